@@ -1,0 +1,169 @@
+"""The rigid tool (P9), its candidate skin elements, and the haptic local model of the touched surface (P11).
+
+The tool tip is the pose's position; the tool frame's +z axis points back along the shaft.
+- sphere: a ball of `radius_m` centred on the tip;
+- capsule: a shaft of `radius_m` from the tip to tip + `length_m`·z;
+- box: the paper's parallelepiped, centred on the tip, axes = the tool frame, `half_extents_m`.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from liver_sim.physics import kernels
+
+TOOL_KINDS = {"sphere": kernels.TOOL_SPHERE, "capsule": kernels.TOOL_CAPSULE, "box": kernels.TOOL_BOX}
+
+
+@dataclass(frozen=True)
+class ToolShape:
+    """Shape of the rigid tool, in metres, in the tool frame."""
+
+    kind: str = "sphere"
+    radius_m: float = 0.01
+    length_m: float = 0.05
+    half_extents_m: tuple = (0.01, 0.01, 0.01)
+
+    def __post_init__(self):
+        if self.kind not in TOOL_KINDS:
+            raise ValueError(f"parameter tool.kind must be one of {tuple(TOOL_KINDS)}, got {self.kind!r}")
+        if not (math.isfinite(self.radius_m) and self.radius_m > 0.0):
+            raise ValueError(f"parameter tool.radius_m must be > 0, got {self.radius_m!r}")
+        if not (math.isfinite(self.length_m) and self.length_m >= 0.0):
+            raise ValueError(f"parameter tool.length_m must be >= 0, got {self.length_m!r}")
+        if len(self.half_extents_m) != 3 or not all(math.isfinite(h) and h > 0 for h in self.half_extents_m):
+            raise ValueError(f"parameter tool.half_extents_m must be three numbers > 0, got {self.half_extents_m!r}")
+
+    @property
+    def bounding_radius_m(self) -> float:
+        """Radius of a ball about the tool's core midpoint that holds the whole tool."""
+        if self.kind == "box":
+            return float(np.linalg.norm(self.half_extents_m))
+        if self.kind == "capsule":
+            return self.radius_m + self.length_m / 2.0
+        return self.radius_m
+
+
+@dataclass(frozen=True)
+class ToolPose:
+    """Tool tip position (m) and orientation (unit quaternion x, y, z, w) in the liver frame."""
+
+    position: np.ndarray
+    orientation_xyzw: tuple = (0.0, 0.0, 0.0, 1.0)
+
+    @property
+    def rotation(self) -> np.ndarray:
+        """3×3 rotation matrix whose columns are the tool axes in the liver frame."""
+        return quaternion_to_matrix(self.orientation_xyzw)
+
+
+def quaternion_to_matrix(q) -> np.ndarray:
+    """Rotation matrix of a quaternion (x, y, z, w); normalised first."""
+    x, y, z, w = np.asarray(q, dtype=np.float64) / np.linalg.norm(q)
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+    ])
+
+
+def tool_core(shape: ToolShape, pose: ToolPose) -> tuple[np.ndarray, np.ndarray]:
+    """The tool's core segment (a, b) in the liver frame: a point for sphere and box, the shaft for a capsule."""
+    a = np.asarray(pose.position, dtype=np.float64)
+    if shape.kind == "capsule":
+        return a, a + pose.rotation[:, 2] * shape.length_m
+    return a, a.copy()
+
+
+def candidate_nodes(points: np.ndarray, skin_nodes: np.ndarray, shape: ToolShape, pose: ToolPose,
+                    reach_m: float) -> np.ndarray:
+    """Sorted skin nodes within the tool's bounding radius + `reach_m` of its core midpoint (k-d tree)."""
+    a, b = tool_core(shape, pose)
+    hits = cKDTree(points[skin_nodes]).query_ball_point((a + b) / 2.0, shape.bounding_radius_m + reach_m)
+    return np.sort(skin_nodes[np.asarray(hits, dtype=np.int64)])
+
+
+def candidate_triangles(points: np.ndarray, skin: np.ndarray, shape: ToolShape, pose: ToolPose,
+                        reach_m: float) -> np.ndarray:
+    """Sorted skin triangles that may come within `reach_m` of the tool (k-d tree over centroids)."""
+    a, b = tool_core(shape, pose)
+    corners = points[skin]
+    centroids = corners.mean(axis=1)
+    circumradius = np.linalg.norm(corners - centroids[:, None, :], axis=2).max()
+    hits = cKDTree(centroids).query_ball_point((a + b) / 2.0, shape.bounding_radius_m + circumradius + reach_m)
+    return np.sort(np.asarray(hits, dtype=np.int64))
+
+
+@dataclass(frozen=True)
+class LocalModel:
+    """The local model of §2.5 (P11) sent to the haptic loop.
+
+    kind 'plane': the surface through `point` with outward unit `normal`; kind 'sphere': a sphere of
+    `radius_m` about `centre` holding the liver.  `valid` is False when no surface is within reach of
+    the tool.  `depth_m` is the tool's deepest penetration seen by the physics.
+    """
+
+    kind: str
+    valid: bool
+    point: np.ndarray
+    normal: np.ndarray
+    centre: np.ndarray
+    radius_m: float
+    depth_m: float
+    in_contact: bool
+
+    @classmethod
+    def invalid(cls) -> "LocalModel":
+        """No surface near the tool."""
+        zero = np.zeros(3)
+        return cls("plane", False, zero, np.array([0.0, 0.0, 1.0]), zero, 0.0, 0.0, False)
+
+
+def fit_local_model(gap: np.ndarray, point: np.ndarray, direction: np.ndarray, reach_m: float,
+                    kind: str = "plane", skin_points: np.ndarray | None = None) -> LocalModel:
+    """Fit the local model from per-candidate contact geometry of the last physics step.
+
+    In contact (some gap < 0): the plane passes through the depth-weighted mean of the contact
+    points, its normal the opposite of the depth-weighted mean push direction.  Out of contact but
+    within `reach_m`: the plane touches the nearest surface point, facing the tool.  Beyond: invalid.
+    kind 'sphere' also fits a sphere (least squares) through `skin_points` near the contact and keeps
+    it when it is convex toward the tool (its centre lies behind the plane); otherwise the plane.
+    """
+    if gap.size == 0 or gap.min() > reach_m:
+        return LocalModel.invalid()
+    touching = gap < 0.0
+    if touching.any():
+        depth = -gap[touching]
+        plane_point = (depth[:, None] * point[touching]).sum(axis=0) / depth.sum()
+        push = (depth[:, None] * direction[touching]).sum(axis=0)
+        deepest = float(depth.max())
+    else:
+        nearest = int(np.argmin(gap))
+        plane_point = point[nearest]
+        push = direction[nearest]
+        deepest = 0.0
+    norm = np.linalg.norm(push)
+    if not norm > 0.0:
+        return LocalModel.invalid()
+    normal = -push / norm
+    plane = LocalModel("plane", True, plane_point, normal, plane_point, 0.0, deepest, bool(touching.any()))
+    if kind != "sphere" or skin_points is None or len(skin_points) < 4:
+        return plane
+    centre, radius = fit_sphere(skin_points)
+    if not (math.isfinite(radius) and (centre - plane_point) @ normal < 0.0 and radius < 1.0):
+        return plane
+    return LocalModel("sphere", True, plane_point, normal, centre, radius, deepest, plane.in_contact)
+
+
+def fit_sphere(points: np.ndarray) -> tuple[np.ndarray, float]:
+    """Algebraic least-squares sphere |p − c|² = r² through the points: (centre, radius); radius inf if flat."""
+    design = np.column_stack([2.0 * points, np.ones(len(points))])
+    rhs = (points * points).sum(axis=1)
+    solution, _, rank, _ = np.linalg.lstsq(design, rhs, rcond=None)
+    if rank < 4:
+        return points.mean(axis=0), math.inf
+    centre = solution[:3]
+    return centre, float(math.sqrt(max(solution[3] + centre @ centre, 0.0)))

@@ -1,0 +1,253 @@
+"""numba kernels of one physics frame: springs (Eq. 1), penalty contact (Eq. 3), integration (Eq. 2).
+
+Array conventions: positions `x` and velocities `v` are (N, 3) float64 in m and m/s;
+forces accumulate in `f` (N, 3) in newtons.  The serial and the parallel spring
+kernels are separate functions (a cached dispatcher must never be shared between
+a `parallel=True` and a serial build).  `liver_sim.physics.reference` is the
+plain-NumPy oracle of the spring and integration kernels.
+"""
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+TOOL_NONE = 0
+TOOL_SPHERE = 1
+TOOL_CAPSULE = 2
+TOOL_BOX = 3
+
+
+@numba.njit(cache=True, inline="always")
+def _spring_tension(x, v, i, j, rest, lambda1, lambda2, mu):
+    """Eq. 1 tension (N) and unit axis i→j; tension 0 for a collapsed spring."""
+    dx = x[j, 0] - x[i, 0]
+    dy = x[j, 1] - x[i, 1]
+    dz = x[j, 2] - x[i, 2]
+    length = math.sqrt(dx * dx + dy * dy + dz * dz)
+    if length <= 1e-12 * rest:
+        return 0.0, 0.0, 0.0, 0.0
+    ux, uy, uz = dx / length, dy / length, dz / length
+    strain = (length - rest) / rest
+    rate = (v[j, 0] - v[i, 0]) * ux + (v[j, 1] - v[i, 1]) * uy + (v[j, 2] - v[i, 2]) * uz
+    tension = lambda1 * strain * strain * strain + lambda2 * strain + mu * rate
+    return tension, ux, uy, uz
+
+
+@numba.njit(cache=True)
+def spring_forces_serial(x, v, node_i, node_j, rest, lambda1, lambda2, mu, f):
+    """Add every spring's Eq. 1 force to f: +T·u on node i, −T·u on node j (one thread)."""
+    for s in range(node_i.shape[0]):
+        i = node_i[s]
+        j = node_j[s]
+        t, ux, uy, uz = _spring_tension(x, v, i, j, rest[s], lambda1[s], lambda2[s], mu[s])
+        f[i, 0] += t * ux
+        f[i, 1] += t * uy
+        f[i, 2] += t * uz
+        f[j, 0] -= t * ux
+        f[j, 1] -= t * uy
+        f[j, 2] -= t * uz
+
+
+@numba.njit(cache=True, parallel=True)
+def spring_forces_parallel(x, v, node_i, node_j, rest, lambda1, lambda2, mu,
+                           incidence_start, incidence_edge, incidence_sign, edge_force, f):
+    """As spring_forces_serial, on all threads: edge forces first, then a per-node gather."""
+    for s in numba.prange(node_i.shape[0]):
+        t, ux, uy, uz = _spring_tension(x, v, node_i[s], node_j[s], rest[s], lambda1[s], lambda2[s], mu[s])
+        edge_force[s, 0] = t * ux
+        edge_force[s, 1] = t * uy
+        edge_force[s, 2] = t * uz
+    for n in numba.prange(f.shape[0]):
+        for k in range(incidence_start[n], incidence_start[n + 1]):
+            e = incidence_edge[k]
+            sign = incidence_sign[k]
+            f[n, 0] += sign * edge_force[e, 0]
+            f[n, 1] += sign * edge_force[e, 1]
+            f[n, 2] += sign * edge_force[e, 2]
+
+
+@numba.njit(cache=True)
+def integrate(x, v, f, inv_mass, dt, environment_damping, gravity, symplectic):
+    """One step of every free node (inv_mass > 0); fixed nodes (inv_mass = 0) do not move.
+
+    a = f/m + g − c_env·v.  Explicit Euler (Eq. 2): v ← v + Δt·a, x ← x + Δt·v_old.
+    Symplectic Euler: v ← v + Δt·a, x ← x + Δt·v_new.
+    """
+    for n in range(x.shape[0]):
+        w = inv_mass[n]
+        if w == 0.0:
+            continue
+        for k in range(3):
+            a = f[n, k] * w + gravity[k] - environment_damping * v[n, k]
+            if symplectic:
+                v[n, k] += dt * a
+                x[n, k] += dt * v[n, k]
+            else:
+                x[n, k] += dt * v[n, k]
+                v[n, k] += dt * a
+
+
+@numba.njit(cache=True)
+def closest_point_on_segment(p, a, b):
+    """Closest point to p on segment ab."""
+    ab = b - a
+    denom = ab @ ab
+    if denom <= 0.0:
+        return a.copy()
+    t = min(1.0, max(0.0, ((p - a) @ ab) / denom))
+    return a + t * ab
+
+
+@numba.njit(cache=True)
+def closest_point_on_triangle(p, a, b, c):
+    """Closest point to p on triangle abc (Ericson, Real-Time Collision Detection §5.1.5)."""
+    ab = b - a
+    ac = c - a
+    ap = p - a
+    d1 = ab @ ap
+    d2 = ac @ ap
+    if d1 <= 0.0 and d2 <= 0.0:
+        return a.copy()
+    bp = p - b
+    d3 = ab @ bp
+    d4 = ac @ bp
+    if d3 >= 0.0 and d4 <= d3:
+        return b.copy()
+    vc = d1 * d4 - d3 * d2
+    if vc <= 0.0 and d1 >= 0.0 and d3 <= 0.0:
+        t = d1 / (d1 - d3)
+        return a + t * ab
+    cp = p - c
+    d5 = ab @ cp
+    d6 = ac @ cp
+    if d6 >= 0.0 and d5 <= d6:
+        return c.copy()
+    vb = d5 * d2 - d1 * d6
+    if vb <= 0.0 and d2 >= 0.0 and d6 <= 0.0:
+        t = d2 / (d2 - d6)
+        return a + t * ac
+    va = d3 * d6 - d5 * d4
+    if va <= 0.0 and (d4 - d3) >= 0.0 and (d5 - d6) >= 0.0:
+        t = (d4 - d3) / ((d4 - d3) + (d5 - d6))
+        return b + t * (c - b)
+    denom = 1.0 / (va + vb + vc)
+    return a + (vb * denom) * ab + (vc * denom) * ac
+
+
+@numba.njit(cache=True)
+def round_tool_contacts(x, v, candidates, core_a, core_b, radius, inward_point, tool_velocity,
+                        stiffness, damping, f):
+    """Eq. 3 between a sphere (core_a == core_b) or capsule (segment core_a–core_b) and skin nodes.
+
+    A candidate node closer than `radius` to the core has penetration δ = radius − distance and
+    gets F = max(0, λ·δ + μ·δ̇)·k, k the unit vector from the core to the node (into the liver;
+    toward `inward_point` if the node sits on the core).  Returns the total force on the liver
+    (the tool feels its opposite).
+    """
+    total = np.zeros(3)
+    for c in range(candidates.shape[0]):
+        n = candidates[c]
+        delta = x[n] - closest_point_on_segment(x[n], core_a, core_b)
+        dist = math.sqrt(delta @ delta)
+        depth = radius - dist
+        if depth <= 0.0:
+            continue
+        if dist > 1e-12:
+            k = delta / dist
+        else:
+            k = inward_point - x[n]
+            k = k / math.sqrt(k @ k)
+        depth_rate = -(k @ (v[n] - tool_velocity))
+        force = max(0.0, stiffness * depth + damping * depth_rate) * k
+        f[n] += force
+        total += force
+    return total
+
+
+@numba.njit(cache=True)
+def surface_gaps(x, skin, candidates, core_a, core_b, radius, gap, point, direction):
+    """Per candidate skin triangle: closest points of the tool core and the triangle (alternating
+    projection), gap = distance − radius (m, negative inside), the triangle point and the unit
+    direction from the core to it (the triangle's inward normal if the core lies on it).
+    """
+    for c in range(candidates.shape[0]):
+        tri = candidates[c]
+        a, b, cc = x[skin[tri, 0]], x[skin[tri, 1]], x[skin[tri, 2]]
+        s = closest_point_on_segment((a + b + cc) / 3.0, core_a, core_b)
+        q = closest_point_on_triangle(s, a, b, cc)
+        for _ in range(4):
+            s = closest_point_on_segment(q, core_a, core_b)
+            q = closest_point_on_triangle(s, a, b, cc)
+        delta = q - s
+        dist = math.sqrt(delta @ delta)
+        if dist > 1e-12:
+            direction[c] = delta / dist
+        else:
+            normal = np.cross(b - a, cc - a)
+            direction[c] = -normal / math.sqrt(normal @ normal)
+        gap[c] = dist - radius
+        point[c] = q
+
+
+@numba.njit(cache=True)
+def box_tool_contacts(x, v, candidates, centre, axes, half_extents, tool_velocity,
+                      stiffness, damping, f, gap, point, direction):
+    """Eq. 3 between a box (centre, axes = columns of a rotation matrix, half extents) and skin nodes.
+
+    A node inside the box is pushed out through the nearest face: δ = h_a − |q_a| on the axis a of
+    least depth, k = ±axis a.  Writes each candidate node's gap (m; distance to the box outside,
+    −δ inside), position and k; returns the total force on the liver.
+    """
+    total = np.zeros(3)
+    for c in range(candidates.shape[0]):
+        n = candidates[c]
+        local = axes.T @ (x[n] - centre)
+        outside = np.maximum(np.abs(local) - half_extents, 0.0)
+        point[c] = x[n]
+        if outside.max() > 0.0:
+            gap[c] = math.sqrt(outside @ outside)
+            direction[c] = axes @ (np.sign(local) * outside) / gap[c]
+            continue
+        depths = half_extents - np.abs(local)
+        axis = np.argmin(depths)
+        k = axes[:, axis] * (1.0 if local[axis] >= 0.0 else -1.0)
+        gap[c] = -depths[axis]
+        direction[c] = k
+        depth_rate = -(k @ (v[n] - tool_velocity))
+        force = max(0.0, stiffness * depths[axis] + damping * depth_rate) * k
+        f[n] += force
+        total += force
+    return total
+
+
+@numba.njit(cache=True)
+def run_frame(x, v, inv_mass, node_i, node_j, rest, lambda1, lambda2, mu,
+              incidence_start, incidence_edge, incidence_sign, edge_force, use_parallel,
+              dt, substeps, environment_damping, gravity, symplectic,
+              tool_kind, core_a, core_b, radius, axes, half_extents, tool_velocity,
+              stiffness, damping, inward_point, candidates, f, gap, point, direction):
+    """`substeps` steps of the model; the tool core moves at `tool_velocity` from core_a/core_b.
+
+    `candidates` are skin nodes near the tool.  Returns the contact force on the liver at the last
+    substep (N); the tool's reaction is its opposite.  For a box, the candidates' contact geometry
+    of the last substep is left in gap/point/direction.
+    """
+    contact = np.zeros(3)
+    for step in range(substeps):
+        f[:] = 0.0
+        if use_parallel:
+            spring_forces_parallel(x, v, node_i, node_j, rest, lambda1, lambda2, mu,
+                                   incidence_start, incidence_edge, incidence_sign, edge_force, f)
+        else:
+            spring_forces_serial(x, v, node_i, node_j, rest, lambda1, lambda2, mu, f)
+        shift = tool_velocity * ((step + 1) * dt)
+        if tool_kind == TOOL_BOX:
+            contact = box_tool_contacts(x, v, candidates, core_a + shift, axes, half_extents, tool_velocity,
+                                        stiffness, damping, f, gap, point, direction)
+        elif tool_kind != TOOL_NONE:
+            contact = round_tool_contacts(x, v, candidates, core_a + shift, core_b + shift, radius, inward_point,
+                                          tool_velocity, stiffness, damping, f)
+        integrate(x, v, f, inv_mass, dt, environment_damping, gravity, symplectic)
+    return contact

@@ -1,0 +1,180 @@
+"""The heterogeneous mass-spring liver (paper §2): state, one frame of simulation, divergence guard.
+
+`LiverModel.step_frame(pose)` advances one frame (1/frame_rate_hz s, `substeps` steps) with the
+tool at `pose`, and returns the contact force on the tool and the local model for the haptic loop.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from liver_sim.mesh.tetmesh import TetMesh
+from liver_sim.physics import kernels
+from liver_sim.physics.contact import (TOOL_KINDS, LocalModel, ToolPose, ToolShape, candidate_nodes,
+                                       candidate_triangles, fit_local_model, tool_core)
+from liver_sim.physics.params import ModelParams
+from liver_sim.physics.springs import build_springs, stable_time_step
+
+#: A tool that moves farther than this in one frame is taken as re-placed, not as moving (m).
+TOOL_JUMP_M = 0.05
+#: Above this many springs the parallel kernel is used (below it thread start-up costs more).
+PARALLEL_MIN_EDGES = 20_000
+
+
+def default_fixed_nodes(mesh: TetMesh) -> np.ndarray:
+    """The four nodes of the tet whose centroid is nearest the mesh's volume centroid (paper §3.1)."""
+    centroids = mesh.points[mesh.tets].mean(axis=1)
+    centre = (centroids * mesh.volumes[:, None]).sum(axis=0) / mesh.volume
+    return np.sort(mesh.tets[np.argmin(np.linalg.norm(centroids - centre, axis=1))])
+
+
+@dataclass(frozen=True)
+class FrameResult:
+    """What one frame produced: simulation time (s), force on the tool (N), local model, divergence."""
+
+    time_s: float
+    tool_force_n: np.ndarray
+    local_model: LocalModel
+    divergence: str | None
+
+
+class LiverModel:
+    """A liver mesh, its springs and masses, and its state (positions in m, velocities in m/s)."""
+
+    def __init__(self, mesh: TetMesh, params: ModelParams | None = None, tool: ToolShape | None = None,
+                 local_model: str = "plane", local_model_reach_m: float = 0.02, parallel: bool | None = None):
+        self.mesh = mesh
+        self.params = (params or ModelParams()).validate()
+        self.tool = tool or ToolShape()
+        if local_model not in ("plane", "sphere"):
+            raise ValueError(f"parameter local_model must be 'plane' or 'sphere', got {local_model!r}")
+        self.local_model_kind = local_model
+        self.local_model_reach_m = float(local_model_reach_m)
+        self.springs = build_springs(mesh, self.params)
+        self.masses_kg = mesh.lumped_masses(self.params.density_kg_m3)
+        fixed = self.params.fixed_nodes
+        self.fixed_nodes = default_fixed_nodes(mesh) if fixed is None else np.unique(np.asarray(fixed, np.int64))
+        if self.fixed_nodes.size and (self.fixed_nodes.min() < 0 or self.fixed_nodes.max() >= len(mesh.points)):
+            raise ValueError(f"parameter fixed_nodes must index nodes 0..{len(mesh.points) - 1}")
+        self.inv_mass = 1.0 / self.masses_kg
+        self.inv_mass[self.fixed_nodes] = 0.0
+        self.stable_dt_s = stable_time_step(self.springs, self.masses_kg, self.params.environment_damping_per_s,
+                                            self.params.integrator, mesh.points)
+        self.parallel = self.springs.edges >= PARALLEL_MIN_EDGES if parallel is None else bool(parallel)
+        self._skin = np.ascontiguousarray(mesh.skin)
+        self._skin_nodes = mesh.skin_nodes
+        self._centre = mesh.points.mean(axis=0)
+        self._force = np.zeros_like(mesh.points)
+        self._edge_force = np.zeros((self.springs.edges, 3))
+        self._gravity = np.asarray(self.params.gravity_m_s2, dtype=np.float64)
+        self.divergences = 0
+        self.time_s = 0.0
+        self.reset()
+
+    def reset(self) -> None:
+        """Back to the rest shape, at rest, with no tool history; the clock runs on."""
+        self.positions = self.mesh.points.copy()
+        self.velocities = np.zeros_like(self.positions)
+        self._previous_pose: ToolPose | None = None
+
+    def warm_up(self) -> None:
+        """Compile the kernels (numba, cached on disk) before a timed loop starts."""
+        self._advance(ToolPose(np.full(3, 1e3)), substeps=0)
+        self._previous_pose = None
+
+    @property
+    def frame_period_s(self) -> float:
+        return 1.0 / self.params.frame_rate_hz
+
+    def displacement_m(self) -> np.ndarray:
+        """|x − x_rest| per node (m)."""
+        return np.linalg.norm(self.positions - self.mesh.points, axis=1)
+
+    def kinetic_energy_j(self) -> float:
+        """½·Σ m·|v|² (J)."""
+        return 0.5 * float((self.masses_kg * (self.velocities ** 2).sum(axis=1)).sum())
+
+    def step_frame(self, pose: ToolPose | None = None) -> FrameResult:
+        """Advance one frame with the tool at `pose` (None: no tool). Resets and reports on divergence."""
+        liver_force, box_gaps = self._advance(pose, self.params.substeps)
+        self.time_s += self.frame_period_s
+        divergence = self._check_divergence()
+        if divergence is not None:
+            self.divergences += 1
+            self.reset()
+            return FrameResult(self.time_s, np.zeros(3), LocalModel.invalid(), divergence)
+        local_model = LocalModel.invalid() if pose is None else self._fit_local_model(pose, box_gaps)
+        return FrameResult(self.time_s, -liver_force, local_model, None)
+
+    def _advance(self, pose: ToolPose | None, substeps: int) -> tuple[np.ndarray, tuple]:
+        """Run `substeps` steps with the tool moving from the previous pose to `pose`.
+
+        Returns the contact force on the liver (N) and the box tool's per-node (gap, point, direction).
+        """
+        shape = self.tool
+        springs = self.springs
+        core_a = core_b = velocity = np.zeros(3)
+        axes = np.eye(3)
+        kind = kernels.TOOL_NONE
+        nodes = np.zeros(0, dtype=np.int64)
+        if pose is not None:
+            kind = TOOL_KINDS[shape.kind]
+            core_a, core_b = tool_core(shape, pose)
+            axes = np.ascontiguousarray(pose.rotation)
+            if self._previous_pose is not None:
+                start_a, start_b = tool_core(shape, self._previous_pose)
+                if np.linalg.norm(core_a - start_a) <= TOOL_JUMP_M:
+                    velocity = (core_a - start_a) / self.frame_period_s
+                    core_a, core_b = start_a, start_b
+            reach = self.local_model_reach_m + float(np.linalg.norm(velocity)) * self.frame_period_s
+            nodes = candidate_nodes(self.positions, self._skin_nodes, shape, pose, reach)
+        self._previous_pose = pose
+        gap = np.full(len(nodes), np.inf)
+        point = np.zeros((len(nodes), 3))
+        direction = np.zeros((len(nodes), 3))
+        liver_force = kernels.run_frame(
+            self.positions, self.velocities, self.inv_mass, springs.node_i, springs.node_j,
+            springs.rest_length_m, springs.lambda1_n, springs.lambda2_n, springs.mu_ns_per_m,
+            springs.incidence_start, springs.incidence_edge, springs.incidence_sign, self._edge_force,
+            self.parallel, self.params.dt_s, substeps, self.params.environment_damping_per_s, self._gravity,
+            self.params.integrator == "symplectic_euler",
+            kind, core_a, core_b, shape.radius_m, axes, np.asarray(shape.half_extents_m, dtype=np.float64),
+            velocity, self.params.contact_stiffness_n_per_m, self.params.contact_damping_ns_per_m,
+            self._centre, nodes, self._force, gap, point, direction)
+        return liver_force, (gap, point, direction)
+
+    def _fit_local_model(self, pose: ToolPose, box_gaps: tuple) -> LocalModel:
+        """The local model at the end of the frame: from skin triangles for round tools, nodes for a box."""
+        shape = self.tool
+        if shape.kind == "box":
+            near_nodes = candidate_nodes(self.positions, self._skin_nodes, shape, pose, self.local_model_reach_m)
+            return fit_local_model(*box_gaps, self.local_model_reach_m, self.local_model_kind,
+                                   self.positions[near_nodes])
+        core_a, core_b = tool_core(shape, pose)
+        triangles = candidate_triangles(self.positions, self._skin, shape, pose, self.local_model_reach_m)
+        gap = np.full(len(triangles), np.inf)
+        point = np.zeros((len(triangles), 3))
+        direction = np.zeros((len(triangles), 3))
+        kernels.surface_gaps(self.positions, self._skin, triangles, core_a, core_b, shape.radius_m,
+                             gap, point, direction)
+        return fit_local_model(gap, point, direction, self.local_model_reach_m, self.local_model_kind,
+                               self.positions[np.unique(self._skin[triangles])])
+
+    def _check_divergence(self) -> str | None:
+        """None, or the cause when the state is non-finite or a node outruns max_node_speed_m_s."""
+        finite = np.isfinite(self.positions).all() and np.isfinite(self.velocities).all()
+        if finite:
+            speed = float(np.sqrt((self.velocities ** 2).sum(axis=1)).max())
+            if speed <= self.params.max_node_speed_m_s:
+                return None
+            cause = f"node speed {speed:.3g} m/s above max_node_speed_m_s={self.params.max_node_speed_m_s:g}"
+        else:
+            cause = "non-finite positions or velocities"
+        dt = self.params.dt_s
+        if dt > self.stable_dt_s:
+            needed = math.ceil(self.frame_period_s / self.stable_dt_s)
+            cause += (f"; time step {dt:.3g} s is above the stability bound {self.stable_dt_s:.3g} s of "
+                      f"{self.params.integrator} (raise substeps to at least {needed})")
+        return f"simulation diverged at t={self.time_s:.4f} s: {cause}; model reset to rest"

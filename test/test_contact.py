@@ -1,0 +1,130 @@
+"""Tool shapes against the skin: Eq. 3 force direction and magnitude, candidates, and the local model."""
+import math
+
+import numpy as np
+import pytest
+from meshes import box_mesh
+
+from liver_sim.physics.contact import ToolPose, ToolShape, candidate_nodes, candidate_triangles, fit_sphere
+from liver_sim.physics.model import LiverModel
+from liver_sim.physics.params import ModelParams
+
+STIFFNESS = 250.0
+DEPTH = 0.002
+SPACING = 0.02
+
+
+@pytest.fixture(scope="module")
+def slab():
+    """A 10 × 10 × 4 cm slab; its top face is z = 0.04 m, with a grid vertex at (0.04, 0.04)."""
+    return box_mesh(5, 5, 2, SPACING)
+
+
+def one_step_model(mesh, tool):
+    """One 10 µs step per frame: forces are read before the nodes have moved noticeably."""
+    params = ModelParams(substeps=1, frame_rate_hz=1e5, contact_stiffness_n_per_m=STIFFNESS,
+                         contact_damping_ns_per_m=0.0)
+    return LiverModel(mesh, params, tool=tool)
+
+
+Y_TO_X = (0.0, math.sin(math.pi / 4), 0.0, math.cos(math.pi / 4))  # tool +z along liver +x
+
+
+@pytest.mark.parametrize("tool, tip", [
+    (ToolShape("sphere", radius_m=0.01), (0.04, 0.04, 0.04 + 0.01 - DEPTH)),
+    (ToolShape("capsule", radius_m=0.01, length_m=0.05), (0.04, 0.04, 0.04 + 0.01 - DEPTH)),
+    (ToolShape("box", half_extents_m=(0.005, 0.005, 0.01)), (0.04, 0.04, 0.04 + 0.01 - DEPTH)),
+])
+def test_pressing_a_vertex_gives_the_penalty_force_along_the_normal(slab, tool, tip):
+    result = one_step_model(slab, tool).step_frame(ToolPose(np.array(tip)))
+    # Eq. 3 with μ = 0: |F| = λ·δ, pushing the tool out along the surface normal (+z)
+    np.testing.assert_allclose(result.tool_force_n, [0.0, 0.0, STIFFNESS * DEPTH], atol=1e-9)
+
+
+def test_liver_nodes_feel_the_opposite_of_the_tool_force(slab):
+    model = one_step_model(slab, ToolShape("sphere", radius_m=0.01))
+    result = model.step_frame(ToolPose(np.array([0.042, 0.041, 0.04 + 0.01 - DEPTH])))
+    momentum = (model.masses_kg[:, None] * model.velocities).sum(axis=0)
+    impulse_on_liver = -result.tool_force_n * model.params.dt_s
+    # the fixed nodes absorb only spring forces, which are zero at rest
+    np.testing.assert_allclose(momentum, impulse_on_liver, atol=1e-12)
+    assert result.tool_force_n[2] > 0
+
+
+def test_horizontal_capsule_touches_along_its_length(slab):
+    vertical = one_step_model(slab, ToolShape("capsule", radius_m=0.01, length_m=0.06))
+    tip = np.array([0.02, 0.04, 0.04 + 0.01 - DEPTH])
+    upright = vertical.step_frame(ToolPose(tip)).tool_force_n
+    lying = one_step_model(slab, ToolShape("capsule", radius_m=0.01, length_m=0.06)).step_frame(
+        ToolPose(tip, Y_TO_X)).tool_force_n
+    assert lying[2] > 2.5 * upright[2]
+    assert abs(lying[0]) < 1e-6 * lying[2] + 1e-12 or abs(lying[0]) < 0.05 * lying[2]
+
+
+def test_no_force_out_of_contact(slab):
+    for tool in (ToolShape("sphere"), ToolShape("capsule"), ToolShape("box")):
+        result = one_step_model(slab, tool).step_frame(ToolPose(np.array([0.05, 0.05, 0.04 + 0.011])))
+        np.testing.assert_array_equal(result.tool_force_n, 0.0)
+
+
+def test_penalty_damping_resists_approach(slab):
+    params = ModelParams(substeps=1, frame_rate_hz=1e5, contact_stiffness_n_per_m=STIFFNESS,
+                         contact_damping_ns_per_m=5.0)
+    model = LiverModel(slab, params, tool=ToolShape("sphere", radius_m=0.01))
+    z0 = 0.04 + 0.01 - DEPTH
+    model.step_frame(ToolPose(np.array([0.04, 0.04, z0 + 1e-6])))
+    moving = model.step_frame(ToolPose(np.array([0.04, 0.04, z0]))).tool_force_n[2]
+    # pressing in at 0.1 m/s: δ̇ ≈ 0.1 m/s adds μ·δ̇ ≈ 0.5 N to λ·δ = 0.5 N
+    assert moving == pytest.approx(STIFFNESS * DEPTH + 5.0 * 0.1, rel=0.05)
+
+
+def test_candidates_are_the_elements_near_the_tool(slab):
+    tool = ToolShape("sphere", radius_m=0.01)
+    near, far = ToolPose(np.array([0.05, 0.05, 0.05])), ToolPose(np.array([0.05, 0.05, 0.5]))
+    triangles = candidate_triangles(slab.points, slab.skin, tool, near, 0.0)
+    assert 0 < len(triangles) < len(slab.skin) / 4
+    assert len(candidate_triangles(slab.points, slab.skin, tool, far, 0.0)) == 0
+    centroids = slab.points[slab.skin[triangles]].mean(axis=1)
+    assert (np.linalg.norm(centroids - near.position, axis=1) < 0.01 + 0.03).all()
+    nodes = candidate_nodes(slab.points, slab.skin_nodes, tool, near, 0.005)
+    np.testing.assert_array_equal(
+        nodes, [n for n in slab.skin_nodes if np.linalg.norm(slab.points[n] - near.position) <= 0.015])
+
+
+def test_local_model_in_contact_is_the_touched_plane(slab):
+    model = one_step_model(slab, ToolShape("sphere", radius_m=0.01))
+    local = model.step_frame(ToolPose(np.array([0.04, 0.04, 0.04 + 0.01 - DEPTH]))).local_model
+    assert local.valid and local.in_contact and local.kind == "plane"
+    np.testing.assert_allclose(local.normal, [0, 0, 1], atol=1e-9)
+    np.testing.assert_allclose(local.point, [0.04, 0.04, 0.04], atol=1e-6)
+    assert local.depth_m == pytest.approx(DEPTH, rel=1e-4)
+
+
+def test_local_model_near_but_not_touching_and_out_of_reach(slab):
+    model = LiverModel(slab, tool=ToolShape("sphere", radius_m=0.01), local_model_reach_m=0.02)
+    near = model.step_frame(ToolPose(np.array([0.05, 0.05, 0.04 + 0.01 + 0.005]))).local_model
+    assert near.valid and not near.in_contact and near.depth_m == 0.0
+    np.testing.assert_allclose(near.normal, [0, 0, 1], atol=1e-6)
+    assert near.point[2] == pytest.approx(0.04, abs=1e-6)
+    far = model.step_frame(ToolPose(np.array([0.05, 0.05, 0.04 + 0.01 + 0.05]))).local_model
+    assert not far.valid
+
+
+def test_fit_sphere_recovers_a_sphere_and_flags_a_plane():
+    rng = np.random.default_rng(3)
+    directions = rng.normal(size=(40, 3))
+    directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+    centre, radius = fit_sphere(np.array([0.1, -0.2, 0.3]) + 0.07 * directions)
+    np.testing.assert_allclose(centre, [0.1, -0.2, 0.3], atol=1e-9)
+    assert radius == pytest.approx(0.07)
+    flat = np.column_stack([rng.uniform(size=(20, 2)), np.zeros(20)])
+    assert fit_sphere(flat)[1] == math.inf
+
+
+@pytest.mark.parametrize("kwargs, name", [
+    (dict(kind="scalpel"), "tool.kind"), (dict(radius_m=0.0), "tool.radius_m"),
+    (dict(length_m=-1.0), "tool.length_m"), (dict(half_extents_m=(0.01, 0.0, 0.01)), "tool.half_extents_m"),
+])
+def test_bad_tool_shapes_are_refused_by_name(kwargs, name):
+    with pytest.raises(ValueError, match=name.replace(".", r"\.")):
+        ToolShape(**kwargs)
