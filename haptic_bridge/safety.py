@@ -1,0 +1,138 @@
+"""What stands between the force computation and the haptic device (DESIGN "Haptic safety").
+
+The device never receives NaN/inf, a force above `max_force`, a change faster
+than the rate limit, or a force computed from stale data: when the local model
+or the tool pose outlives its lifetime the force ramps to exactly zero within
+`ramp_time_s` and stays there until fresh data arrive.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+#: The PHANToM's peak force (N); no configuration may exceed it.
+PHANTOM_MAX_FORCE_N = 3.3
+#: DESIGN default for the force clamp (N).
+DEFAULT_MAX_FORCE_N = 2.0
+#: Gains within this of 0 or 1 are snapped there, so ramps end exactly.
+_GAIN_SNAP = 1e-9
+
+
+def _positive(value: float, name: str) -> float:
+    """`value` as a float if finite and > 0, else ValueError naming `name`."""
+    value = float(value)
+    if not (math.isfinite(value) and value > 0.0):
+        raise ValueError(f"{name} must be finite and > 0, got {value!r}")
+    return value
+
+
+def clamp_norm(force: np.ndarray, max_force: float) -> np.ndarray:
+    """F·min(1, max_force/|F|) as a new (3,) array in N; any non-finite component → the zero vector."""
+    force = np.array(force, dtype=np.float64)
+    if not np.isfinite(force).all():
+        return np.zeros(3)
+    norm = math.hypot(*force)  # no overflow for components near the float limit
+    if norm > max_force:
+        force *= max_force / norm
+    return force
+
+
+class RateLimiter:
+    """Limits |F_k − F_{k−1}| to `max_rate_n_per_s`·`period_s` (N) per tick by moving towards the target.
+
+    A non-finite target counts as zero, so the state stays finite.
+    """
+
+    def __init__(self, max_rate_n_per_s: float, period_s: float):
+        self.max_step_n = (_positive(max_rate_n_per_s, "max_rate_n_per_s")
+                           * _positive(period_s, "period_s"))
+        self.last = np.zeros(3)
+
+    def reset(self, force: np.ndarray | None = None) -> None:
+        """Restart from `force` (N), zero by default."""
+        self.last = np.zeros(3) if force is None else np.array(force, dtype=np.float64)
+
+    def step(self, target: np.ndarray) -> np.ndarray:
+        """The force (N) one tick closer to `target`: F_{k−1} + Δ, |Δ| ≤ max_step_n."""
+        delta = target - self.last
+        if not np.isfinite(delta).all():
+            delta = -self.last
+        change = math.hypot(*delta)
+        if change > self.max_step_n:
+            delta *= self.max_step_n / change
+        self.last = self.last + delta
+        return self.last.copy()
+
+
+class Watchdog:
+    """Force gain in [0, 1] from the age of the newest local model and tool pose.
+
+    Called once per tick of `period_s`. Fresh (both ages ≤ their lifetime): the
+    gain rises by `period_s`/`ramp_time_s` per tick up to 1; stale (either age
+    beyond its lifetime, NaN or inf): it falls by the same step to exactly 0,
+    reached within ceil(`ramp_time_s`/`period_s`) ticks, and stays there.
+    `state` is 'ok', 'ramping_down', 'stale' or 'ramping_up' (for diagnostics);
+    it starts 'stale', with gain 0, until fresh data arrive.
+    """
+
+    def __init__(self, lifetime_s: float = 0.05, ramp_time_s: float = 0.01, period_s: float = 0.001):
+        self.lifetime_s = _positive(lifetime_s, "lifetime_s")
+        self.ramp_time_s = _positive(ramp_time_s, "ramp_time_s")
+        self._step = _positive(period_s, "period_s") / self.ramp_time_s
+        self.gain = 0.0
+        self.state = "stale"
+
+    def update(self, model_age_s: float, pose_age_s: float, model_lifetime_s: float | None = None) -> float:
+        """Advance one tick and return the gain.
+
+        `model_lifetime_s` is the lifetime the local model carries (s); None uses
+        `lifetime_s`, which always applies to the tool pose.
+        """
+        model_lifetime = self.lifetime_s if model_lifetime_s is None else model_lifetime_s
+        fresh = model_age_s <= model_lifetime and pose_age_s <= self.lifetime_s
+        gain = self.gain + self._step if fresh else self.gain - self._step
+        if gain >= 1.0 - _GAIN_SNAP:
+            self.gain, self.state = 1.0, "ok" if fresh else "ramping_down"
+        elif gain <= _GAIN_SNAP:
+            self.gain, self.state = 0.0, "ramping_up" if fresh else "stale"
+        else:
+            self.gain, self.state = gain, "ramping_up" if fresh else "ramping_down"
+        return self.gain
+
+
+class SafeForceOutput:
+    """The last stage before the device: F_out = finite(clamp(rate_limit(clamp(gain·F)))).
+
+    `max_force` (N) must lie in (0, 3.3] (PHANToM limit; DESIGN default 2.0).
+    The target is clamped before the rate limiter so the limiter's state never
+    winds up above the clamp (releasing a stiff contact is not delayed); the
+    final clamp and finiteness check guard the wire. `max_rate_n_per_s`·`ramp_time_s`
+    must be ≥ `max_force` so the limiter can follow the watchdog's ramp to zero.
+    """
+
+    def __init__(self, max_force: float = DEFAULT_MAX_FORCE_N, max_rate_n_per_s: float = 400.0,
+                 period_s: float = 0.001, lifetime_s: float = 0.05, ramp_time_s: float = 0.01):
+        self.max_force = _positive(max_force, "max_force")
+        if self.max_force > PHANTOM_MAX_FORCE_N:
+            raise ValueError(f"max_force must be <= {PHANTOM_MAX_FORCE_N} N (PHANToM limit), got {max_force!r}")
+        self.watchdog = Watchdog(lifetime_s, ramp_time_s, period_s)
+        self.limiter = RateLimiter(max_rate_n_per_s, period_s)
+        if self.limiter.max_step_n * (ramp_time_s / period_s) < self.max_force * (1.0 - 1e-9):
+            raise ValueError(f"max_rate_n_per_s must be >= max_force/ramp_time_s = "
+                             f"{self.max_force / ramp_time_s:g} N/s so the force can reach 0 "
+                             f"within ramp_time_s, got {max_rate_n_per_s!r}")
+
+    @property
+    def state(self) -> str:
+        """The watchdog state: 'ok', 'ramping_down', 'stale' or 'ramping_up'."""
+        return self.watchdog.state
+
+    def step(self, force: np.ndarray, model_age_s: float, pose_age_s: float,
+             model_lifetime_s: float | None = None) -> np.ndarray:
+        """The (3,) force (N) to send this tick for the requested `force` (N); see :class:`Watchdog` for the ages."""
+        gain = self.watchdog.update(model_age_s, pose_age_s, model_lifetime_s)
+        if gain == 0.0:
+            self.limiter.reset()
+            return np.zeros(3)
+        return clamp_norm(self.limiter.step(clamp_norm(force, self.max_force) * gain), self.max_force)
