@@ -227,16 +227,16 @@ def run_frame(x, v, inv_mass, node_i, node_j, rest, lambda1, lambda2, mu,
               incidence_start, incidence_edge, incidence_sign, edge_force, use_parallel,
               dt, substeps, environment_damping, gravity, symplectic,
               tool_kind, core_a, core_b, radius, axes, half_extents, tool_velocity,
-              stiffness, damping, inward_point, candidates, f, gap, point, direction):
+              stiffness, damping, inward_point, candidates, external_force, f, gap, point, direction):
     """`substeps` steps of the model; the tool core moves at `tool_velocity` from core_a/core_b.
 
-    `candidates` are skin nodes near the tool.  Returns the contact force on the liver at the last
+    `external_force` (N, 3) is added to every node each step.  `candidates` are skin nodes near the tool.  Returns the contact force on the liver at the last
     substep (N); the tool's reaction is its opposite.  For a box, the candidates' contact geometry
     of the last substep is left in gap/point/direction.
     """
     contact = np.zeros(3)
     for step in range(substeps):
-        f[:] = 0.0
+        f[:] = external_force
         if use_parallel:
             spring_forces_parallel(x, v, node_i, node_j, rest, lambda1, lambda2, mu,
                                    incidence_start, incidence_edge, incidence_sign, edge_force, f)

@@ -41,7 +41,10 @@ class FrameResult:
 
 
 class LiverModel:
-    """A liver mesh, its springs and masses, and its state (positions in m, velocities in m/s)."""
+    """A liver mesh, its springs and masses, and its state (positions in m, velocities in m/s).
+
+    `external_forces_n` (N, 3) are applied to the nodes at every step (zero by default).
+    """
 
     def __init__(self, mesh: TetMesh, params: ModelParams | None = None, tool: ToolShape | None = None,
                  local_model: str = "plane", local_model_reach_m: float = 0.02, parallel: bool | None = None):
@@ -67,6 +70,7 @@ class LiverModel:
         self._skin_nodes = mesh.skin_nodes
         self._centre = mesh.points.mean(axis=0)
         self._force = np.zeros_like(mesh.points)
+        self.external_forces_n = np.zeros_like(mesh.points)
         self._edge_force = np.zeros((self.springs.edges, 3))
         self._gravity = np.asarray(self.params.gravity_m_s2, dtype=np.float64)
         self.divergences = 0
@@ -142,7 +146,7 @@ class LiverModel:
             self.params.integrator == "symplectic_euler",
             kind, core_a, core_b, shape.radius_m, axes, np.asarray(shape.half_extents_m, dtype=np.float64),
             velocity, self.params.contact_stiffness_n_per_m, self.params.contact_damping_ns_per_m,
-            self._centre, nodes, self._force, gap, point, direction)
+            self._centre, nodes, self.external_forces_n, self._force, gap, point, direction)
         return liver_force, (gap, point, direction)
 
     def _fit_local_model(self, pose: ToolPose, box_gaps: tuple) -> LocalModel:
