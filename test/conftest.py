@@ -1,0 +1,129 @@
+"""Session-wide settings for the liver_sim test suite.
+
+* DDS stays on loopback: ROS_AUTOMATIC_DISCOVERY_RANGE is forced to
+  LOCALHOST for this process and everything it starts, whatever the
+  environment says, and ROS_STATIC_PEERS / ROS_LOCALHOST_ONLY are removed
+  (static peers would reach other hosts; the latter is deprecated and would
+  override the range).
+* Plots never open windows: MPLBACKEND=Agg.
+* ROS domains: the session keeps the ROS_DOMAIN_ID it was given (the Makefile
+  picks one) unless another liver_sim test session on this machine holds it.
+  Tests that start ROS processes or contexts take the ``ros_domain_id``
+  fixture: a domain of their own, held under an exclusive file lock for the
+  duration of the test, so that no two tests -- in this session, in
+  pytest-xdist workers, or in another checkout's test run on the same machine
+  -- ever share one.
+
+These settings are made at import time, before any test module imports
+rclpy or matplotlib.
+"""
+import fcntl
+import os
+import tempfile
+from pathlib import Path
+
+import pytest
+
+os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+os.environ.pop("ROS_STATIC_PEERS", None)
+os.environ.pop("ROS_LOCALHOST_ONLY", None)
+os.environ["MPLBACKEND"] = "Agg"
+
+# Domain ids whose Fast DDS ports stay clear of the Linux ephemeral range.
+# 0 is left out: it is every ROS installation's default.
+VALID_DOMAIN_IDS = tuple(range(1, 102)) + tuple(range(215, 233))
+_LOCK_DIR = Path(tempfile.gettempdir()) / "liver_sim-ros-domain-locks"
+
+
+def _try_lock(domain_id):
+    """Open file handle holding the exclusive lock of ``domain_id``, or None."""
+    _LOCK_DIR.mkdir(mode=0o777, parents=True, exist_ok=True)
+    handle = open(_LOCK_DIR / f"{domain_id}.lock", "a+")
+    try:
+        fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        handle.close()
+        return None
+    return handle
+
+
+_next_index = (os.getpid() * 7919) % len(VALID_DOMAIN_IDS)
+
+
+def claim_domain_id(exclude=()):
+    """Lock a free domain id; return ``(domain_id, handle)``.
+
+    The lock lasts until ``handle`` is closed or the process ends (even by a
+    crash), so a dead test run never keeps a domain. The search starts where
+    the previous claim of this process stopped (first: at a place derived
+    from the process id), so consecutive tests get different domains -- a
+    process a test failed to stop cannot talk to the next test -- and
+    concurrent runs rarely contend for the same lock.
+    """
+    global _next_index
+    n = len(VALID_DOMAIN_IDS)
+    for k in range(n):
+        index = (_next_index + k) % n
+        domain_id = VALID_DOMAIN_IDS[index]
+        if domain_id in exclude:
+            continue
+        handle = _try_lock(domain_id)
+        if handle is not None:
+            _next_index = (index + 1) % n
+            return domain_id, handle
+    raise RuntimeError(
+        f"no free ROS domain id among {n}: too many liver_sim test sessions "
+        f"on this machine (locks in {_LOCK_DIR})")
+
+
+def _session_domain():
+    """The session's own domain: the given one unless another session holds it."""
+    given = os.environ.get("ROS_DOMAIN_ID", "").strip()
+    if given.isdigit() and int(given) in VALID_DOMAIN_IDS:
+        handle = _try_lock(int(given))
+        if handle is not None:
+            return int(given), handle
+    return claim_domain_id()
+
+
+SESSION_DOMAIN_ID, _SESSION_LOCK = _session_domain()
+os.environ["ROS_DOMAIN_ID"] = str(SESSION_DOMAIN_ID)
+
+
+def pytest_unconfigure(config):
+    _SESSION_LOCK.close()
+
+
+def pytest_report_header(config):
+    return (f"ROS: ROS_DOMAIN_ID={SESSION_DOMAIN_ID} (session), "
+            f"ROS_AUTOMATIC_DISCOVERY_RANGE="
+            f"{os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE']}, "
+            f"MPLBACKEND={os.environ['MPLBACKEND']}")
+
+
+@pytest.fixture
+def ros_domain_id(monkeypatch):
+    """A ROS_DOMAIN_ID (int) that no other running test uses.
+
+    It is also set in ``os.environ`` for the duration of the test, so both
+    ``rclpy.init()`` in the test process and subprocesses started with the
+    default environment use it. Pass it explicitly where you build an
+    environment yourself (or use the ``ros_env`` fixture).
+    """
+    domain_id, handle = claim_domain_id(exclude={SESSION_DOMAIN_ID})
+    monkeypatch.setenv("ROS_DOMAIN_ID", str(domain_id))
+    try:
+        yield domain_id
+    finally:
+        handle.close()
+
+
+@pytest.fixture
+def ros_env(ros_domain_id):
+    """A copy of ``os.environ`` for ROS subprocesses: own domain, loopback only."""
+    env = dict(os.environ)
+    env["ROS_DOMAIN_ID"] = str(ros_domain_id)
+    env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    env.pop("ROS_STATIC_PEERS", None)
+    env.pop("ROS_LOCALHOST_ONLY", None)
+    return env
