@@ -23,7 +23,7 @@ class ToolShape:
     """Shape of the rigid tool, in metres, in the tool frame."""
 
     kind: str = "sphere"
-    radius_m: float = 0.01
+    radius_m: float = 0.015
     length_m: float = 0.05
     half_extents_m: tuple = (0.01, 0.01, 0.01)
 

@@ -30,6 +30,16 @@ def default_fixed_nodes(mesh: TetMesh) -> np.ndarray:
     return np.sort(mesh.tets[np.argmin(np.linalg.norm(centroids - centre, axis=1))])
 
 
+def scaled_masses(masses_kg: np.ndarray, min_fraction: float) -> np.ndarray:
+    """Lumped masses raised to at least `min_fraction` × their mean, then rescaled to the same total.
+
+    Mass scaling for the explicit step: the stable time step goes with √m of the lightest nodes,
+    which isosurface stuffing makes small at the skin; the organ's mass (P2) is unchanged.
+    """
+    floored = np.maximum(masses_kg, min_fraction * masses_kg.mean())
+    return floored * (masses_kg.sum() / floored.sum())
+
+
 @dataclass(frozen=True)
 class FrameResult:
     """What one frame produced: simulation time (s), force on the tool (N), local model, divergence."""
@@ -56,7 +66,8 @@ class LiverModel:
         self.local_model_kind = local_model
         self.local_model_reach_m = float(local_model_reach_m)
         self.springs = build_springs(mesh, self.params)
-        self.masses_kg = mesh.lumped_masses(self.params.density_kg_m3)
+        self.masses_kg = scaled_masses(mesh.lumped_masses(self.params.density_kg_m3),
+                                       self.params.min_node_mass_fraction)
         fixed = self.params.fixed_nodes
         self.fixed_nodes = default_fixed_nodes(mesh) if fixed is None else np.unique(np.asarray(fixed, np.int64))
         if self.fixed_nodes.size and (self.fixed_nodes.min() < 0 or self.fixed_nodes.max() >= len(mesh.points)):

@@ -40,14 +40,15 @@ class ModelParams:
     cubic-to-linear ratio λ1/λ2 ≈ 143, linear below ~10 % strain.
     """
 
-    capsule: SpringLaw = SpringLaw(lambda1_n=430.0, lambda2_n=3.0, mu_ns_per_m=0.02)
-    parenchyma: SpringLaw = SpringLaw(lambda1_n=43.0, lambda2_n=0.3, mu_ns_per_m=2.0)
+    capsule: SpringLaw = SpringLaw(lambda1_n=1430.0, lambda2_n=10.0, mu_ns_per_m=0.02)
+    parenchyma: SpringLaw = SpringLaw(lambda1_n=71.5, lambda2_n=0.5, mu_ns_per_m=5.0)
     density_kg_m3: float = 1060.0
-    environment_damping_per_s: float = 2.0
+    min_node_mass_fraction: float = 0.4
+    environment_damping_per_s: float = 3.0
     gravity_m_s2: tuple = (0.0, 0.0, 0.0)
     integrator: str = "symplectic_euler"
     frame_rate_hz: float = 150.0
-    substeps: int = 32
+    substeps: int = 96
     fixed_nodes: tuple | None = None
     contact_stiffness_n_per_m: float = 300.0
     contact_damping_ns_per_m: float = 1.0
@@ -77,6 +78,9 @@ class ModelParams:
         for name, value in positive.items():
             if not (math.isfinite(value) and value > 0.0):
                 raise ValueError(f"parameter {name} must be finite and > 0, got {value!r}")
+        if not (math.isfinite(self.min_node_mass_fraction) and 0.0 <= self.min_node_mass_fraction <= 1.0):
+            raise ValueError("parameter min_node_mass_fraction must be in [0, 1], "
+                             f"got {self.min_node_mass_fraction!r}")
         non_negative = {
             "environment_damping_per_s": self.environment_damping_per_s,
             "contact_stiffness_n_per_m": self.contact_stiffness_n_per_m,

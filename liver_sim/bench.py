@@ -1,0 +1,131 @@
+"""`liver-sim bench physics`: step cost of the model for the default liver and larger livers (R2).
+
+One step = every spring's Eq. 1 force plus one integration of every node (no tool), timed with
+the serial kernel, the parallel kernel on all threads, and the plain-NumPy oracle, which also
+checks the kernels' result in the same process.
+"""
+from __future__ import annotations
+
+import os
+import platform
+import sys
+import time
+
+import numba
+import numpy as np
+
+from liver_sim.mesh.liver_shape import build_liver, default_liver
+from liver_sim.physics import reference
+from liver_sim.physics.model import LiverModel
+
+#: Liver sizes measured after the default one (target tetrahedra).
+LARGER_LIVERS = (10_000, 100_000)
+TARGETS = {"default_us_per_step_1thread_max": 50.0, "default_speedup_vs_numpy_min": 10.0,
+           "spring_updates_per_s_min": 50e6}
+
+
+def machine() -> dict:
+    """Where the benchmark ran."""
+    cpu = platform.processor() or "unknown"
+    try:
+        with open("/proc/cpuinfo") as handle:
+            cpu = next(line.split(":", 1)[1].strip() for line in handle if line.startswith("model name"))
+    except (OSError, StopIteration):
+        pass
+    return {"cpu": cpu, "cores": os.cpu_count(), "numba_threads": numba.get_num_threads(),
+            "python": sys.version.split()[0], "numpy": np.__version__, "numba": numba.__version__,
+            "platform": platform.platform()}
+
+
+def _perturb(model: LiverModel) -> None:
+    rng = np.random.default_rng(0)
+    spacing = float(model.springs.rest_length_m.mean())
+    model.positions += rng.normal(scale=0.02 * spacing, size=model.positions.shape)
+    model.velocities += rng.normal(scale=0.001, size=model.velocities.shape)
+
+
+def _time_kernel(model: LiverModel, min_seconds: float) -> float:
+    """Microseconds per step of the model's kernel, over frames of many substeps."""
+    model.params = model.params.with_changes(substeps=max(1, int(2e6 // model.springs.edges)))
+    model.step_frame(None)
+    steps, start = 0, time.perf_counter()
+    while time.perf_counter() - start < min_seconds:
+        model.step_frame(None)
+        steps += model.params.substeps
+    return (time.perf_counter() - start) / steps * 1e6
+
+
+def _time_numpy(model: LiverModel, min_seconds: float) -> float:
+    x, v = model.positions.copy(), model.velocities.copy()
+    p = model.params
+    steps, start = 0, time.perf_counter()
+    while time.perf_counter() - start < min_seconds or steps < 3:
+        x, v = reference.step(x, v, model.springs, model.inv_mass, p.dt_s, p.environment_damping_per_s,
+                              p.gravity_m_s2, p.integrator)
+        steps += 1
+    return (time.perf_counter() - start) / steps * 1e6
+
+
+def _oracle_difference(model: LiverModel) -> float:
+    """Largest |x_kernel − x_numpy| (m) after one frame from the same perturbed state."""
+    x, v = model.positions.copy(), model.velocities.copy()
+    p = model.params
+    model.step_frame(None)
+    for _ in range(p.substeps):
+        x, v = reference.step(x, v, model.springs, model.inv_mass, p.dt_s, p.environment_damping_per_s,
+                              p.gravity_m_s2, p.integrator)
+    return float(np.abs(model.positions - x).max())
+
+
+def bench_mesh(name: str, mesh, min_seconds: float = 1.0) -> dict:
+    """Figures for one mesh with the default model parameters."""
+    serial = LiverModel(mesh, parallel=False)
+    parallel = LiverModel(mesh, parallel=True)
+    configured_substeps = serial.params.substeps
+    for model in (serial, parallel):
+        model.warm_up()
+        _perturb(model)
+    difference = _oracle_difference(serial)
+    us_serial = _time_kernel(serial, min_seconds)
+    us_parallel = _time_kernel(parallel, min_seconds)
+    us_numpy = _time_numpy(serial, min_seconds)
+    best = min(us_serial, us_parallel)
+    frame_us = 1e6 / serial.params.frame_rate_hz
+    return {
+        "mesh": name,
+        "nodes": int(len(mesh.points)),
+        "tetrahedra": int(len(mesh.tets)),
+        "springs": serial.springs.springs,
+        "edges_evaluated": serial.springs.edges,
+        "us_per_step_1thread": round(us_serial, 3),
+        "us_per_step_all_threads": round(us_parallel, 3),
+        "numpy_us_per_step": round(us_numpy, 3),
+        "speedup_vs_numpy": round(us_numpy / us_serial, 2),
+        "spring_updates_per_s": round(serial.springs.edges / (best * 1e-6)),
+        "max_abs_diff_vs_numpy_m": difference,
+        "stable_dt_s": serial.stable_dt_s,
+        "configured_dt_s": serial.params.dt_s,
+        "substeps_per_frame": configured_substeps,
+        "realtime_factor_150hz": round(frame_us / (configured_substeps * best), 3),
+    }
+
+
+def run_physics_bench(sizes=LARGER_LIVERS, min_seconds: float = 1.0, progress=None) -> dict:
+    """The benchmark's JSON object: machine, results (default liver first) and targets met."""
+    meshes = [("default liver", default_liver)] + [(f"liver ~{n} tets", lambda n=n: build_liver(n)) for n in sizes]
+    results = []
+    for name, make in meshes:
+        if progress:
+            progress(f"meshing {name}")
+        mesh = make()
+        if progress:
+            progress(f"timing {name}: {len(mesh.tets)} tets")
+        results.append(bench_mesh(name, mesh, min_seconds))
+    default = results[0]
+    met = {
+        "default_us_per_step_1thread_max": default["us_per_step_1thread"] <= TARGETS["default_us_per_step_1thread_max"],
+        "default_speedup_vs_numpy_min": default["speedup_vs_numpy"] >= TARGETS["default_speedup_vs_numpy_min"],
+        "spring_updates_per_s_min": max(r["spring_updates_per_s"] for r in results)
+        >= TARGETS["spring_updates_per_s_min"],
+    }
+    return {"benchmark": "physics", "machine": machine(), "results": results, "targets": TARGETS, "met": met}

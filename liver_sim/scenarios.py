@@ -1,0 +1,122 @@
+"""Scripted tool motions run offline on the model, and what they record (B1–B3).
+
+`press_release` lowers a sphere tool onto the top of the liver, presses, holds, withdraws and
+waits, recording the force, the tool and the shape at every frame.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from liver_sim.physics.contact import ToolPose
+from liver_sim.physics.model import LiverModel
+
+
+@dataclass(frozen=True)
+class PressRelease:
+    """Timing (s) and depth (m) of a press-and-release, measured along the surface normal."""
+
+    approach_s: float = 0.3
+    press_s: float = 1.0
+    hold_s: float = 0.5
+    withdraw_s: float = 0.05
+    rest_s: float = 3.0
+    depth_m: float = 0.02
+    clearance_m: float = 0.01
+
+    @property
+    def duration_s(self) -> float:
+        return self.approach_s + self.press_s + self.hold_s + self.withdraw_s + self.rest_s
+
+    @property
+    def release_time_s(self) -> float:
+        """When the tool starts to withdraw."""
+        return self.approach_s + self.press_s + self.hold_s
+
+    def depth_at(self, t: float) -> float:
+        """Nominal penetration of the tool below the rest surface at time t (negative: above it)."""
+        edges = np.cumsum([0.0, self.approach_s, self.press_s, self.hold_s, self.withdraw_s])
+        depths = [-self.clearance_m, 0.0, self.depth_m, self.depth_m, -self.clearance_m]
+        return float(np.interp(t, edges, depths))
+
+
+@dataclass
+class Trace:
+    """Per-frame record of a scripted run: times (s), tool tip (m), force on the tool (N), displacements (m)."""
+
+    time_s: list = field(default_factory=list)
+    tool_position_m: list = field(default_factory=list)
+    tool_force_n: list = field(default_factory=list)
+    max_displacement_m: list = field(default_factory=list)
+    max_deformation_m: list = field(default_factory=list)
+    in_contact: list = field(default_factory=list)
+    peak_positions_m: np.ndarray | None = None
+    divergences: list = field(default_factory=list)
+
+    def arrays(self) -> dict:
+        """The per-frame lists as numpy arrays."""
+        return {name: np.asarray(getattr(self, name)) for name in
+                ("time_s", "tool_position_m", "tool_force_n", "max_displacement_m", "max_deformation_m",
+                 "in_contact")}
+
+
+def press_target(model: LiverModel) -> tuple[np.ndarray, np.ndarray]:
+    """The topmost skin node (the diaphragmatic dome) and the downward press direction."""
+    skin_nodes = model.mesh.skin_nodes
+    top = skin_nodes[np.argmax(model.mesh.points[skin_nodes, 2])]
+    return model.mesh.points[top].copy(), np.array([0.0, 0.0, -1.0])
+
+
+def press_release(model: LiverModel, script: PressRelease = PressRelease(), progress=None) -> Trace:
+    """Run the scripted press-and-release on `model` with its tool; returns the per-frame trace.
+
+    The tool tip starts `clearance_m` above the top of the liver (tool surface to skin), goes down
+    to `depth_m` below the rest surface, holds, withdraws and the model is left to recover.
+    """
+    target, down = press_target(model)
+    radius = model.tool.radius_m
+    frames = int(round(script.duration_s * model.params.frame_rate_hz))
+    trace = Trace()
+    peak_force = -1.0
+    for frame in range(frames):
+        t = (frame + 1) * model.frame_period_s
+        tip = target - down * radius + down * script.depth_at(t)
+        result = model.step_frame(ToolPose(tip))
+        trace.time_s.append(t)
+        trace.tool_position_m.append(tip)
+        trace.tool_force_n.append(result.tool_force_n)
+        trace.max_displacement_m.append(float(model.displacement_m().max()))
+        trace.max_deformation_m.append(float(deformation_m(model.mesh.points, model.positions).max()))
+        trace.in_contact.append(result.local_model.in_contact)
+        if result.divergence:
+            trace.divergences.append(result.divergence)
+        magnitude = float(np.linalg.norm(result.tool_force_n))
+        if magnitude > peak_force:
+            peak_force = magnitude
+            trace.peak_positions_m = model.positions.copy()
+        if progress and frame % int(model.params.frame_rate_hz) == 0:
+            progress(t, script.duration_s)
+    return trace
+
+
+def deformation_m(rest: np.ndarray, current: np.ndarray) -> np.ndarray:
+    """Per-node distance (m) between the rest shape and the current one with its best rigid motion
+    removed (Kabsch): the change of shape, without the organ turning about its fixed nodes."""
+    rest_centre, current_centre = rest.mean(axis=0), current.mean(axis=0)
+    u, _, vt = np.linalg.svd((current - current_centre).T @ (rest - rest_centre))
+    flip = np.diag([1.0, 1.0, np.sign(np.linalg.det(u @ vt))])
+    rotation = u @ flip @ vt
+    aligned = (current - current_centre) @ rotation + rest_centre
+    return np.linalg.norm(aligned - rest, axis=1)
+
+
+def recovery_time_s(trace: Trace, fraction: float = 0.1, measure: str = "max_deformation_m") -> float:
+    """Time from the tool's last contact until `measure` (the largest change of shape, by default)
+    falls below `fraction` of its value then (inf if it never does within the trace)."""
+    data = trace.arrays()
+    release_time_s = data["time_s"][np.flatnonzero(data["in_contact"])[-1]]
+    after = data["time_s"] >= release_time_s
+    start = data[measure][after][0]
+    below = np.flatnonzero(data[measure][after] < fraction * start)
+    return float(data["time_s"][after][below[0]] - release_time_s) if below.size else float("inf")
