@@ -86,8 +86,7 @@ def test_spring_kernels_equal_numpy_oracle(box, parallel):
     f = np.zeros_like(x)
     if parallel:
         kernels.spring_forces_parallel(x, v, springs.node_i, springs.node_j, springs.rest_length_m, springs.lambda1_n,
-                                       springs.lambda2_n, springs.mu_ns_per_m, springs.incidence_start,
-                                       springs.incidence_edge, springs.incidence_sign, np.zeros((springs.edges, 3)), f)
+                                       springs.lambda2_n, springs.mu_ns_per_m, np.zeros((3, len(x), 3)), f)
     else:
         kernels.spring_forces_serial(x, v, springs.node_i, springs.node_j, springs.rest_length_m, springs.lambda1_n,
                                      springs.lambda2_n, springs.mu_ns_per_m, f)

@@ -51,21 +51,29 @@ def spring_forces_serial(x, v, node_i, node_j, rest, lambda1, lambda2, mu, f):
 
 
 @numba.njit(cache=True, parallel=True)
-def spring_forces_parallel(x, v, node_i, node_j, rest, lambda1, lambda2, mu,
-                           incidence_start, incidence_edge, incidence_sign, edge_force, f):
-    """As spring_forces_serial, on all threads: edge forces first, then a per-node gather."""
-    for s in numba.prange(node_i.shape[0]):
-        t, ux, uy, uz = _spring_tension(x, v, node_i[s], node_j[s], rest[s], lambda1[s], lambda2[s], mu[s])
-        edge_force[s, 0] = t * ux
-        edge_force[s, 1] = t * uy
-        edge_force[s, 2] = t * uz
+def spring_forces_parallel(x, v, node_i, node_j, rest, lambda1, lambda2, mu, partial, f):
+    """As spring_forces_serial, on all threads: each of the len(partial) chunks of springs
+    accumulates into its own (N, 3) slice of `partial`, then the slices are summed into f."""
+    chunks = partial.shape[0]
+    springs = node_i.shape[0]
+    for c in numba.prange(chunks):
+        own = partial[c]
+        own[:] = 0.0
+        for s in range(c * springs // chunks, (c + 1) * springs // chunks):
+            i = node_i[s]
+            j = node_j[s]
+            t, ux, uy, uz = _spring_tension(x, v, i, j, rest[s], lambda1[s], lambda2[s], mu[s])
+            own[i, 0] += t * ux
+            own[i, 1] += t * uy
+            own[i, 2] += t * uz
+            own[j, 0] -= t * ux
+            own[j, 1] -= t * uy
+            own[j, 2] -= t * uz
     for n in numba.prange(f.shape[0]):
-        for k in range(incidence_start[n], incidence_start[n + 1]):
-            e = incidence_edge[k]
-            sign = incidence_sign[k]
-            f[n, 0] += sign * edge_force[e, 0]
-            f[n, 1] += sign * edge_force[e, 1]
-            f[n, 2] += sign * edge_force[e, 2]
+        for c in range(chunks):
+            f[n, 0] += partial[c, n, 0]
+            f[n, 1] += partial[c, n, 1]
+            f[n, 2] += partial[c, n, 2]
 
 
 @numba.njit(cache=True)
@@ -223,8 +231,7 @@ def box_tool_contacts(x, v, candidates, centre, axes, half_extents, tool_velocit
 
 
 @numba.njit(cache=True)
-def run_frame(x, v, inv_mass, node_i, node_j, rest, lambda1, lambda2, mu,
-              incidence_start, incidence_edge, incidence_sign, edge_force, use_parallel,
+def run_frame(x, v, inv_mass, node_i, node_j, rest, lambda1, lambda2, mu, partial, use_parallel,
               dt, substeps, environment_damping, gravity, symplectic,
               tool_kind, core_a, core_b, radius, axes, half_extents, tool_velocity,
               stiffness, damping, inward_point, candidates, external_force, f, gap, point, direction):
@@ -238,8 +245,7 @@ def run_frame(x, v, inv_mass, node_i, node_j, rest, lambda1, lambda2, mu,
     for step in range(substeps):
         f[:] = external_force
         if use_parallel:
-            spring_forces_parallel(x, v, node_i, node_j, rest, lambda1, lambda2, mu,
-                                   incidence_start, incidence_edge, incidence_sign, edge_force, f)
+            spring_forces_parallel(x, v, node_i, node_j, rest, lambda1, lambda2, mu, partial, f)
         else:
             spring_forces_serial(x, v, node_i, node_j, rest, lambda1, lambda2, mu, f)
         shift = tool_velocity * ((step + 1) * dt)

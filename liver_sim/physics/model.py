@@ -8,6 +8,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
 from liver_sim.mesh.tetmesh import TetMesh
@@ -82,7 +83,7 @@ class LiverModel:
         self._centre = mesh.points.mean(axis=0)
         self._force = np.zeros_like(mesh.points)
         self.external_forces_n = np.zeros_like(mesh.points)
-        self._edge_force = np.zeros((self.springs.edges, 3))
+        self._partial_forces = np.zeros((numba.get_num_threads() if self.parallel else 1, len(mesh.points), 3))
         self._gravity = np.asarray(self.params.gravity_m_s2, dtype=np.float64)
         self.divergences = 0
         self.time_s = 0.0
@@ -152,9 +153,8 @@ class LiverModel:
         liver_force = kernels.run_frame(
             self.positions, self.velocities, self.inv_mass, springs.node_i, springs.node_j,
             springs.rest_length_m, springs.lambda1_n, springs.lambda2_n, springs.mu_ns_per_m,
-            springs.incidence_start, springs.incidence_edge, springs.incidence_sign, self._edge_force,
-            self.parallel, self.params.dt_s, substeps, self.params.environment_damping_per_s, self._gravity,
-            self.params.integrator == "symplectic_euler",
+            self._partial_forces, self.parallel, self.params.dt_s, substeps,
+            self.params.environment_damping_per_s, self._gravity, self.params.integrator == "symplectic_euler",
             kind, core_a, core_b, shape.radius_m, axes, np.asarray(shape.half_extents_m, dtype=np.float64),
             velocity, self.params.contact_stiffness_n_per_m, self.params.contact_damping_ns_per_m,
             self._centre, nodes, self.external_forces_n, self._force, gap, point, direction)

@@ -30,10 +30,6 @@ class SpringNetwork:
     mu_ns_per_m: np.ndarray
     capsule_springs: int
     parenchyma_springs: int
-    # CSR incidence (node -> edges), used by the parallel gather kernel
-    incidence_start: np.ndarray
-    incidence_edge: np.ndarray
-    incidence_sign: np.ndarray
 
     @property
     def edges(self) -> int:
@@ -55,14 +51,6 @@ def build_springs(mesh: TetMesh, params: ModelParams, rest_points: np.ndarray | 
     node_i = np.ascontiguousarray(edges[:, 0])
     node_j = np.ascontiguousarray(edges[:, 1])
     rest = np.linalg.norm(points[node_j] - points[node_i], axis=1)
-    # CSR incidence: for node n, edges incidence_edge[start[n]:start[n+1]] with sign +1 if n is
-    # the edge's first node (tension pulls it toward the second), -1 otherwise.
-    ends = np.concatenate([node_i, node_j])
-    order = np.argsort(ends, kind="stable")
-    start = np.zeros(len(points) + 1, dtype=np.int64)
-    np.cumsum(np.bincount(ends, minlength=len(points)), out=start[1:])
-    edge_ids = np.concatenate([np.arange(len(edges)), np.arange(len(edges))])
-    signs = np.concatenate([np.ones(len(edges)), -np.ones(len(edges))])
     return SpringNetwork(
         node_i=node_i,
         node_j=node_j,
@@ -72,9 +60,6 @@ def build_springs(mesh: TetMesh, params: ModelParams, rest_points: np.ndarray | 
         mu_ns_per_m=par.mu_ns_per_m + cap.mu_ns_per_m * on_skin,
         capsule_springs=int(on_skin.sum()),
         parenchyma_springs=int(len(edges)),
-        incidence_start=start,
-        incidence_edge=np.ascontiguousarray(edge_ids[order]),
-        incidence_sign=np.ascontiguousarray(signs[order]),
     )
 
 
