@@ -1,0 +1,429 @@
+"""Mesh files in and out (DESIGN "Meshes in").
+
+:func:`load_mesh` reads volume meshes (Gmsh ``.msh`` 2.2/4.1 and the old v1 format,
+VTK ``.vtu``/``.vtk``, Medit ``.mesh``) and closed surfaces (``.stl``, ``.obj``,
+``.ply``, ``.off``), which are turned into tets by isosurface stuffing of their signed
+distance.  :func:`write_mesh` writes ``.msh`` (Gmsh 2.2 ASCII) or ``.vtu`` with the skin
+tagged.  Coordinates are taken to be metres.  Every refused input raises
+:class:`MeshError` naming the file and the defect; reader crashes (including meshio's
+``sys.exit``) are converted, never propagated.
+"""
+from __future__ import annotations
+
+import contextlib
+import io
+import itertools
+from pathlib import Path
+
+import meshio
+import numba
+import numpy as np
+import trimesh
+
+from liver_sim.mesh.stuffing import tetrahedralize_to_target
+from liver_sim.mesh.tetmesh import MeshError, TetMesh
+
+#: Tet count aimed at when a surface is tetrahedralised without an explicit target.
+DEFAULT_SURFACE_TETS = 1150
+#: Physical group (Gmsh) / ``region`` value (VTU) of the skin triangles and of the tets.
+CAPSULE_REGION = 1
+PARENCHYMA_REGION = 2
+
+VOLUME_READERS = {
+    ".msh": ("Gmsh", meshio.gmsh.read),
+    ".vtu": ("VTK XML", meshio.vtu.read),
+    ".vtk": ("legacy VTK", meshio.vtk.read),
+    ".mesh": ("Medit", meshio.medit.read),
+}
+SURFACE_SUFFIXES = (".stl", ".obj", ".ply", ".off")
+WRITE_SUFFIXES = (".msh", ".vtu")
+
+#: A surface triangle with area below this fraction of (bounding-box diagonal)^2 is degenerate.
+DEGENERATE_RELATIVE_AREA = 1e-12
+#: Triangles per leaf of the hierarchy :class:`SurfaceSignedDistance` searches.
+_BVH_LEAF_TRIANGLES = 8
+#: Longest reader error text quoted in a MeshError.
+_MAX_REASON_CHARS = 200
+
+
+def load_mesh(path, target_tets: int | None = None) -> TetMesh:
+    """Read a volume mesh or a closed surface file into a validated :class:`TetMesh`.
+
+    `target_tets` is the tet count aimed at when a surface is tetrahedralised (default
+    :data:`DEFAULT_SURFACE_TETS`); volume meshes are taken as they are and ignore it.
+    Raises :class:`MeshError` (file, defect) for anything refused.
+    """
+    path = Path(path)
+    source = str(path)
+    if not path.exists():
+        raise MeshError(source, "no such file")
+    if not path.is_file():
+        raise MeshError(source, "not a regular file")
+    suffix = path.suffix.lower()
+    if suffix not in VOLUME_READERS and suffix not in SURFACE_SUFFIXES:
+        known = ", ".join(sorted([*VOLUME_READERS, *SURFACE_SUFFIXES]))
+        raise MeshError(source, f"unsupported file format '{suffix}' (readable: {known})")
+    try:
+        if path.stat().st_size == 0:
+            raise MeshError(source, "empty file")
+        if suffix in SURFACE_SUFFIXES:
+            return _load_surface(path, target_tets or DEFAULT_SURFACE_TETS)
+        if suffix == ".msh" and _is_gmsh_v1(path):
+            points, tets = _read_gmsh_v1(path)
+        else:
+            points, tets = _read_volume(path, *VOLUME_READERS[suffix])
+    except OSError as exc:
+        raise MeshError(source, f"cannot read: {exc.strerror or exc}") from None
+    return TetMesh.from_arrays(points, tets, source)
+
+
+def write_mesh(mesh: TetMesh, path) -> Path:
+    """Write `mesh` with its skin tagged; return the path written.
+
+    ``.msh``: Gmsh 2.2 ASCII, tets in physical group 2 "parenchyma", skin triangles in
+    physical group 1 "capsule".  ``.vtu``: tets and skin triangles with the integer cell
+    data ``region`` (1 = capsule skin, 2 = parenchyma).  Raises :class:`MeshError` for
+    another extension or when the file cannot be written.
+    """
+    path = checked_output_path(path)
+    cells = [meshio.CellBlock("triangle", mesh.skin), meshio.CellBlock("tetra", mesh.tets)]
+    regions = [np.full(len(mesh.skin), CAPSULE_REGION, dtype=np.int32),
+               np.full(len(mesh.tets), PARENCHYMA_REGION, dtype=np.int32)]
+    try:
+        if path.suffix.lower() == ".msh":
+            tagged = meshio.Mesh(
+                mesh.points, cells,
+                cell_data={"gmsh:physical": regions, "gmsh:geometrical": regions},
+                field_data={"capsule": np.array([CAPSULE_REGION, 2]),  # (group, dimension)
+                            "parenchyma": np.array([PARENCHYMA_REGION, 3])},
+            )
+            meshio.gmsh.write(str(path), tagged, fmt_version="2.2", binary=False)
+        else:
+            meshio.vtu.write(str(path), meshio.Mesh(mesh.points, cells, cell_data={"region": regions}))
+    except OSError as exc:
+        raise MeshError(str(path), f"cannot write: {exc.strerror or exc}") from None
+    return path
+
+
+def checked_output_path(path) -> Path:
+    """`path` as a Path if :func:`write_mesh` can write its format, else MeshError."""
+    path = Path(path)
+    if path.suffix.lower() not in WRITE_SUFFIXES:
+        raise MeshError(str(path), f"unsupported output format '{path.suffix}' (writable: "
+                                   f"{', '.join(WRITE_SUFFIXES)})")
+    return path
+
+
+def _reason(exc: BaseException) -> str:
+    """A short description of a reader's exception."""
+    if isinstance(exc, SystemExit):
+        return "the reader gave up"
+    if isinstance(exc, UnicodeDecodeError):
+        return "binary content where text was expected"
+    text = " ".join(str(exc).split())
+    # An ImportError is trimesh asking for an optional decoder for non-UTF-8 "text".
+    if not text or isinstance(exc, ImportError):
+        return "content not recognised"
+    return text[:_MAX_REASON_CHARS]
+
+
+def _read_volume(path: Path, format_name: str, reader) -> tuple[np.ndarray, np.ndarray]:
+    """Points and concatenated tetra cells read by a meshio format reader, output silenced."""
+    try:
+        with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
+            data = reader(str(path))
+    except (Exception, SystemExit) as exc:
+        raise MeshError(str(path), f"unreadable {format_name} file: {_reason(exc)}") from None
+    if not data.cells:
+        raise MeshError(str(path), "empty mesh: no cells")
+    blocks = [block.data for block in data.cells if block.type == "tetra"]
+    if not blocks:
+        found = ", ".join(sorted({block.type for block in data.cells}))
+        raise MeshError(str(path), f"no tetrahedra (cell types found: {found})")
+    return data.points, np.concatenate(blocks)
+
+
+def _is_gmsh_v1(path: Path) -> bool:
+    """True when the file starts with the v1 ``$NOD`` section (v2+ starts with ``$MeshFormat``)."""
+    with path.open("rb") as stream:
+        return stream.read(64).lstrip().startswith(b"$NOD")
+
+
+def _read_gmsh_v1(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    """Nodes and type-4 (tetrahedron) elements of a Gmsh v1 file; node numbers are labels."""
+    source = str(path)
+    try:
+        lines = path.read_bytes().decode("ascii").splitlines()
+    except UnicodeDecodeError:
+        raise MeshError(source, "unreadable Gmsh v1 file: not ASCII text") from None
+    rows = [(number, line.split()) for number, line in enumerate(lines, 1) if line.strip()]
+    index: dict[int, int] = {}
+    points = []
+    for number, fields in _gmsh_v1_section(rows, "$NOD", "$ENDNOD", source):
+        try:
+            label, coords = int(fields[0]), [float(v) for v in fields[1:]]
+        except ValueError:
+            raise MeshError(source, f"line {number}: malformed node") from None
+        if len(coords) != 3:
+            raise MeshError(source, f"line {number}: node needs a number and 3 coordinates")
+        if label in index:
+            raise MeshError(source, f"line {number}: node {label} defined twice")
+        index[label] = len(points)
+        points.append(coords)
+    tets = []
+    for number, fields in _gmsh_v1_section(rows, "$ELM", "$ENDELM", source):
+        try:
+            values = [int(v) for v in fields]
+        except ValueError:
+            raise MeshError(source, f"line {number}: malformed element") from None
+        if len(values) < 5 or len(values) != 5 + values[4]:
+            raise MeshError(source, f"line {number}: element node count does not match its nodes")
+        if values[1] != 4:
+            continue
+        if values[4] != 4:
+            raise MeshError(source, f"line {number}: tetrahedron with {values[4]} nodes")
+        missing = [label for label in values[5:] if label not in index]
+        if missing:
+            raise MeshError(source, f"line {number}: element {values[0]} refers to undefined node {missing[0]}")
+        tets.append([index[label] for label in values[5:]])
+    if not tets:
+        raise MeshError(source, "no tetrahedra (no type-4 elements in $ELM)")
+    return np.array(points, dtype=np.float64), np.array(tets, dtype=np.int64)
+
+
+def _gmsh_v1_section(rows, start: str, end: str, source: str):
+    """The (line number, fields) entries between `start` and `end`, checked against the count."""
+    tags = [fields[0] for _, fields in rows]
+    if start not in tags:
+        raise MeshError(source, f"malformed Gmsh v1 file: no {start} section")
+    first = tags.index(start) + 1
+    if first >= len(rows) or len(rows[first][1]) != 1 or not rows[first][1][0].isdigit():
+        raise MeshError(source, f"malformed Gmsh v1 file: {start} is not followed by a count")
+    count = int(rows[first][1][0])
+    entries = rows[first + 1:first + 1 + count]
+    closing = first + 1 + count
+    if len(entries) != count or closing >= len(rows) or tags[closing] != end:
+        raise MeshError(source, f"malformed Gmsh v1 file: {start} announces {count} entries "
+                                f"but {end} does not follow them")
+    return entries
+
+
+def _load_surface(path: Path, target_tets: int) -> TetMesh:
+    """Check a closed surface file, fix its winding, and tetrahedralise its interior."""
+    source = str(path)
+    vertices, faces = _read_closed_surface(path)
+    try:
+        return tetrahedralize_to_target(SurfaceSignedDistance(vertices, faces), vertices.min(axis=0),
+                                        vertices.max(axis=0), target_tets, source)
+    except MeshError:
+        raise
+    except ValueError as exc:  # the stuffing's refusals, already prefixed with the source
+        raise MeshError(source, f"cannot tetrahedralise: {str(exc).removeprefix(source + ': ')}") from None
+
+
+def _read_closed_surface(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices (m) and outward-wound triangles of a watertight, non-degenerate surface."""
+    source = str(path)
+    try:
+        with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
+            loaded = trimesh.load(source, force="mesh", process=False)
+    except (Exception, SystemExit) as exc:
+        raise MeshError(source, f"unreadable surface file: {_reason(exc)}") from None
+    if not isinstance(loaded, trimesh.Trimesh) or len(loaded.faces) == 0:
+        raise MeshError(source, "empty surface: no triangles")
+    vertices = np.asarray(loaded.vertices, dtype=np.float64)
+    bad = ~np.isfinite(vertices).all(axis=1)
+    if bad.any():
+        raise MeshError(source, f"{int(bad.sum())} surface vertices with NaN or infinite coordinates, "
+                                f"first at vertex {int(np.argmax(bad))}")
+    surface = trimesh.Trimesh(vertices, loaded.faces, process=True)  # merges STL's repeated corners
+    diagonal = float(np.linalg.norm(surface.extents))
+    flat = surface.area_faces <= DEGENERATE_RELATIVE_AREA * diagonal ** 2
+    if flat.any():
+        raise MeshError(source, f"degenerate surface: {int(flat.sum())} zero-area triangles, "
+                                f"first is triangle {int(np.argmax(flat))}")
+    edges = np.sort(surface.edges, axis=1)
+    _, uses = np.unique(edges, axis=0, return_counts=True)
+    if (uses != 2).any():
+        raise MeshError(source, f"open surface, not watertight: {int((uses == 1).sum())} boundary "
+                                f"edges, {int((uses > 2).sum())} edges shared by more than two triangles")
+    surface.fix_normals()
+    if not surface.is_winding_consistent:
+        raise MeshError(source, "surface cannot be wound consistently (non-orientable)")
+    if surface.volume <= DEGENERATE_RELATIVE_AREA * diagonal ** 3:
+        raise MeshError(source, "degenerate surface: encloses no volume")
+    return np.asarray(surface.vertices, dtype=np.float64), np.asarray(surface.faces, dtype=np.int64)
+
+
+class SurfaceSignedDistance:
+    """Exact signed distance (m) to a closed, outward-wound triangle surface; negative inside.
+
+    Calling it with points (..., 3) in metres returns distances of shape (...).  The
+    magnitude is the distance to the nearest triangle, found through a bounding-volume
+    hierarchy; the sign is that of the offset along the angle-weighted pseudonormal of
+    the nearest vertex, edge or face (Baerentzen & Aanaes 2005), which is exact for a
+    watertight consistently wound surface.
+    """
+
+    def __init__(self, vertices: np.ndarray, faces: np.ndarray):
+        self._corners = np.ascontiguousarray(vertices[faces], dtype=np.float64)  # (F, 3, 3)
+        self._feature_normals = _feature_pseudonormals(vertices, faces)
+        self._tree = _build_bvh(self._corners.min(axis=1), self._corners.max(axis=1))
+
+    def __call__(self, points) -> np.ndarray:
+        points = np.asarray(points, dtype=np.float64)
+        flat = np.ascontiguousarray(points.reshape(-1, 3))
+        face = np.empty(len(flat), dtype=np.int64)
+        feature = np.empty(len(flat), dtype=np.int64)
+        closest = np.empty_like(flat)
+        _nearest_triangles(flat, self._corners, *self._tree, face, feature, closest)
+        offset = flat - closest
+        distance = np.linalg.norm(offset, axis=1)
+        side = np.einsum("ij,ij->i", offset, self._feature_normals[face, feature])
+        return np.where(side < 0, -distance, distance).reshape(points.shape[:-1])
+
+
+def _feature_pseudonormals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """(F, 7, 3) pseudonormals of each triangle's corners a, b, c, edges ab, bc, ca and face."""
+    corners = vertices[faces]
+    normals = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    vertex_normals = np.zeros_like(vertices)
+    for i in range(3):
+        u = corners[:, (i + 1) % 3] - corners[:, i]
+        v = corners[:, (i + 2) % 3] - corners[:, i]
+        cosine = np.einsum("ij,ij->i", u, v) / (np.linalg.norm(u, axis=1) * np.linalg.norm(v, axis=1))
+        np.add.at(vertex_normals, faces[:, i], np.arccos(np.clip(cosine, -1.0, 1.0))[:, None] * normals)
+    edge_keys = np.sort(faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    _, edge_id = np.unique(edge_keys, axis=0, return_inverse=True)
+    edge_normals = np.zeros((edge_id.max() + 1, 3))
+    np.add.at(edge_normals, edge_id, np.repeat(normals, 3, axis=0))
+    return np.concatenate([vertex_normals[faces], edge_normals[edge_id].reshape(-1, 3, 3),
+                           normals[:, None]], axis=1)
+
+
+def _build_bvh(lower: np.ndarray, upper: np.ndarray) -> tuple:
+    """Median-split hierarchy over triangle boxes (F, 3): (order, box_lower, box_upper, span, child, depth).
+
+    Node 0 is the root; node k holds triangles order[span[k, 0]:span[k, 1]] inside the box
+    [box_lower[k], box_upper[k]]; child[k] is its two children, or (-1, -1) for a leaf.
+    """
+    centres = 0.5 * (lower + upper)
+    order = np.arange(len(lower))
+    spans, children, depths = [(0, len(order))], [(-1, -1)], [0]
+    for node in itertools.count():
+        if node == len(spans):
+            break
+        start, stop = spans[node]
+        if stop - start <= _BVH_LEAF_TRIANGLES:
+            continue
+        members = order[start:stop]
+        axis = int(np.argmax(np.ptp(centres[members], axis=0)))
+        half = (stop - start) // 2
+        order[start:stop] = members[np.argpartition(centres[members, axis], half)]
+        children[node] = (len(spans), len(spans) + 1)
+        spans += [(start, start + half), (start + half, stop)]
+        children += [(-1, -1), (-1, -1)]
+        depths += [depths[node] + 1] * 2
+    span = np.array(spans, dtype=np.int64)
+    box_lower = np.array([lower[order[a:b]].min(axis=0) for a, b in spans])
+    box_upper = np.array([upper[order[a:b]].max(axis=0) for a, b in spans])
+    return order, box_lower, box_upper, span, np.array(children, dtype=np.int64), max(depths)
+
+
+@numba.njit(cache=True)
+def _nearest_triangles(points, corners, order, box_lower, box_upper, span, child, depth,
+                       face, feature, closest):
+    """Fill face[i], feature[i] and closest[i] with the nearest surface point to points[i].
+
+    Best-first descent of the hierarchy: the nearer child is visited first and a box no
+    closer than the best triangle so far is skipped.
+    """
+    stack = np.empty(2 * depth + 2, dtype=np.int64)
+    for i in range(points.shape[0]):
+        p = (points[i, 0], points[i, 1], points[i, 2])
+        best = np.inf
+        stack[0] = 0
+        top = 1
+        while top > 0:
+            top -= 1
+            node = stack[top]
+            if _box_distance2(p, box_lower[node], box_upper[node]) >= best:
+                continue
+            if child[node, 0] < 0:
+                for k in range(span[node, 0], span[node, 1]):
+                    t = order[k]
+                    c, f = _closest_point_on_triangle(p, corners[t])
+                    d2 = _dot(_sub(p, c), _sub(p, c))
+                    if d2 < best:
+                        best = d2
+                        face[i], feature[i] = t, f
+                        closest[i, 0], closest[i, 1], closest[i, 2] = c
+                continue
+            near, far = child[node, 0], child[node, 1]
+            if _box_distance2(p, box_lower[near], box_upper[near]) > \
+                    _box_distance2(p, box_lower[far], box_upper[far]):
+                near, far = far, near
+            stack[top] = far
+            stack[top + 1] = near
+            top += 2
+
+
+@numba.njit(cache=True, inline="always")
+def _sub(u, v):
+    return (u[0] - v[0], u[1] - v[1], u[2] - v[2])
+
+
+@numba.njit(cache=True, inline="always")
+def _dot(u, v):
+    return u[0] * v[0] + u[1] * v[1] + u[2] * v[2]
+
+
+@numba.njit(cache=True, inline="always")
+def _along(a, s, u):
+    """a + s u."""
+    return (a[0] + s * u[0], a[1] + s * u[1], a[2] + s * u[2])
+
+
+@numba.njit(cache=True, inline="always")
+def _box_distance2(p, lower, upper):
+    """Squared distance from p to the box [lower, upper]."""
+    total = 0.0
+    for axis in range(3):
+        gap = max(lower[axis] - p[axis], 0.0, p[axis] - upper[axis])
+        total += gap * gap
+    return total
+
+
+@numba.njit(cache=True)
+def _closest_point_on_triangle(p, triangle):
+    """Closest point to p on a triangle (3, 3) and the feature it lies on.
+
+    Features are numbered as in :func:`_feature_pseudonormals`: 0-2 corners a, b, c,
+    3-5 edges ab, bc, ca, 6 the interior (Ericson, Real-Time Collision Detection §5.1.5).
+    """
+    a = (triangle[0, 0], triangle[0, 1], triangle[0, 2])
+    b = (triangle[1, 0], triangle[1, 1], triangle[1, 2])
+    c = (triangle[2, 0], triangle[2, 1], triangle[2, 2])
+    ab, ac = _sub(b, a), _sub(c, a)
+    ap, bp, cp = _sub(p, a), _sub(p, b), _sub(p, c)
+    d1, d2 = _dot(ab, ap), _dot(ac, ap)
+    if d1 <= 0.0 and d2 <= 0.0:
+        return a, 0
+    d3, d4 = _dot(ab, bp), _dot(ac, bp)
+    if d3 >= 0.0 and d4 <= d3:
+        return b, 1
+    vc = d1 * d4 - d3 * d2
+    if vc <= 0.0 and d1 >= 0.0 and d3 <= 0.0:
+        return _along(a, d1 / (d1 - d3), ab), 3
+    d5, d6 = _dot(ab, cp), _dot(ac, cp)
+    if d6 >= 0.0 and d5 <= d6:
+        return c, 2
+    vb = d5 * d2 - d1 * d6
+    if vb <= 0.0 and d2 >= 0.0 and d6 <= 0.0:
+        return _along(a, d2 / (d2 - d6), ac), 5
+    va = d3 * d6 - d5 * d4
+    if va <= 0.0 and d4 >= d3 and d5 >= d6:
+        return _along(b, (d4 - d3) / ((d4 - d3) + (d5 - d6)), _sub(c, b)), 4
+    scale = 1.0 / (va + vb + vc)
+    return _along(_along(a, vb * scale, ab), vc * scale, ac), 6
