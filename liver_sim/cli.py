@@ -1,0 +1,199 @@
+"""The ``liver-sim`` command line.
+
+Each subcommand is an ``add_*_command(subparsers)`` function that declares its
+arguments and sets ``handler`` to a function ``handler(args) -> int``; list it in
+:data:`COMMANDS`.  A refused input ends the command with exit status 2 and
+``liver-sim: error: <file>: <defect>`` on stderr.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from liver_sim.mesh.io import (CAPSULE_REGION, PARENCHYMA_REGION, WRITE_SUFFIXES, checked_output_path,
+                               load_mesh, write_mesh)
+from liver_sim.mesh.liver_shape import build_liver, default_liver
+from liver_sim.mesh.tetmesh import TetMesh
+
+PROG = "liver-sim"
+#: Exit status of a command that refused its input.
+EXIT_REFUSED = 2
+
+
+def positive_int(text: str) -> int:
+    """argparse type: an integer >= 1."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"{value} is not positive")
+    return value
+
+
+def add_mesh_command(commands) -> None:
+    """``liver-sim mesh info|build``: describe or convert a mesh (default: the built-in liver)."""
+    mesh_parser = commands.add_parser("mesh", help="describe or write tetrahedral meshes")
+    actions = mesh_parser.add_subparsers(dest="action", required=True, metavar="ACTION")
+
+    def add_source_arguments(parser) -> None:
+        parser.add_argument("path", nargs="?", metavar="PATH",
+                            help="volume mesh (.msh .vtu .vtk .mesh) or closed surface "
+                                 "(.stl .obj .ply .off); default: the built-in liver")
+        parser.add_argument("--target-tets", type=positive_int, metavar="N",
+                            help="tet count aimed at when tetrahedralising a surface or the "
+                                 "built-in liver (volume meshes are used as they are)")
+
+    info = actions.add_parser("info", help="print size, volume, quality and hash of a mesh")
+    add_source_arguments(info)
+    info.add_argument("--json", action="store_true", help="print one JSON object")
+    info.set_defaults(handler=mesh_info)
+
+    build = actions.add_parser("build", help="write the tet mesh with its skin tagged")
+    add_source_arguments(build)
+    build.add_argument("--out", required=True, metavar="FILE",
+                       help=f"output file, format by extension: {' '.join(WRITE_SUFFIXES)}")
+    build.set_defaults(handler=mesh_build)
+
+
+def mesh_from_args(args) -> TetMesh:
+    """The mesh named by PATH, or the built-in liver (rebuilt when --target-tets is given)."""
+    if args.path is not None:
+        return load_mesh(args.path, args.target_tets)
+    if args.target_tets is not None:
+        return build_liver(args.target_tets)
+    return default_liver()
+
+
+def mesh_info(args) -> int:
+    """Print :meth:`TetMesh.summary` (plus the volume in litres), as text or JSON."""
+    info = mesh_from_args(args).summary()
+    info["volume_l"] = info["volume_m3"] * 1e3
+    if args.json:
+        print(json.dumps(info))
+        return 0
+    (lo, hi), size = info["bounds_m"], info["size_m"]
+    print(f"source          {info['source']}")
+    print(f"nodes           {info['nodes']}")
+    print(f"tetrahedra      {info['tetrahedra']}")
+    print(f"skin triangles  {info['skin_triangles']}")
+    print(f"volume          {info['volume_m3']:.6g} m^3 ({info['volume_l']:.4g} L)")
+    print("bounding box    " + "  ".join(f"{a}: {l:.4g} .. {h:.4g}" for a, l, h in zip("xyz", lo, hi)) + " m")
+    print("size            " + " x ".join(f"{s:.4g}" for s in size) + " m")
+    print(f"dihedral angles {info['min_dihedral_deg']:.2f} .. {info['max_dihedral_deg']:.2f} deg")
+    print(f"watertight      {'yes' if info['watertight'] else 'no'}")
+    print(f"sha256          {info['sha256']}")
+    return 0
+
+
+def mesh_build(args) -> int:
+    """Write the mesh to --out and say what was written."""
+    out = checked_output_path(args.out)  # refuse a bad extension before building anything
+    mesh = mesh_from_args(args)
+    write_mesh(mesh, out)
+    print(f"wrote {out}: {len(mesh.points)} nodes, {len(mesh.tets)} tetrahedra (region "
+          f"{PARENCHYMA_REGION} 'parenchyma'), {len(mesh.skin)} skin triangles (region "
+          f"{CAPSULE_REGION} 'capsule'), sha256 {mesh.sha256}")
+    return 0
+
+
+def add_traction_command(commands) -> None:
+    """``liver-sim traction [--out DIR]``: the traction test of Figs. 4–5."""
+    parser = commands.add_parser("traction", help="traction test of a cylinder beside the connector law (Figs. 4-5)")
+    parser.add_argument("--out", type=Path, default=Path("out/traction"), help="output folder (default: %(default)s)")
+    parser.set_defaults(handler=traction)
+
+
+def traction(args) -> int:
+    from liver_sim.traction import run_traction, write_traction
+
+    def report(level, levels, force, elongation):
+        print(f"  level {level:2d}/{levels}: {force:8.4f} N -> elongation {elongation * 100:6.2f} %", flush=True)
+
+    print("pulling a cylinder (top fixed, equal forces on the bottom nodes) to static equilibrium", flush=True)
+    result = run_traction(progress=report)
+    csv_path, png_path = write_traction(result, args.out)
+    print(f"wrote {csv_path} and {png_path}")
+    return 0
+
+
+def add_bench_command(commands) -> None:
+    """``liver-sim bench physics [--json]``: step cost of the model (not a test)."""
+    parser = commands.add_parser("bench", help="benchmarks (print JSON with --json)")
+    kinds = parser.add_subparsers(dest="bench", required=True, metavar="BENCHMARK")
+    physics = kinds.add_parser("physics", help="us per step for the default liver and ~10k/~100k-tet livers")
+    physics.add_argument("--json", action="store_true", help="print one JSON object")
+    physics.add_argument("--sizes", type=positive_int, nargs="*", default=None, metavar="TETS",
+                         help="target tet counts of the larger livers (default: 10000 100000)")
+    physics.add_argument("--seconds", type=float, default=1.0, help="timing per kernel and mesh (default: 1 s)")
+    physics.set_defaults(handler=bench_physics)
+
+
+def bench_physics(args) -> int:
+    from liver_sim.bench import LARGER_LIVERS, run_physics_bench
+
+    progress = None if args.json else (lambda line: print(line, flush=True))
+    sizes = LARGER_LIVERS if args.sizes is None else tuple(args.sizes)
+    report = run_physics_bench(sizes, args.seconds, progress)
+    if args.json:
+        print(json.dumps(report))
+        return 0
+    print(f"machine: {report['machine']['cpu']}, {report['machine']['cores']} cores")
+    print(f"{'mesh':<20}{'tets':>8}{'springs':>9}{'us/step 1t':>12}{'us/step all':>12}{'numpy us':>10}"
+          f"{'stable dt':>11}{'RT x150Hz':>10}")
+    for r in report["results"]:
+        print(f"{r['mesh']:<20}{r['tetrahedra']:>8}{r['springs']:>9}{r['us_per_step_1thread']:>12.1f}"
+              f"{r['us_per_step_all_threads']:>12.1f}{r['numpy_us_per_step']:>10.0f}"
+              f"{r['stable_dt_s'] * 1e6:>9.0f}us{r['realtime_factor_150hz']:>10.2f}")
+    for target, met in report["met"].items():
+        print(f"target {target} = {report['targets'][target]:g}: {'met' if met else 'NOT met'}")
+    return 0
+
+
+def add_demo_command(commands) -> None:
+    """``liver-sim demo [--duration S] [--out DIR]``: the headless press-and-release."""
+    parser = commands.add_parser("demo", help="scripted press-and-release on the default liver, headless")
+    parser.add_argument("--duration", type=float, default=None, help="simulated seconds (default: the script's 4.85 s)")
+    parser.add_argument("--out", type=Path, default=Path("out/demo"), help="output folder (default: %(default)s)")
+    parser.set_defaults(handler=demo)
+
+
+def demo(args) -> int:
+    from liver_sim.demo import run_demo
+
+    run_demo(args.out, args.duration, progress=lambda line: print(line, flush=True))
+    return 0
+
+
+#: The subcommands, in the order `liver-sim --help` lists them.
+COMMANDS = (add_mesh_command, add_traction_command, add_bench_command, add_demo_command)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The ``liver-sim`` argument parser with every subcommand in :data:`COMMANDS`."""
+    parser = argparse.ArgumentParser(prog=PROG, description="Human liver simulation "
+                                     "(Boux de Casson et al.): meshes, traction tests, demos.")
+    commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    for add_command in COMMANDS:
+        add_command(commands)
+    return parser
+
+
+def main(argv=None) -> int:
+    """Run ``liver-sim`` with `argv` (default: sys.argv[1:]); return the exit status."""
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:  # --help or a usage error, already reported by argparse
+        return exc.code if isinstance(exc.code, int) else EXIT_REFUSED
+    try:
+        return args.handler(args)
+    except ValueError as exc:  # MeshError, or a refusal of the stuffing; both name the source
+        print(f"{PROG}: error: {exc}", file=sys.stderr)
+        return EXIT_REFUSED
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,39 @@
+"""The physics benchmark's report and the headless demo's outputs (behaviour, not speed)."""
+import json
+
+import pytest
+
+from liver_sim.bench import run_physics_bench
+from liver_sim.demo import PLOTTED_FIGURES, run_demo
+
+PNG = b"\x89PNG\r\n\x1a\n"
+
+
+def test_physics_bench_reports_the_default_liver_first_and_agrees_with_numpy():
+    report = run_physics_bench(sizes=(3000,), min_seconds=0.02)
+    assert {"cpu", "cores", "numba"} <= set(report["machine"])
+    first, second = report["results"]
+    assert first["mesh"] == "default liver" and 1100 <= first["tetrahedra"] <= 1200
+    assert 2700 <= second["tetrahedra"] <= 3300
+    for result in report["results"]:
+        assert {"mesh", "tetrahedra", "springs", "us_per_step_1thread", "us_per_step_all_threads",
+                "numpy_us_per_step", "stable_dt_s", "realtime_factor_150hz"} <= set(result)
+        assert result["max_abs_diff_vs_numpy_m"] < 1e-9
+        assert result["us_per_step_1thread"] > 0 and result["realtime_factor_150hz"] > 0
+    json.dumps(report)
+
+
+def test_demo_writes_summary_and_pictures(tmp_path):
+    summary = run_demo(tmp_path, duration_s=3.0, progress=lambda line: None)
+    for name in PLOTTED_FIGURES:
+        assert (tmp_path / name).read_bytes()[:8] == PNG
+    on_disk = json.loads((tmp_path / "summary.json").read_text())
+    assert on_disk["peak_force_n"] == pytest.approx(summary["peak_force_n"])
+    assert summary["peak_force_n"] > 0.2 and not summary["divergences"]
+    assert summary["simulated_s"] == pytest.approx(3.0, abs=0.01)
+    assert "Press-and-release" in (tmp_path / "summary.md").read_text()
+
+
+def test_demo_refuses_a_duration_shorter_than_the_script(tmp_path):
+    with pytest.raises(ValueError, match="--duration"):
+        run_demo(tmp_path, duration_s=1.0, progress=lambda line: None)
