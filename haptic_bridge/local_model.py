@@ -10,6 +10,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from liver_sim.rotations import quaternion_to_matrix
+
 #: A tip closer than this (m) to a sphere model's centre gets the fallback direction +z.
 CENTRE_EPS_M = 1e-12
 _UP = np.array([0.0, 0.0, 1.0])
@@ -92,20 +94,6 @@ def contact_force(depth: float, depth_rate: float, direction: np.ndarray,
     """
     magnitude = stiffness * depth + damping * depth_rate if depth > 0.0 else 0.0
     return max(magnitude, 0.0) * np.asarray(direction, dtype=np.float64)
-
-
-def quaternion_to_matrix(quaternion) -> np.ndarray:
-    """3×3 rotation matrix of the quaternion (x, y, z, w); normalised first, refused if zero or non-finite."""
-    q = np.asarray(quaternion, dtype=np.float64)
-    norm = float(np.linalg.norm(q)) if q.shape == (4,) else 0.0
-    if not (np.isfinite(norm) and norm > 0.0):
-        raise ValueError(f"quaternion must be a finite, non-zero (x, y, z, w), got {quaternion!r}")
-    x, y, z, w = q / norm
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-    ])
 
 
 def _rotation_matrix(rotation) -> np.ndarray:

@@ -14,6 +14,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from liver_sim.physics import kernels
+from liver_sim.rotations import quaternion_to_matrix
 
 TOOL_KINDS = {"sphere": kernels.TOOL_SPHERE, "capsule": kernels.TOOL_CAPSULE, "box": kernels.TOOL_BOX}
 
@@ -58,16 +59,6 @@ class ToolPose:
     def rotation(self) -> np.ndarray:
         """3×3 rotation matrix whose columns are the tool axes in the liver frame."""
         return quaternion_to_matrix(self.orientation_xyzw)
-
-
-def quaternion_to_matrix(q) -> np.ndarray:
-    """Rotation matrix of a quaternion (x, y, z, w); normalised first."""
-    x, y, z, w = np.asarray(q, dtype=np.float64) / np.linalg.norm(q)
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-    ])
 
 
 def tool_core(shape: ToolShape, pose: ToolPose) -> tuple[np.ndarray, np.ndarray]:
