@@ -1,0 +1,398 @@
+"""msg_defs: numpy ↔ ROS message round trips, refusals naming the field, and one trip over loopback DDS."""
+import time
+
+import numpy as np
+import pytest
+from builtin_interfaces.msg import Time
+from geometry_msgs.msg import Pose, PoseStamped, Vector3, Wrench, WrenchStamped
+from rclpy.qos import DurabilityPolicy, ReliabilityPolicy
+from rclpy.serialization import deserialize_message, serialize_message
+from sensor_msgs.msg import PointCloud2, PointField
+from shape_msgs.msg import Mesh
+from std_msgs.msg import Float64MultiArray
+from visualization_msgs.msg import Marker
+
+from haptic_bridge.local_model import PlaneModel, SphereModel
+from liver_sim.physics.contact import LocalModel
+from liver_sim.rotations import quaternion_to_matrix
+from msg_defs import conversions as conv
+from msg_defs.topics import TOPICS
+
+STANDARD_FORCE_FORMATS = [fmt for fmt in conv.FORCE_OUTPUT_FORMATS if fmt != "omni_feedback"]
+AXES = [(0, 0, 1), (0, 0, -1), (1, 0, 0), (-1, 0, 0), (0, 1, 0), (0.3, -0.2, -0.9)]
+
+
+@pytest.fixture
+def rng():
+    return np.random.default_rng(7)
+
+
+def plane_model(point, normal):
+    return LocalModel("plane", True, np.asarray(point, float), np.asarray(normal, float), np.zeros(3), 0.0, 0.001, True)
+
+
+def sphere_model(centre, radius):
+    return LocalModel("sphere", True, np.zeros(3), np.array([0.0, 0.0, 1.0]), np.asarray(centre, float), radius,
+                      0.0, False)
+
+
+# ---------------------------------------------------------------- time
+
+def test_stamp_round_trip_to_the_nanosecond():
+    stamp = conv.stamp_from_seconds(1_700_000_000.25)
+    assert (stamp.sec, stamp.nanosec) == (1_700_000_000, 250_000_000)
+    assert conv.seconds_from_stamp(conv.stamp_from_seconds(12.345678901)) == pytest.approx(12.345678901, abs=1e-9)
+    carried = conv.stamp_from_seconds(2.9999999999)
+    assert (carried.sec, carried.nanosec) == (3, 0)
+
+
+@pytest.mark.parametrize("bad", [-1.0, float("nan"), float("inf"), 2.0 ** 31])
+def test_stamp_refuses_negative_non_finite_and_overflowing_times(bad):
+    with pytest.raises(ValueError, match="stamp"):
+        conv.stamp_from_seconds(bad)
+
+
+# ---------------------------------------------------------------- PointCloud2
+
+def test_pointcloud_round_trip_is_exact_in_float32(rng):
+    positions = rng.normal(scale=0.1, size=(2000, 3))
+    msg = conv.nodes_to_pointcloud2(positions, 3.5, "liver")
+    assert (msg.height, msg.width, msg.point_step, msg.row_step) == (1, 2000, 12, 24000)
+    assert [(f.name, f.offset, f.datatype, f.count) for f in msg.fields] == [
+        ("x", 0, PointField.FLOAT32, 1), ("y", 4, PointField.FLOAT32, 1), ("z", 8, PointField.FLOAT32, 1)]
+    assert msg.is_dense and not msg.is_bigendian
+    assert msg.header.frame_id == "liver" and conv.seconds_from_stamp(msg.header.stamp) == 3.5
+    back = conv.pointcloud2_to_nodes(deserialize_message(serialize_message(msg), PointCloud2))
+    assert back.dtype == np.float64 and back.shape == (2000, 3)
+    np.testing.assert_array_equal(back, positions.astype(np.float32))
+
+
+def test_pointcloud_build_is_fast(rng):
+    positions = rng.random((2000, 3))
+    conv.nodes_to_pointcloud2(positions, 0.0, "liver")
+    started = time.perf_counter()
+    for _ in range(100):
+        conv.nodes_to_pointcloud2(positions, 0.0, "liver")
+    assert (time.perf_counter() - started) / 100 < 1e-3
+
+
+def test_pointcloud_accepts_other_layouts(rng):
+    """Foreign clouds: padded points, fields out of order, extra fields, big-endian, two rows."""
+    xyz = rng.random((6, 3)).astype(np.float32)
+    for endian, bigendian in (("<", False), (">", True)):
+        layout = np.dtype({"names": ["intensity", "z", "x", "y"], "formats": [endian + "f4"] * 4,
+                           "offsets": [0, 4, 12, 20], "itemsize": 32})
+        records = np.zeros(6, dtype=layout)
+        records["x"], records["y"], records["z"] = xyz.T
+        fields = [PointField(name=name, offset=offset, datatype=PointField.FLOAT32, count=1)
+                  for name, offset in (("intensity", 0), ("z", 4), ("x", 12), ("y", 20))]
+        msg = PointCloud2(height=2, width=3, fields=fields, is_bigendian=bigendian, point_step=32, row_step=96,
+                          data=records.tobytes(), is_dense=True)
+        np.testing.assert_array_equal(conv.pointcloud2_to_nodes(msg), xyz)
+
+
+def _cloud_with(**changes):
+    msg = conv.nodes_to_pointcloud2(np.arange(30.0).reshape(10, 3), 0.0, "liver")
+    for key, value in changes.items():
+        setattr(msg, key, value)
+    return msg
+
+
+def _field(name, offset, datatype=PointField.FLOAT32):
+    return PointField(name=name, offset=offset, datatype=datatype, count=1)
+
+
+def _nan_data():
+    data = np.arange(30.0, dtype="<f4")
+    data[17] = np.nan
+    return data.tobytes()
+
+
+@pytest.mark.parametrize("changes, message", [
+    ({"data": bytes(100)}, r"PointCloud2\.data has 100 bytes, expected row_step\*height = 120"),
+    ({"row_step": 100}, r"PointCloud2\.row_step is 100"),
+    ({"point_step": 8, "row_step": 80}, r"PointCloud2\.point_step is 8"),
+    ({"fields": [_field("x", 0), _field("z", 8)]}, r"PointCloud2\.fields has no 'y' field"),
+    ({"fields": [_field("x", 0), _field("y", 4, PointField.FLOAT64), _field("z", 8)]},
+     r"PointCloud2\.fields\['y'\]\.datatype is 8, expected 7"),
+    ({"fields": [_field("x", 0), _field("y", 4), _field("z", 10)]}, r"PointCloud2\.fields\['z'\]\.offset is 10"),
+    ({"data": _nan_data()}, r"PointCloud2\.data holds non-finite coordinates \(first at point 5\)"),
+], ids=["data length", "row_step", "point_step", "missing field", "datatype", "offset", "NaN"])
+def test_malformed_pointcloud_is_refused_naming_the_field(changes, message):
+    with pytest.raises(ValueError, match=message):
+        conv.pointcloud2_to_nodes(_cloud_with(**changes))
+
+
+@pytest.mark.parametrize("positions, message", [
+    (np.array([[0.0, np.nan, 0.0]]), r"positions must be finite .* at index \[0, 1\]"),
+    (np.array([[0.0, 1e39, 0.0]]), r"positions must be finite \(float32\)"),
+    (np.zeros((4, 2)), r"positions must have shape \(N, 3\)"),
+])
+def test_pointcloud_builder_refuses_what_would_not_be_finite_float32(positions, message):
+    with pytest.raises(ValueError, match=message):
+        conv.nodes_to_pointcloud2(positions, 0.0, "liver")
+
+
+# ---------------------------------------------------------------- skin: Mesh and Marker
+
+def _skin(rng, n_points, n_triangles):
+    return rng.integers(0, n_points, size=(n_triangles, 3))
+
+
+def test_mesh_round_trip(rng):
+    points, skin = rng.random((40, 3)), _skin(rng, 40, 60)
+    msg = deserialize_message(serialize_message(conv.skin_mesh_msg(skin, points)), Mesh)
+    back_skin, back_points = conv.mesh_msg_to_arrays(msg)
+    np.testing.assert_array_equal(back_skin, skin)
+    np.testing.assert_array_equal(back_points, points)
+    assert back_skin.dtype == np.int64
+
+
+def test_mesh_refuses_indices_out_of_range_both_ways(rng):
+    points = rng.random((4, 3))
+    with pytest.raises(ValueError, match=r"skin holds node indices outside \[0, 4\)"):
+        conv.skin_mesh_msg(np.array([[0, 1, 4]]), points)
+    msg = conv.skin_mesh_msg(np.array([[0, 1, 3]]), points)
+    msg.vertices.pop()
+    with pytest.raises(ValueError, match=r"Mesh\.triangles holds node indices outside \[0, 3\)"):
+        conv.mesh_msg_to_arrays(msg)
+    msg.vertices[0].y = float("inf")
+    with pytest.raises(ValueError, match=r"Mesh\.vertices must be finite"):
+        conv.mesh_msg_to_arrays(msg)
+
+
+def test_skin_marker_lists_the_triangle_corners_in_order(rng):
+    positions, skin = rng.random((30, 3)), _skin(rng, 30, 20)
+    marker = conv.skin_marker(positions, skin, 2.0, "liver")
+    assert (marker.ns, marker.id, marker.type, marker.action) == ("liver", 0, Marker.TRIANGLE_LIST, Marker.ADD)
+    assert marker.pose.orientation.w == 1.0 and marker.color.a == 1.0
+    corners = np.array([(p.x, p.y, p.z) for p in marker.points])
+    np.testing.assert_array_equal(corners, positions[skin].reshape(-1, 3))
+
+
+@pytest.mark.parametrize("n_triangles", [0, 1, 450])
+def test_serialized_skin_marker_is_the_same_message(rng, n_triangles):
+    positions, skin = rng.random((300, 3)), _skin(rng, 300, n_triangles)
+    stamp = conv.stamp_from_seconds(5.25)
+    expected = deserialize_message(serialize_message(conv.skin_marker(positions, skin, stamp, "liver")), Marker)
+    assert deserialize_message(conv.skin_marker_serialized(positions, skin, stamp, "liver"), Marker) == expected
+
+
+# ---------------------------------------------------------------- rotations and poses
+
+@pytest.mark.parametrize("normal", AXES)
+def test_quaternion_from_z_axis_maps_z_to_the_normal(normal):
+    q = conv.quaternion_from_z_axis(normal)
+    assert np.linalg.norm(q) == pytest.approx(1.0)
+    np.testing.assert_allclose(quaternion_to_matrix(q)[:, 2], np.asarray(normal) / np.linalg.norm(normal), atol=1e-12)
+
+
+def test_quaternion_from_z_axis_is_the_shortest_arc_and_refuses_zero(rng):
+    for normal in rng.normal(size=(50, 3)):
+        rotation = quaternion_to_matrix(conv.quaternion_from_z_axis(normal))
+        unit = normal / np.linalg.norm(normal)
+        np.testing.assert_allclose(rotation[:, 2], unit, atol=1e-12)
+        np.testing.assert_allclose(rotation @ np.cross([0, 0, 1], unit), np.cross([0, 0, 1], unit), atol=1e-12)
+    with pytest.raises(ValueError, match="normal must be non-zero"):
+        conv.quaternion_from_z_axis((0, 0, 0))
+
+
+def test_pose_round_trip_normalises_the_quaternion():
+    msg = conv.pose_stamped((0.1, -0.2, 0.3), (0.0, 0.0, 2.0, 2.0), 1.0, "liver")
+    assert msg.header.frame_id == "liver"
+    for pose in (msg, msg.pose):
+        position, orientation = conv.pose_to_arrays(pose)
+        np.testing.assert_array_equal(position, (0.1, -0.2, 0.3))
+        np.testing.assert_allclose(orientation, (0.0, 0.0, np.sqrt(0.5), np.sqrt(0.5)))
+
+
+def test_pose_with_bad_fields_is_refused_by_name():
+    bad_position = Pose()
+    bad_position.position.z = float("nan")
+    with pytest.raises(ValueError, match=r"Pose\.position must be finite"):
+        conv.pose_to_arrays(bad_position)
+    zero_orientation = PoseStamped()
+    zero_orientation.pose.orientation.w = 0.0
+    with pytest.raises(ValueError, match=r"PoseStamped\.pose\.orientation must be a non-zero quaternion"):
+        conv.pose_to_arrays(zero_orientation)
+    with pytest.raises(ValueError, match="orientation_xyzw"):
+        conv.pose_stamped((0, 0, 0), (0, 0, 0, 0), 0.0, "liver")
+
+
+# ---------------------------------------------------------------- local model
+
+def _through_the_wire(marker):
+    return deserialize_message(serialize_message(marker), Marker)
+
+
+@pytest.mark.parametrize("normal", AXES)
+def test_plane_local_model_round_trip(normal):
+    point = (0.01, -0.02, 0.03)
+    marker = conv.local_model_marker(plane_model(point, normal), 4.0, "liver", 0.05, patch_size_m=0.03)
+    assert (marker.ns, marker.id, marker.type, marker.action) == ("local_model", 0, Marker.CUBE, Marker.ADD)
+    assert (marker.scale.x, marker.scale.y, marker.scale.z) == (0.03, 0.03, conv.PLANE_THICKNESS_M)
+    model, lifetime_s = conv.marker_to_local_model(_through_the_wire(marker))
+    assert isinstance(model, PlaneModel) and lifetime_s == pytest.approx(0.05)
+    np.testing.assert_array_equal(model.point, point)
+    np.testing.assert_allclose(model.normal, np.asarray(normal) / np.linalg.norm(normal), atol=1e-12)
+
+
+def test_plane_local_model_round_trip_random_normals(rng):
+    for normal in rng.normal(size=(20, 3)):
+        model, _ = conv.marker_to_local_model(conv.local_model_marker(plane_model(np.zeros(3), normal), 0.0, "l", 0.05))
+        np.testing.assert_allclose(model.normal, normal / np.linalg.norm(normal), atol=1e-12)
+
+
+def test_sphere_local_model_round_trip():
+    marker = conv.local_model_marker(sphere_model((0.0, 0.1, -0.2), 0.07), 4.0, "liver", 0.02)
+    assert marker.type == Marker.SPHERE and (marker.scale.x, marker.scale.y, marker.scale.z) == (0.14, 0.14, 0.14)
+    model, lifetime_s = conv.marker_to_local_model(_through_the_wire(marker))
+    assert isinstance(model, SphereModel) and lifetime_s == pytest.approx(0.02)
+    np.testing.assert_array_equal(model.centre, (0.0, 0.1, -0.2))
+    assert model.radius == pytest.approx(0.07)
+
+
+def test_invalid_local_model_is_a_delete_marker_read_as_none():
+    marker = conv.local_model_marker(LocalModel.invalid(), 4.0, "liver", 0.05)
+    assert (marker.ns, marker.id, marker.action, marker.header.frame_id) == ("local_model", 0, Marker.DELETE, "liver")
+    assert conv.marker_to_local_model(_through_the_wire(marker)) == (None, pytest.approx(0.05))
+    assert conv.marker_to_local_model(Marker(action=Marker.DELETEALL)) == (None, 0.0)
+
+
+def test_local_model_marker_refuses_bad_models():
+    with pytest.raises(ValueError, match=r"LocalModel\.point must be finite"):
+        conv.local_model_marker(plane_model((0, np.nan, 0), (0, 0, 1)), 0.0, "liver", 0.05)
+    with pytest.raises(ValueError, match=r"LocalModel\.radius_m must be finite and > 0"):
+        conv.local_model_marker(sphere_model((0, 0, 0), 0.0), 0.0, "liver", 0.05)
+    with pytest.raises(ValueError, match="lifetime_s"):
+        conv.local_model_marker(plane_model((0, 0, 0), (0, 0, 1)), 0.0, "liver", -0.05)
+
+
+def _marker(**changes):
+    marker = conv.local_model_marker(sphere_model((0.0, 0.0, 0.0), 0.05), 0.0, "liver", 0.05)
+    for path, value in changes.items():
+        owner = marker
+        *parents, leaf = path.split("__")
+        for name in parents:
+            owner = getattr(owner, name)
+        setattr(owner, leaf, value)
+    return marker
+
+
+@pytest.mark.parametrize("changes, message", [
+    ({"pose__position__x": float("nan")}, r"Marker\.pose\.position must be finite"),
+    ({"pose__orientation__w": 0.0}, r"Marker\.pose\.orientation must be a non-zero quaternion"),
+    ({"pose__orientation__y": float("inf")}, r"Marker\.pose\.orientation must be finite"),
+    ({"scale__x": 0.0}, r"Marker\.scale\.x must be finite and > 0"),
+    ({"scale__x": float("nan")}, r"Marker\.scale\.x must be finite and > 0"),
+    ({"type": Marker.ARROW}, r"Marker\.type is 0, expected CUBE \(1\) or SPHERE \(2\)"),
+    ({"action": 5}, r"Marker\.action is 5"),
+])
+def test_bad_local_model_marker_is_refused_by_field(changes, message):
+    with pytest.raises(ValueError, match=message):
+        conv.marker_to_local_model(_marker(**changes))
+
+
+# ---------------------------------------------------------------- forces
+
+def test_wrench_stamped_carries_force_torque_and_header():
+    msg = conv.wrench_stamped((0.5, -1.0, 1.5), 7.0, "liver", torque=(0.0, 0.1, 0.0))
+    wrench = msg.wrench
+    assert (wrench.force.x, wrench.force.y, wrench.force.z, wrench.torque.y) == (0.5, -1.0, 1.5, 0.1)
+    assert msg.header.frame_id == "liver" and conv.seconds_from_stamp(msg.header.stamp) == 7.0
+    with pytest.raises(ValueError, match="force must be finite"):
+        conv.wrench_stamped((0.0, float("inf"), 0.0), 7.0, "liver")
+
+
+@pytest.mark.parametrize("fmt, msg_type", [("wrench_stamped", WrenchStamped), ("wrench", Wrench),
+                                           ("vector3", Vector3), ("float64_array", Float64MultiArray)])
+def test_each_force_output_format_carries_the_same_force(fmt, msg_type):
+    force = (0.25, -1.5, 0.75)
+    assert conv.force_message_type(fmt) is msg_type
+    msg = conv.force_message(fmt, force, Time(sec=3), "phantom_base")
+    assert isinstance(msg, msg_type)
+    back = conv.force_from_message(fmt, deserialize_message(serialize_message(msg), msg_type))
+    np.testing.assert_array_equal(back, force)
+
+
+def test_force_output_refusals():
+    with pytest.raises(ValueError, match=r"needs omni_msgs \(Geomagic Touch ROS 2 driver workspace\) sourced"):
+        conv.force_message_type("omni_feedback")
+    with pytest.raises(ValueError, match="needs omni_msgs"):
+        conv.force_message("omni_feedback", (0.0, 0.0, 1.0), 0.0, "phantom_base")
+    with pytest.raises(ValueError, match="force_output must be one of"):
+        conv.force_message_type("twist")
+    with pytest.raises(ValueError, match=r"Float64MultiArray\.data has 2 values, expected 3"):
+        conv.force_from_message("float64_array", Float64MultiArray(data=[1.0, 2.0]))
+    with pytest.raises(ValueError, match="'vector3' carries Vector3, got Wrench"):
+        conv.force_from_message("vector3", Wrench())
+    with pytest.raises(ValueError, match="Vector3 force must be finite"):
+        conv.force_from_message("vector3", Vector3(x=float("nan")))
+    for fmt in STANDARD_FORCE_FORMATS:
+        with pytest.raises(ValueError, match="force must be finite"):
+            conv.force_message(fmt, (0.0, float("nan"), 0.0), 0.0, "phantom_base")
+
+
+# ---------------------------------------------------------------- topics
+
+def test_topics_follow_the_design_table():
+    expected = {
+        "nodes": ("/liver/nodes", ReliabilityPolicy.RELIABLE, DurabilityPolicy.VOLATILE, 1),
+        "surface": ("/liver/surface", ReliabilityPolicy.RELIABLE, DurabilityPolicy.TRANSIENT_LOCAL, 1),
+        "marker": ("/liver/marker", ReliabilityPolicy.RELIABLE, DurabilityPolicy.VOLATILE, 1),
+        "contact_plane": ("/liver/contact_plane", ReliabilityPolicy.RELIABLE, DurabilityPolicy.VOLATILE, 1),
+        "tool_wrench": ("/liver/tool_wrench", ReliabilityPolicy.RELIABLE, DurabilityPolicy.VOLATILE, 10),
+        "tool_pose": ("/tool/pose", ReliabilityPolicy.BEST_EFFORT, DurabilityPolicy.VOLATILE, 1),
+        "measured_cp": ("/phantom/measured_cp", ReliabilityPolicy.BEST_EFFORT, DurabilityPolicy.VOLATILE, 1),
+        "servo_cf": ("/phantom/servo_cf", ReliabilityPolicy.RELIABLE, DurabilityPolicy.VOLATILE, 1),
+        "diagnostics": ("/diagnostics", ReliabilityPolicy.RELIABLE, DurabilityPolicy.VOLATILE, 10),
+    }
+    assert set(TOPICS) == set(expected)
+    for key, (name, reliability, durability, depth) in expected.items():
+        topic = TOPICS[key]
+        assert (topic.name, topic.qos.reliability, topic.qos.durability, topic.qos.depth) == (
+            name, reliability, durability, depth), key
+    assert TOPICS["nodes"].type is PointCloud2 and TOPICS["servo_cf"].type is None
+
+
+# ---------------------------------------------------------------- on the wire
+
+def test_pointcloud_and_serialized_marker_cross_loopback_dds(ros_domain_id, rng):
+    """A PointCloud2 and a pre-serialized skin Marker published by one node arrive intact at another."""
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+
+    positions, skin = rng.random((2000, 3)), _skin(rng, 2000, 450)
+    cloud = conv.nodes_to_pointcloud2(positions, 9.0, "liver")
+    marker_bytes = conv.skin_marker_serialized(positions, skin, 9.0, "liver")
+    received = {}
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=ros_domain_id)
+    try:
+        sender = rclpy.create_node("msg_defs_sender", context=context)
+        receiver = rclpy.create_node("msg_defs_receiver", context=context)
+        executor = SingleThreadedExecutor(context=context)
+        executor.add_node(receiver)
+        topics = {"nodes": (TOPICS["nodes"], cloud), "marker": (TOPICS["marker"], marker_bytes)}
+        publishers = {}
+        for key, (topic, _) in topics.items():
+            name = f"/msg_defs_test{topic.name}"
+            publishers[key] = sender.create_publisher(topic.type, name, topic.qos)
+            receiver.create_subscription(topic.type, name, lambda msg, key=key: received.setdefault(key, msg),
+                                         topic.qos)
+        deadline = time.monotonic() + 5.0
+        while len(received) < len(topics) and time.monotonic() < deadline:
+            for key, (_, message) in topics.items():
+                if key not in received:
+                    publishers[key].publish(message)
+            executor.spin_once(timeout_sec=0.05)
+        executor.shutdown()
+        sender.destroy_node()
+        receiver.destroy_node()
+    finally:
+        rclpy.shutdown(context=context)
+    assert set(received) == set(topics), f"received only {sorted(received)} within 5 s"
+    np.testing.assert_array_equal(conv.pointcloud2_to_nodes(received["nodes"]), positions.astype(np.float32))
+    assert received["nodes"].header.frame_id == "liver"
+    corners = np.array([(p.x, p.y, p.z) for p in received["marker"].points])
+    np.testing.assert_array_equal(corners, positions[skin].reshape(-1, 3))
