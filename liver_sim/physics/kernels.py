@@ -230,12 +230,14 @@ def box_tool_contacts(x, v, candidates, centre, axes, half_extents, tool_velocit
     return total
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def run_frame(x, v, inv_mass, node_i, node_j, rest, lambda1, lambda2, mu, partial, use_parallel,
               dt, substeps, environment_damping, gravity, symplectic,
               tool_kind, core_a, core_b, radius, axes, half_extents, tool_velocity,
               stiffness, damping, inward_point, candidates, external_force, f, gap, point, direction):
     """`substeps` steps of the model; the tool core moves at `tool_velocity` from core_a/core_b.
+
+    Runs without the GIL, so a node's executor thread keeps delivering messages meanwhile.
 
     `external_force` (N, 3) is added to every node each step.  `candidates` are skin nodes near the tool.  Returns the contact force on the liver at the last
     substep (N); the tool's reaction is its opposite.  For a box, the candidates' contact geometry

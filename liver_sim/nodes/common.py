@@ -1,0 +1,227 @@
+"""What every node shell shares: a rate loop on absolute deadlines, its statistics, diagnostics,
+declared parameters with ranges, lock-protected snapshots, and the process entry point.
+
+Loops with a rate to keep run in their own thread (rclpy timers jitter by milliseconds on a
+2-core machine); the executor only delivers messages and 1 Hz diagnostics.
+"""
+from __future__ import annotations
+
+import sys
+import threading
+import time
+import traceback
+from collections import deque
+from dataclasses import dataclass
+
+import numpy as np
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rclpy.exceptions import ParameterException
+from rclpy.executors import ExternalShutdownException
+from rclpy.experimental import EventsExecutor
+
+#: Seconds before a deadline at which a loop stops sleeping and spins.
+SPIN_MARGIN_S = 0.0001
+#: How often (s) a thread holding the GIL is asked to hand it over.
+GIL_SWITCH_INTERVAL_S = 0.0002
+
+
+class Latest:
+    """The newest value of something and when it arrived (monotonic seconds), behind a lock."""
+
+    def __init__(self):
+        self._lock = threading.Lock()
+        self._value = None
+        self._received = -np.inf
+
+    def set(self, value) -> None:
+        with self._lock:
+            self._value, self._received = value, time.monotonic()
+
+    def get(self):
+        """(value, monotonic arrival time); (None, -inf) before the first value."""
+        with self._lock:
+            return self._value, self._received
+
+
+class LoopStats:
+    """Periods of a rate loop over a sliding window: achieved rate, period error percentiles, overruns."""
+
+    def __init__(self, period_s: float, window: int = 5000):
+        self.period_s = period_s
+        self._periods = deque(maxlen=window)
+        self._lock = threading.Lock()
+        self.overruns = 0
+        self.ticks = 0
+        self.max_gap_s = 0.0
+
+    def record(self, period_s: float, overrun: bool) -> None:
+        with self._lock:
+            self._periods.append(period_s)
+            self.ticks += 1
+            self.overruns += int(overrun)
+            self.max_gap_s = max(self.max_gap_s, period_s)
+
+    def summary(self) -> dict:
+        """rate_hz, period error p50/p99/max (s), overruns, ticks, max_gap_s."""
+        with self._lock:
+            periods = np.array(self._periods)
+            overruns, ticks, max_gap = self.overruns, self.ticks, self.max_gap_s
+        if periods.size == 0:
+            return {"rate_hz": 0.0, "jitter_p50_s": 0.0, "jitter_p99_s": 0.0, "jitter_max_s": 0.0,
+                    "overruns": overruns, "ticks": ticks, "max_gap_s": max_gap}
+        error = np.abs(periods - self.period_s)
+        return {"rate_hz": float(1.0 / periods.mean()), "jitter_p50_s": float(np.percentile(error, 50)),
+                "jitter_p99_s": float(np.percentile(error, 99)), "jitter_max_s": float(error.max()),
+                "overruns": overruns, "ticks": ticks, "max_gap_s": max_gap}
+
+
+class RateLoop(threading.Thread):
+    """Calls `step(now_monotonic_s)` at `rate_hz` on absolute deadlines in its own thread.
+
+    Deadline k is start + k·period: the thread sleeps until SPIN_MARGIN_S before it, then spins.
+    A step that ends after the next deadline is an overrun; missed deadlines are skipped rather
+    than run in a burst.  An exception in a step is printed and counted (`errors`); the loop goes on.
+    """
+
+    def __init__(self, rate_hz: float, step, name: str):
+        super().__init__(name=name, daemon=True)
+        self.period_s = 1.0 / rate_hz
+        self.step = step
+        self.stats = LoopStats(self.period_s)
+        self.errors = 0
+        self._stopping = threading.Event()
+
+    def stop(self) -> None:
+        self._stopping.set()
+        if self.is_alive() and threading.current_thread() is not self:
+            self.join(timeout=1.0)
+
+    def run(self) -> None:
+        start = time.monotonic()
+        tick = 0
+        previous = None
+        while not self._stopping.is_set():
+            deadline = start + tick * self.period_s
+            remaining = deadline - time.monotonic()
+            if remaining > SPIN_MARGIN_S:
+                time.sleep(remaining - SPIN_MARGIN_S)
+            while time.monotonic() < deadline:
+                time.sleep(0)  # spin, but let the executor thread take the GIL
+            now = time.monotonic()
+            if previous is not None:
+                self.stats.record(now - previous, now > deadline + self.period_s)
+            previous = now
+            try:
+                self.step(now)
+            except Exception:  # a node keeps running; at shutdown the context goes first
+                if not rclpy.ok():
+                    return
+                self.errors += 1
+                traceback.print_exc()
+            tick += 1
+            behind = int((time.monotonic() - start) / self.period_s)
+            if behind > tick:
+                tick = behind
+
+
+@dataclass(frozen=True)
+class Param:
+    """A declared parameter: default, description (with its unit) and optional range or choices."""
+
+    default: object
+    description: str
+    low: float | None = None
+    high: float | None = None
+    choices: tuple | None = None
+
+
+def declare_parameters(node, params: dict[str, Param]) -> dict:
+    """Declare every parameter with its descriptor and range; return {name: value}.
+
+    Out-of-range values and values outside `choices` raise ValueError naming the parameter.
+    """
+    values = {}
+    for name, spec in params.items():
+        descriptor = ParameterDescriptor(description=spec.description)
+        if spec.low is not None:
+            if isinstance(spec.default, int) and not isinstance(spec.default, bool):
+                descriptor.integer_range = [IntegerRange(from_value=int(spec.low), to_value=int(spec.high), step=0)]
+            else:
+                descriptor.floating_point_range = [FloatingPointRange(from_value=float(spec.low),
+                                                                      to_value=float(spec.high), step=0.0)]
+        if spec.choices:
+            descriptor.additional_constraints = f"one of {', '.join(map(str, spec.choices))}"
+        try:
+            value = node.declare_parameter(name, spec.default, descriptor).value
+        except ParameterException as exc:
+            raise ValueError(f"parameter {name}: {exc}") from None
+        if spec.low is not None and not (spec.low <= value <= spec.high):
+            raise ValueError(f"parameter {name}={value!r} is outside [{spec.low}, {spec.high}]")
+        if spec.choices and value not in spec.choices:
+            raise ValueError(f"parameter {name}={value!r} must be one of {spec.choices}")
+        values[name] = value
+    return values
+
+
+def diagnostic_status(name: str, stats: dict, level_ok: bool, message: str,
+                      extra: dict | None = None) -> DiagnosticStatus:
+    """One DiagnosticStatus with the loop statistics (and `extra`) as key/value pairs."""
+    status = DiagnosticStatus(name=name, hardware_id="liver_sim", message=message,
+                              level=DiagnosticStatus.OK if level_ok else DiagnosticStatus.WARN)
+    fields = dict(stats)
+    fields.update(extra or {})
+    status.values = [KeyValue(key=key, value=f"{value:.6g}" if isinstance(value, float) else str(value))
+                     for key, value in fields.items()]
+    return status
+
+
+def publish_diagnostics(node, publisher, statuses: list[DiagnosticStatus]) -> None:
+    """Publish the node's statuses stamped now."""
+    message = DiagnosticArray(status=statuses)
+    message.header.stamp = node.get_clock().now().to_msg()
+    publisher.publish(message)
+
+
+def spin(executor, context=None) -> None:
+    """Run the executor until its context shuts down.
+
+    `EventsExecutor.spin()` of the rclpy 7.1 wheels neither runs callbacks nor returns on SIGINT
+    here, so the executor is driven with spin_once.
+    """
+    ok = (context.ok if context is not None else rclpy.ok)
+    try:
+        while ok():
+            executor.spin_once(timeout_sec=0.1)
+    except ExternalShutdownException:
+        pass
+
+
+def run_node(make_node, args=None) -> int:
+    """Entry point of a node process: create it, spin an EventsExecutor until shutdown, clean up.
+
+    A refused parameter ends the process with status 2 and a message naming it.  The interpreter
+    hands the GIL over every GIL_SWITCH_INTERVAL_S so that a rate loop and the executor thread do
+    not hold each other up for Python's default 5 ms.
+    """
+    sys.setswitchinterval(GIL_SWITCH_INTERVAL_S)
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = make_node()
+        executor = EventsExecutor()
+        executor.add_node(node)
+        spin(executor)
+    except ValueError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            node.close()
+            node.destroy_node()
+        if rclpy.ok():
+            rclpy.shutdown()
+    return 0

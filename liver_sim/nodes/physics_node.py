@@ -1,0 +1,180 @@
+"""`liver_physics`: steps the liver model at 150 Hz in its own thread and publishes its state.
+
+Publishes /liver/nodes (PointCloud2), /liver/surface (shape_msgs/Mesh, transient local, on start),
+/liver/marker (TRIANGLE_LIST at marker_rate_hz), /liver/contact_plane (the local model) and
+/liver/tool_wrench (force on the tool); takes the tool tip from /tool/pose.  Stamps are the
+simulation time of the state, counted from the node's start on the ROS clock.
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+from rclpy.node import Node
+
+from liver_sim.mesh.io import load_mesh
+from liver_sim.mesh.liver_shape import default_liver
+from liver_sim.nodes.common import (Latest, Param, RateLoop, declare_parameters, diagnostic_status,
+                                    publish_diagnostics, run_node)
+from liver_sim.physics.contact import ToolPose, ToolShape
+from liver_sim.physics.model import LiverModel
+from liver_sim.physics.params import INTEGRATORS, ModelParams, SpringLaw
+from msg_defs import conversions
+from msg_defs.topics import TOPICS
+
+DEFAULTS = ModelParams()
+PARAMETERS = {
+    "mesh_path": Param("", "volume or closed-surface mesh file (metres); empty: the embedded default liver"),
+    "target_tets": Param(1150, "tetrahedra to aim for when mesh_path is a surface", 50, 2_000_000),
+    "frame_id": Param("liver", "frame of every published position"),
+    "rate_hz": Param(DEFAULTS.frame_rate_hz, "physics frame rate (Hz)", 1.0, 1000.0),
+    "substeps": Param(DEFAULTS.substeps, "integration steps per frame", 1, 10_000),
+    "integrator": Param(DEFAULTS.integrator, "symplectic_euler or explicit_euler (Eq. 2)", choices=INTEGRATORS),
+    "capsule_lambda1_n": Param(DEFAULTS.capsule.lambda1_n, "capsule spring cubic stiffness λ1 of Eq. 1 (N)", 0.0, 1e6),
+    "capsule_lambda2_n": Param(DEFAULTS.capsule.lambda2_n, "capsule spring linear stiffness λ2 of Eq. 1 (N)", 0.0, 1e6),
+    "capsule_mu_ns_per_m": Param(DEFAULTS.capsule.mu_ns_per_m, "capsule spring viscosity μ of Eq. 1 (N·s/m)", 0.0, 1e4),
+    "parenchyma_lambda1_n": Param(DEFAULTS.parenchyma.lambda1_n, "parenchyma cubic stiffness λ1 (N)", 0.0, 1e6),
+    "parenchyma_lambda2_n": Param(DEFAULTS.parenchyma.lambda2_n, "parenchyma linear stiffness λ2 (N)", 0.0, 1e6),
+    "parenchyma_mu_ns_per_m": Param(DEFAULTS.parenchyma.mu_ns_per_m, "parenchyma viscosity μ (N·s/m)", 0.0, 1e4),
+    "density_kg_m3": Param(DEFAULTS.density_kg_m3, "tissue density for the lumped masses (kg/m³)", 1.0, 1e5),
+    "environment_damping_per_s": Param(DEFAULTS.environment_damping_per_s,
+                                       "environmental viscosity c: a −= c·v (1/s)", 0.0, 1e4),
+    "gravity_m_s2": Param(list(DEFAULTS.gravity_m_s2), "gravity vector in the liver frame (m/s²)"),
+    "fixed_nodes": Param([-1], "indices of fixed nodes; [-1]: the four nodes of the tet nearest the centroid"),
+    "contact_stiffness_n_per_m": Param(DEFAULTS.contact_stiffness_n_per_m, "penalty λ of Eq. 3 (N/m)", 0.0, 1e6),
+    "contact_damping_ns_per_m": Param(DEFAULTS.contact_damping_ns_per_m, "penalty μ of Eq. 3 (N·s/m)", 0.0, 1e4),
+    "tool_shape": Param("sphere", "rigid tool: sphere, capsule or box", choices=("sphere", "capsule", "box")),
+    "tool_radius_m": Param(ToolShape().radius_m, "sphere/capsule radius (m)", 1e-4, 0.2),
+    "tool_length_m": Param(ToolShape().length_m, "capsule shaft length along the tool +z (m)", 0.0, 1.0),
+    "tool_half_extents_m": Param(list(ToolShape().half_extents_m), "box half extents (m)"),
+    "local_model": Param("plane", "local model published for the haptic loop", choices=("plane", "sphere")),
+    "local_model_reach_m": Param(0.02, "publish a local model while the tool is this close to the skin (m)",
+                                 0.0, 1.0),
+    "local_model_lifetime_s": Param(0.05, "how long the bridge may trust one local model (s)", 0.001, 10.0),
+    "tool_pose_timeout_s": Param(0.1, "a tool pose older than this is ignored: no tool (s)", 0.001, 60.0),
+    "workspace_margin_m": Param(0.3, "tool poses farther than this from the liver's bounds are refused (m)",
+                                0.0, 100.0),
+    "marker_rate_hz": Param(30.0, "rate of the /liver/marker TRIANGLE_LIST (Hz)", 0.1, 150.0),
+    "nodes_topic": Param(TOPICS["nodes"].name, "deformed node positions (PointCloud2)"),
+    "surface_topic": Param(TOPICS["surface"].name, "skin triangles (shape_msgs/Mesh)"),
+    "marker_topic": Param(TOPICS["marker"].name, "deformed skin for viewers (Marker)"),
+    "contact_plane_topic": Param(TOPICS["contact_plane"].name, "local model for the haptic bridge (Marker)"),
+    "tool_wrench_topic": Param(TOPICS["tool_wrench"].name, "contact force on the tool (WrenchStamped)"),
+    "tool_pose_topic": Param(TOPICS["tool_pose"].name, "tool tip pose in the liver frame (PoseStamped)"),
+}
+
+
+def model_params(values: dict) -> ModelParams:
+    """The ModelParams named by the node's parameter values (validated)."""
+    fixed = tuple(values["fixed_nodes"]) if list(values["fixed_nodes"]) != [-1] else None
+    return ModelParams(
+        capsule=SpringLaw(values["capsule_lambda1_n"], values["capsule_lambda2_n"], values["capsule_mu_ns_per_m"]),
+        parenchyma=SpringLaw(values["parenchyma_lambda1_n"], values["parenchyma_lambda2_n"],
+                             values["parenchyma_mu_ns_per_m"]),
+        density_kg_m3=values["density_kg_m3"], environment_damping_per_s=values["environment_damping_per_s"],
+        gravity_m_s2=tuple(values["gravity_m_s2"]), integrator=values["integrator"],
+        frame_rate_hz=values["rate_hz"], substeps=values["substeps"], fixed_nodes=fixed,
+        contact_stiffness_n_per_m=values["contact_stiffness_n_per_m"],
+        contact_damping_ns_per_m=values["contact_damping_ns_per_m"]).validate()
+
+
+class PhysicsNode(Node):
+    """The physics node: a LiverModel stepped by a RateLoop, its state published each frame."""
+
+    def __init__(self):
+        super().__init__("liver_physics")
+        p = declare_parameters(self, PARAMETERS)
+        self.p = p
+        mesh = load_mesh(p["mesh_path"], p["target_tets"]) if p["mesh_path"] else default_liver()
+        tool = ToolShape(p["tool_shape"], p["tool_radius_m"], p["tool_length_m"], tuple(p["tool_half_extents_m"]))
+        self.model = LiverModel(mesh, model_params(p), tool, p["local_model"], p["local_model_reach_m"])
+        self.model.warm_up()
+        lower, upper = mesh.bounds
+        self._workspace = (lower - p["workspace_margin_m"], upper + p["workspace_margin_m"])
+        self._pose = Latest()
+        self._bad_poses = 0
+        self._frame_seconds = []
+        self._marker_every = max(1, round(p["rate_hz"] / p["marker_rate_hz"]))
+        self._frames = 0
+        self._outputs = {
+            key: self.create_publisher(TOPICS[key].type, p[f"{key}_topic"], TOPICS[key].qos)
+            for key in ("nodes", "surface", "marker", "contact_plane", "tool_wrench")}
+        self._diagnostics = self.create_publisher(TOPICS["diagnostics"].type, TOPICS["diagnostics"].name,
+                                                  TOPICS["diagnostics"].qos)
+        self.create_subscription(TOPICS["tool_pose"].type, p["tool_pose_topic"], self._on_pose, TOPICS["tool_pose"].qos)
+        self._clock_origin_s = self.get_clock().now().nanoseconds * 1e-9
+        self.publish_surface()
+        self.create_timer(1.0, self._publish_diagnostics)
+        self._loop = RateLoop(p["rate_hz"], self._step, "liver_physics")
+        self.get_logger().info(
+            f"liver_physics: mesh '{mesh.source}' ({len(mesh.points)} nodes, {len(mesh.tets)} tets, "
+            f"{len(mesh.skin)} skin triangles), {p['rate_hz']:g} Hz × {p['substeps']} substeps "
+            f"(dt {self.model.params.dt_s * 1e6:.0f} us, stable below {self.model.stable_dt_s * 1e6:.0f} us); "
+            f"in: {p['tool_pose_topic']}; out: {p['nodes_topic']}, {p['surface_topic']}, {p['marker_topic']} "
+            f"({p['marker_rate_hz']:g} Hz), {p['contact_plane_topic']} ({p['local_model']}), {p['tool_wrench_topic']}")
+        self._loop.start()
+
+    def close(self) -> None:
+        self._loop.stop()
+
+    def publish_surface(self) -> None:
+        """Skin triangles and rest positions: on start and on every topology change."""
+        self._outputs["surface"].publish(conversions.skin_mesh_msg(self.model.mesh.skin, self.model.mesh.points))
+
+    def _on_pose(self, message) -> None:
+        try:
+            position, orientation = conversions.pose_to_arrays(message.pose)
+        except ValueError as exc:
+            self._refuse_pose(str(exc))
+            return
+        if np.any(position < self._workspace[0]) or np.any(position > self._workspace[1]):
+            self._refuse_pose(f"tool position {position.round(3).tolist()} m is outside the workspace")
+            return
+        self._pose.set(ToolPose(position, tuple(orientation)))
+
+    def _refuse_pose(self, reason: str) -> None:
+        self._bad_poses += 1
+        self.get_logger().warning(f"ignored tool pose: {reason}", throttle_duration_sec=1.0)
+
+    def _stamp(self):
+        return conversions.stamp_from_seconds(self._clock_origin_s + self.model.time_s)
+
+    def _step(self, now: float) -> None:
+        started = time.perf_counter()
+        pose, received = self._pose.get()
+        if now - received > self.p["tool_pose_timeout_s"]:
+            pose = None
+        result = self.model.step_frame(pose)
+        if result.divergence:
+            self.get_logger().error(result.divergence, throttle_duration_sec=1.0)
+        stamp = self._stamp()
+        frame = self.p["frame_id"]
+        self._outputs["nodes"].publish(conversions.nodes_to_pointcloud2(self.model.positions, stamp, frame))
+        self._outputs["contact_plane"].publish(conversions.local_model_marker(
+            result.local_model, stamp, frame, self.p["local_model_lifetime_s"]))
+        self._outputs["tool_wrench"].publish(conversions.wrench_stamped(result.tool_force_n, stamp, frame))
+        if self._frames % self._marker_every == 0:
+            self._outputs["marker"].publish(conversions.skin_marker_serialized(
+                self.model.positions, self.model.mesh.skin, stamp, frame))
+        self._frames += 1
+        self._frame_seconds.append(time.perf_counter() - started)
+
+    def _publish_diagnostics(self) -> None:
+        stats = self._loop.stats.summary()
+        compute, self._frame_seconds = np.array(self._frame_seconds), []
+        _, received = self._pose.get()
+        extra = {"frame_compute_p99_s": float(np.percentile(compute, 99)) if compute.size else 0.0,
+                 "divergences": self.model.divergences, "bad_tool_poses": self._bad_poses,
+                 "tool_pose_age_s": float(time.monotonic() - received), "simulated_s": self.model.time_s}
+        ok = stats["rate_hz"] > 0.98 * self.p["rate_hz"]
+        status = diagnostic_status("liver_physics: loop", stats, ok,
+                                   "ok" if ok else "below rate", extra)
+        publish_diagnostics(self, self._diagnostics, [status])
+
+
+def main(args=None) -> int:
+    return run_node(PhysicsNode, args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
