@@ -1,0 +1,239 @@
+"""`haptic_bridge`: the 1 kHz haptic loop between the physics (150 Hz) and the device driver.
+
+Each tick of a RateLoop (own thread) turns the newest tool pose and local model into a contact
+force (paper §2.5, P11) — or, with `local_model: none`, holds the newest physics contact wrench
+(the "without local model" baseline of Fig. 8, R4) — maps it into the device frame and sends it
+through SafeForceOutput (clamp, rate limit, watchdog) to the driver's force topic.  Subscription
+callbacks only validate and store snapshots.  The command is stamped with the stamp of the input
+it was computed from (the tool pose; the wrench in `none` mode), or the node's clock before any.
+"""
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+from rclpy.node import Node
+
+from haptic_bridge.local_model import FrameMap, contact_force, max_passive_stiffness, penetration
+from haptic_bridge.safety import DEFAULT_MAX_FORCE_N, PHANTOM_MAX_FORCE_N, SafeForceOutput
+from liver_sim.nodes.common import (Latest, Param, RateLoop, declare_parameters, diagnostic_status,
+                                    publish_diagnostics, run_node)
+from msg_defs import conversions
+from msg_defs.topics import TOPICS
+
+MODES = ("plane", "sphere", "none")
+PARAMETERS = {
+    "rate_hz": Param(1000.0, "haptic loop rate (Hz); its period is the T of the passivity bound", 50.0, 5000.0),
+    "local_model": Param("plane", "plane or sphere: render the local model on local_model_topic (the marker's "
+                         "kind decides: CUBE plane, SPHERE sphere); none: hold the physics contact wrench "
+                         "(Fig. 8 baseline)", choices=MODES),
+    "stiffness_n_per_m": Param(300.0, "local-model stiffness K (N/m of penetration in the liver frame); "
+                               "K·device_scale must stay below 2·(device_damping_ns_per_m − "
+                               "damping_ns_per_m·device_scale)/T (Colgate)", 0.0, 10000.0),
+    "damping_ns_per_m": Param(0.1, "local-model damping B on the penetration rate (N·s/m)", 0.0, 10.0),
+    "device_damping_ns_per_m": Param(0.5, "physical damping b of the device at the stylus (N·s/m), for the "
+                                     "passivity check b > K·T/2 + B; PHANToM-like default, identify yours",
+                                     0.0, 100.0),
+    "depth_rate_cutoff_hz": Param(50.0, "one-pole low-pass on the finite-difference penetration rate (Hz); "
+                                  "0: unfiltered", 0.0, 500.0),
+    "tool_radius_m": Param(0.015, "radius of the tool tip sphere (m); same as the physics tool", 0.0, 0.2),
+    "max_force_n": Param(DEFAULT_MAX_FORCE_N, f"force clamp by norm (N), at most {PHANTOM_MAX_FORCE_N} N "
+                         "(PHANToM peak)", 0.01, PHANTOM_MAX_FORCE_N),
+    "max_force_rate_n_per_s": Param(400.0, "largest change of the commanded force (N/s); at least "
+                                    "max_force_n/ramp_time_s", 1.0, 100000.0),
+    "lifetime_s": Param(0.05, "age (s) beyond which the tool pose, the physics wrench, or a local model "
+                        "without its own lifetime is stale", 0.001, 10.0),
+    "ramp_time_s": Param(0.01, "time (s) for the watchdog to ramp the force to zero on stale data", 0.001, 0.01),
+    "force_output": Param("wrench_stamped", "message type of the force command",
+                          choices=conversions.FORCE_OUTPUT_FORMATS),
+    "force_topic": Param(TOPICS["servo_cf"].name, "force command to the device driver"),
+    "tool_pose_topic": Param(TOPICS["tool_pose"].name, "tool tip pose in the liver frame (PoseStamped)"),
+    "local_model_topic": Param(TOPICS["contact_plane"].name, "local model from the physics (Marker)"),
+    "tool_wrench_topic": Param(TOPICS["tool_wrench"].name, "physics contact force on the tool, liver frame "
+                               "(WrenchStamped); rendered with local_model: none"),
+    "device_frame_id": Param("phantom_base", "frame_id of the force command"),
+    "device_rotation_xyzw": Param([0.0, 0.0, 0.0, 1.0], "rotation R of the device→liver map "
+                                  "p_liver = scale·R·p_device + t, as a quaternion (x, y, z, w); forces get Rᵀ"),
+    "device_translation_m": Param([0.0, 0.0, 0.0], "translation t of the device→liver map (m)"),
+    "device_scale": Param(1.0, "scale of the device→liver map (liver metres per device metre); forces are "
+                          "not scaled", 0.001, 1000.0),
+}
+
+
+def check_passivity(p: dict) -> None:
+    """Refuse a stiffness the device cannot render passively at rate_hz (Colgate: b > K·T/2 + |B|).
+
+    At the device a liver-side stiffness K and damping B are felt as K·scale and B·scale.
+    """
+    stiffness, scale = p["stiffness_n_per_m"], p["device_scale"]
+    limit = max_passive_stiffness(p["device_damping_ns_per_m"], 1.0 / p["rate_hz"], p["damping_ns_per_m"] * scale)
+    if stiffness * scale >= limit and stiffness + p["damping_ns_per_m"] > 0.0:
+        raise ValueError(
+            f"parameter stiffness_n_per_m={stiffness:g} is not passive: with device_damping_ns_per_m="
+            f"{p['device_damping_ns_per_m']:g}, damping_ns_per_m={p['damping_ns_per_m']:g}, "
+            f"device_scale={scale:g} and rate_hz={p['rate_hz']:g}, Colgate's b > K·T/2 + B allows "
+            f"stiffness_n_per_m < {limit / scale:g} N/m")
+
+
+def frame_map(p: dict) -> FrameMap:
+    """The device→liver map named by the parameters, or ValueError naming the bad one."""
+    for name, size in (("device_rotation_xyzw", 4), ("device_translation_m", 3)):
+        if len(p[name]) != size or not np.isfinite(p[name]).all():
+            raise ValueError(f"parameter {name} must be {size} finite numbers, got {list(p[name])!r}")
+    if not np.linalg.norm(p["device_rotation_xyzw"]) > 0.0:
+        raise ValueError("parameter device_rotation_xyzw must be a non-zero quaternion (x, y, z, w)")
+    return FrameMap(np.array(p["device_rotation_xyzw"]), np.array(p["device_translation_m"]), p["device_scale"])
+
+
+class DepthRate:
+    """Rate (m/s) of the penetration depth: finite difference over the tick, one-pole low-passed."""
+
+    def __init__(self, period_s: float, cutoff_hz: float):
+        self.period_s = period_s
+        self.alpha = 1.0 - math.exp(-2.0 * math.pi * cutoff_hz * period_s) if cutoff_hz > 0.0 else 1.0
+        self.depth = 0.0
+        self.rate = 0.0
+
+    def update(self, depth: float) -> float:
+        """The filtered rate after this tick's `depth` (m)."""
+        raw = (depth - self.depth) / self.period_s
+        self.depth = depth
+        self.rate += self.alpha * (raw - self.rate)
+        return self.rate
+
+
+class HapticBridge(Node):
+    """Tool pose + newest local model (or physics wrench) → safe force command, at rate_hz."""
+
+    def __init__(self):
+        super().__init__("haptic_bridge")
+        p = declare_parameters(self, PARAMETERS)
+        self.p = p
+        check_passivity(p)
+        self._frame = frame_map(p)
+        period = 1.0 / p["rate_hz"]
+        try:
+            self._safety = SafeForceOutput(p["max_force_n"], p["max_force_rate_n_per_s"], period,
+                                           p["lifetime_s"], p["ramp_time_s"])
+        except ValueError as exc:
+            raise ValueError(f"parameter max_force_rate_n_per_s={p['max_force_rate_n_per_s']:g} with "
+                             f"max_force_n={p['max_force_n']:g}, ramp_time_s={p['ramp_time_s']:g}: {exc}") from None
+        self._depth_rate = DepthRate(period, p["depth_rate_cutoff_hz"])
+        self._mode = p["local_model"]
+        self._pose = Latest()    # (tip position (3,) m, stamp)
+        self._source = Latest()  # (local model or None, lifetime s), or (force (3,) N, stamp) in none mode
+        self._bad = {"tool_pose": 0, "local_model": 0, "tool_wrench": 0}
+        self._last_force = np.zeros(3)
+        self._publisher = self.create_publisher(conversions.force_message_type(p["force_output"]),
+                                                 p["force_topic"], TOPICS["servo_cf"].qos)
+        self._diagnostics = self.create_publisher(TOPICS["diagnostics"].type, TOPICS["diagnostics"].name,
+                                                  TOPICS["diagnostics"].qos)
+        self.create_subscription(TOPICS["tool_pose"].type, p["tool_pose_topic"], self._on_pose,
+                                 TOPICS["tool_pose"].qos)
+        if self._mode == "none":
+            source = p["tool_wrench_topic"]
+            self.create_subscription(TOPICS["tool_wrench"].type, source, self._on_wrench, TOPICS["tool_wrench"].qos)
+        else:
+            source = p["local_model_topic"]
+            self.create_subscription(TOPICS["contact_plane"].type, source, self._on_marker,
+                                     TOPICS["contact_plane"].qos)
+        self.create_timer(1.0, self._publish_diagnostics)
+        self._loop = RateLoop(p["rate_hz"], self._step, "haptic_bridge")
+        rendering = ("physics wrench held between updates" if self._mode == "none" else
+                     f"local model (K {p['stiffness_n_per_m']:g} N/m, B {p['damping_ns_per_m']:g} N·s/m, "
+                     f"tool radius {p['tool_radius_m']:g} m)")
+        self.get_logger().info(
+            f"haptic_bridge: {p['rate_hz']:g} Hz, local_model {self._mode}: {rendering}; "
+            f"in: {p['tool_pose_topic']}, {source}; out: {p['force_topic']} ({p['force_output']}, frame "
+            f"{p['device_frame_id']}, max {p['max_force_n']:g} N, {p['max_force_rate_n_per_s']:g} N/s); "
+            f"watchdog: lifetime {p['lifetime_s']:g} s, ramp {p['ramp_time_s']:g} s")
+        self._loop.start()
+
+    def close(self) -> None:
+        """Stop the haptic loop."""
+        self._loop.stop()
+
+    def _refuse(self, kind: str, reason: str) -> None:
+        self._bad[kind] += 1
+        self.get_logger().warning(f"ignored {kind} message: {reason}", throttle_duration_sec=1.0)
+
+    def _on_pose(self, message) -> None:
+        try:
+            position, _ = conversions.pose_to_arrays(message.pose)
+        except ValueError as exc:
+            self._refuse("tool_pose", str(exc))
+            return
+        self._pose.set((position, message.header.stamp))
+
+    def _on_marker(self, message) -> None:
+        try:
+            model, lifetime = conversions.marker_to_local_model(message)
+        except ValueError as exc:
+            self._refuse("local_model", str(exc))
+            return
+        self._source.set((model, lifetime if lifetime > 0.0 else self.p["lifetime_s"]))
+
+    def _on_wrench(self, message) -> None:
+        try:
+            force = conversions.force_from_message("wrench_stamped", message)
+        except ValueError as exc:
+            self._refuse("tool_wrench", str(exc))
+            return
+        self._source.set((force, message.header.stamp))
+
+    def _render(self, model, tip: np.ndarray | None) -> np.ndarray:
+        """Local-model force on the tool (N, liver frame); zero without a model or a tip."""
+        if model is None or tip is None:
+            depth, direction = 0.0, np.zeros(3)
+        else:
+            depth, direction = penetration(model, tip, self.p["tool_radius_m"])
+        rate = self._depth_rate.update(depth)
+        return contact_force(depth, rate, direction, self.p["stiffness_n_per_m"], self.p["damping_ns_per_m"])
+
+    def _step(self, now: float) -> None:
+        pose, pose_received = self._pose.get()
+        tip, stamp = pose if pose is not None else (None, None)
+        source, source_received = self._source.get()
+        if self._mode == "none":
+            force, stamp = source if source is not None else (np.zeros(3), None)
+            lifetime = self.p["lifetime_s"]
+        else:
+            model, lifetime = source if source is not None else (None, self.p["lifetime_s"])
+            force = self._render(model, tip)
+        command = self._safety.step(self._frame.liver_to_device_force(force), now - source_received,
+                                    now - pose_received, lifetime)
+        self._last_force = command
+        if stamp is None:
+            stamp = self.get_clock().now().to_msg()
+        message = conversions.force_message(self.p["force_output"], command, stamp, self.p["device_frame_id"])
+        try:
+            self._publisher.publish(message)
+        except Exception:
+            if self.context.ok():
+                raise
+            self._loop.stop()  # the context was shut down (SIGINT/SIGTERM) before close()
+
+    def _publish_diagnostics(self) -> None:
+        stats = self._loop.stats.summary()
+        now = time.monotonic()
+        _, pose_received = self._pose.get()
+        _, source_received = self._source.get()
+        state = self._safety.state
+        extra = {"watchdog": state, "local_model": self._mode,
+                 "bad_messages": sum(self._bad.values()), **{f"bad_{k}": v for k, v in self._bad.items()},
+                 "last_force_n": float(np.linalg.norm(self._last_force)),
+                 "tool_pose_age_s": float(now - pose_received),
+                 ("tool_wrench_age_s" if self._mode == "none" else "local_model_age_s"): float(now - source_received)}
+        on_rate = stats["rate_hz"] > 0.98 * self.p["rate_hz"]
+        problems = ([] if on_rate else ["below rate"]) + ([] if state == "ok" else [f"watchdog {state}"])
+        publish_diagnostics(self, self._diagnostics, [diagnostic_status(
+            "haptic_bridge: loop", stats, not problems, "; ".join(problems) or "ok", extra)])
+
+
+def main(args=None) -> int:
+    return run_node(HapticBridge, args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
