@@ -1,0 +1,117 @@
+"""`phantom_sim`: a simulated PHANToM for use without hardware (P12).
+
+A RateLoop at `rate_hz` (1 kHz) steps `liver_sim.phantom.PhantomSim` — a stylus with mass held by a
+virtual hand playing a `tool_scripts` script — and publishes the stylus on /phantom/measured_cp
+(frame `phantom_base`, stamped with the sample's time). The newest force command from
+/phantom/servo_cf (format `force_output`) pushes the stylus; a command older than
+`command_timeout_s`, or a malformed one, counts as zero, as a real driver's safety would do.
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+from rclpy.node import Node
+
+from liver_sim.nodes.common import Latest, Param, RateLoop, declare_parameters, publish_diagnostics, run_node
+from liver_sim.nodes.tool_node import (DEVICE_MAP_PARAMETERS, IDENTITY_XYZW, SCRIPT_PARAMETERS, frame_map_from,
+                                       loop_status, script_from)
+from liver_sim.phantom import PhantomSim, StylusParams
+from msg_defs import conversions
+from msg_defs.conversions import FORCE_OUTPUT_FORMATS
+from msg_defs.topics import TOPICS
+
+STYLUS = StylusParams()
+#: Force formats a simulated device can take (OmniFeedback is another driver's own message).
+FORCE_FORMATS = tuple(fmt for fmt in FORCE_OUTPUT_FORMATS if fmt != "omni_feedback")
+_ZERO = np.zeros(3)
+
+PARAMETERS = {
+    "rate_hz": Param(1000.0, "stylus integration and publishing rate (Hz)", 100.0, 10000.0),
+    "stylus_mass_kg": Param(STYLUS.mass_kg, "effective stylus mass at the tip (kg)", 0.001, 10.0),
+    "hand_stiffness_n_per_m": Param(STYLUS.hand_stiffness_n_per_m, "virtual hand spring to the script (N/m)",
+                                    1.0, 10000.0),
+    "hand_damping_ns_per_m": Param(STYLUS.hand_damping_ns_per_m, "virtual hand damping (N·s/m)", 0.0, 1000.0),
+    "max_force_n": Param(STYLUS.max_force_n, "commanded force clamp, as the device's (N)", 0.01, STYLUS.max_force_n),
+    "workspace_half_m": Param(STYLUS.workspace_half_m, "the stylus stays within ±this on each device axis (m)",
+                              0.01, 2.0),
+    "command_timeout_s": Param(0.05, "a force command older than this counts as zero (s)", 0.001, 10.0),
+    "force_output": Param("wrench_stamped", f"format of the force commands: {', '.join(FORCE_FORMATS)}",
+                          choices=FORCE_FORMATS),
+    "frame_id": Param("phantom_base", "frame of the published stylus pose"),
+    "measured_cp_topic": Param(TOPICS["measured_cp"].name, "stylus pose out, device frame (PoseStamped)"),
+    "servo_cf_topic": Param(TOPICS["servo_cf"].name, "force command in, device frame"),
+    **SCRIPT_PARAMETERS,
+    **DEVICE_MAP_PARAMETERS,
+}
+
+
+class PhantomNode(Node):
+    """Steps the simulated stylus at `rate_hz` and publishes its pose; applies the newest force command."""
+
+    def __init__(self):
+        super().__init__("phantom_sim")
+        p = self.p = declare_parameters(self, PARAMETERS)
+        stylus = StylusParams(p["stylus_mass_kg"], p["hand_stiffness_n_per_m"], p["hand_damping_ns_per_m"],
+                              p["max_force_n"], p["workspace_half_m"])
+        self.sim = PhantomSim(script_from(p), frame_map_from(p), stylus)
+        self._command = Latest()
+        self.bad_commands = 0
+        self._publisher = self.create_publisher(TOPICS["measured_cp"].type, p["measured_cp_topic"],
+                                                TOPICS["measured_cp"].qos)
+        self._diagnostics = self.create_publisher(TOPICS["diagnostics"].type, TOPICS["diagnostics"].name,
+                                                  TOPICS["diagnostics"].qos)
+        self.create_subscription(conversions.force_message_type(p["force_output"]), p["servo_cf_topic"],
+                                 self._on_command, TOPICS["servo_cf"].qos)
+        self.create_timer(1.0, self._publish_diagnostics)
+        self._loop = RateLoop(p["rate_hz"], self._step, "phantom_sim")
+        self._start = None
+        self._clock_origin_s = 0.0
+        self.get_logger().info(
+            f"phantom_sim: {p['rate_hz']:g} Hz stylus ({p['stylus_mass_kg']:g} kg, hand "
+            f"{p['hand_stiffness_n_per_m']:g} N/m, {p['hand_damping_ns_per_m']:g} N·s/m) playing "
+            f"'{p['script']}' ({self.sim.trajectory.duration_s:g} s{', looped' if p['loop_script'] else ''}) "
+            f"anchored at {list(p['anchor_m'])} m in the liver frame; in: {p['servo_cf_topic']} "
+            f"({p['force_output']}, clamp {p['max_force_n']:g} N, timeout {p['command_timeout_s']:g} s); "
+            f"out: {p['measured_cp_topic']} (frame {p['frame_id']})")
+        self._loop.start()
+
+    def close(self) -> None:
+        self._loop.stop()
+
+    def _on_command(self, message) -> None:
+        try:
+            force = conversions.force_from_message(self.p["force_output"], message)
+        except ValueError as exc:
+            self.bad_commands += 1
+            self.get_logger().warning(f"force command taken as zero: {exc}", throttle_duration_sec=1.0)
+            force = _ZERO
+        self._command.set(force)
+
+    def _step(self, now: float) -> None:
+        if self._start is None:
+            self._start = now
+            self._clock_origin_s = self.get_clock().now().nanoseconds * 1e-9
+        force, received = self._command.get()
+        if now - received > self.p["command_timeout_s"]:
+            force = _ZERO
+        if self.sim.advance_to(now - self._start, force, self._loop.period_s) == 0 and self.sim.time_s > 0.0:
+            return  # a late tick already caught up with this one's sample
+        stamp = conversions.stamp_from_seconds(self._clock_origin_s + self.sim.time_s)
+        self._publisher.publish(conversions.pose_stamped(self.sim.position, IDENTITY_XYZW, stamp, self.p["frame_id"]))
+
+    def _publish_diagnostics(self) -> None:
+        _, received = self._command.get()
+        extra = {"commanded_force_n": float(np.linalg.norm(self.sim.force)),
+                 "command_age_s": float(time.monotonic() - received), "bad_commands": self.bad_commands,
+                 "script_time_s": self.sim.time_s}
+        publish_diagnostics(self, self._diagnostics,
+                            [loop_status("phantom_sim: loop", self._loop.stats.summary(), self.p["rate_hz"], extra)])
+
+
+def main(args=None) -> int:
+    return run_node(PhantomNode, args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,131 @@
+"""Scripted tool-tip trajectories: pure functions of time, in metres and seconds (no ROS).
+
+A script is anchored at `anchor_m`, the rest-surface point it presses on (by default the liver's
+dome), and presses along −z. The tool is a sphere of `tool_radius_m` centred on the tip, so the
+tip touches the rest surface at anchor + radius·z; `clearance_m` is the gap between the tool's
+surface and the anchor when the tool is up, `depth_m` how far below the rest surface the tool's
+surface is driven. Every script first waits `start_delay_s` at its start point (again at each
+repetition when it loops). Between waypoints the tip moves along a straight line with a cosine-eased
+profile (zero velocity at every waypoint).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+#: Every script name, for parameter choices.
+SCRIPT_NAMES = ("press", "press_release", "slide", "withdraw", "press_slide_release", "hold")
+
+
+@dataclass(frozen=True)
+class ScriptSettings:
+    """Where and how a script moves: anchor and distances (m), segment durations (s), looping."""
+
+    anchor_m: tuple = (-0.0461755, 0.0038245, 0.06591025)
+    tool_radius_m: float = 0.015
+    depth_m: float = 0.01
+    clearance_m: float = 0.01
+    slide_m: float = 0.03
+    approach_s: float = 0.5
+    press_s: float = 1.0
+    hold_s: float = 0.5
+    slide_s: float = 1.5
+    withdraw_s: float = 0.3
+    rest_s: float = 1.0
+    start_delay_s: float = 0.0
+    loop: bool = False
+
+
+@dataclass(frozen=True, eq=False)
+class ScriptedTrajectory:
+    """Waypoints `positions_m` (k, 3) reached at `times_s` (k,), cosine-eased in between.
+
+    Before the first waypoint the tip is at the first, after the last at the last; with `loop`
+    the script repeats with period `duration_s` (only allowed when it ends where it starts).
+    """
+
+    name: str
+    times_s: np.ndarray
+    positions_m: np.ndarray
+    loop: bool = False
+
+    @property
+    def duration_s(self) -> float:
+        """Time (s) from the first waypoint to the last."""
+        return float(self.times_s[-1])
+
+    @property
+    def cyclic(self) -> bool:
+        """True when the script ends where it starts, so it can loop without a jump."""
+        return bool(np.allclose(self.positions_m[0], self.positions_m[-1], rtol=0.0, atol=1e-12))
+
+    def position_at(self, t: float) -> np.ndarray:
+        """Tool tip (m, (3,)) at time `t` (s) since the start of the script."""
+        times, points = self.times_s, self.positions_m
+        if self.loop and self.duration_s > 0.0:
+            t = t % self.duration_s
+        if t <= times[0]:
+            return points[0].copy()
+        if t >= times[-1]:
+            return points[-1].copy()
+        k = int(np.searchsorted(times, t, side="right")) - 1  # times[k] <= t < times[k+1]
+        eased = 0.5 - 0.5 * math.cos(math.pi * (t - times[k]) / (times[k + 1] - times[k]))
+        return points[k] + eased * (points[k + 1] - points[k])
+
+
+def _checked(settings: ScriptSettings) -> np.ndarray:
+    """The anchor as a (3,) array after checking every setting; ValueError naming the parameter."""
+    anchor = np.array(settings.anchor_m, dtype=np.float64)
+    if anchor.shape != (3,) or not np.isfinite(anchor).all():
+        raise ValueError(f"parameter anchor_m must be a finite [x, y, z] (m), got {settings.anchor_m!r}")
+    for name in ("tool_radius_m", "depth_m", "clearance_m", "slide_m", "approach_s", "press_s", "hold_s",
+                 "slide_s", "withdraw_s", "rest_s", "start_delay_s"):
+        value = getattr(settings, name)
+        if not (math.isfinite(value) and value >= 0.0):
+            raise ValueError(f"parameter {name} must be finite and >= 0, got {value!r}")
+    return anchor
+
+
+def make_script(name: str, settings: ScriptSettings = ScriptSettings()) -> ScriptedTrajectory:
+    """The trajectory of script `name` (one of SCRIPT_NAMES) with `settings`.
+
+    - hold: stay `clearance_m` above contact;
+    - press: approach from clearance to contact, press to `depth_m`, hold there;
+    - press_release: press, hold, withdraw to clearance, rest;
+    - slide: press, hold, slide `slide_m` along +x and back at depth, withdraw, rest;
+    - press_slide_release: press, hold, slide `slide_m` along +x, withdraw there, then return
+      above the start during `rest_s` (so it loops smoothly);
+    - withdraw: from depth back to clearance, rest.
+
+    Unknown names raise ValueError naming the parameter `script`; `loop` with a script that
+    does not end where it starts raises ValueError naming `loop_script`.
+    """
+    anchor = _checked(settings)
+    s = settings
+    up = anchor + [0.0, 0.0, s.tool_radius_m + s.clearance_m]
+    contact = anchor + [0.0, 0.0, s.tool_radius_m]
+    deep = anchor + [0.0, 0.0, s.tool_radius_m - s.depth_m]
+    along = np.array([s.slide_m, 0.0, 0.0])
+    press = [(s.approach_s, contact), (s.press_s, deep), (s.hold_s, deep)]
+    legs = {
+        "hold": (up, []),
+        "press": (up, press),
+        "press_release": (up, press + [(s.withdraw_s, up), (s.rest_s, up)]),
+        "slide": (up, press + [(s.slide_s, deep + along), (s.slide_s, deep), (s.withdraw_s, up), (s.rest_s, up)]),
+        "press_slide_release": (up, press + [(s.slide_s, deep + along), (s.withdraw_s, up + along),
+                                             (s.rest_s, up)]),
+        "withdraw": (deep, [(s.withdraw_s, up), (s.rest_s, up)]),
+    }
+    if name not in legs:
+        raise ValueError(f"parameter script={name!r} is not a script; one of {', '.join(SCRIPT_NAMES)}")
+    start, moves = legs[name]
+    moves = [(s.start_delay_s, start)] + moves
+    times = np.cumsum([0.0] + [duration for duration, _ in moves])
+    points = np.array([start] + [point for _, point in moves], dtype=np.float64)
+    trajectory = ScriptedTrajectory(name, times, points, s.loop)
+    if s.loop and not trajectory.cyclic:
+        raise ValueError(f"parameter loop_script: script {name!r} does not end where it starts, so it cannot "
+                         f"loop; use press_release, slide, press_slide_release or hold")
+    return trajectory
