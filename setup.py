@@ -15,19 +15,13 @@ from setuptools import find_packages, setup
 
 package_name = 'liver_sim'
 
-# --------------------------------------------------------------------------
-# Executables (DESIGN.md, "Executables").
-#
-# The command line exists now. The node executables are added here, one line
-# each, when their module exists -- never before, so that no entry point ever
-# points to a missing module:
-#     'liver_physics = <module>:main',
-#     'haptic_bridge = <module>:main',
-#     'liver_tool = <module>:main',
-#     'phantom_sim = <module>:main',
-# --------------------------------------------------------------------------
+# Executables (DESIGN.md, "Executables"): the command line and the four nodes.
 CONSOLE_SCRIPTS = [
     'liver-sim = liver_sim.cli:main',
+    'liver_physics = liver_sim.nodes.physics_node:main',
+    'haptic_bridge = haptic_bridge.node:main',
+    'liver_tool = liver_sim.nodes.tool_node:main',
+    'phantom_sim = liver_sim.nodes.phantom_node:main',
 ]
 
 here = os.path.dirname(os.path.abspath(__file__))

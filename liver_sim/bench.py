@@ -142,3 +142,56 @@ def run_physics_bench(sizes=LARGER_LIVERS, min_seconds: float = 1.0, progress=No
         >= TARGETS["spring_updates_per_s_min"],
     }
     return {"benchmark": "physics", "machine": machine(), "results": results, "targets": TARGETS, "met": met}
+
+
+LOOP_TARGETS = {"physics_rate_hz": (147.0, 153.0), "haptic_rate_hz_min": 995.0, "haptic_period_error_p99_s_max": 0.0005,
+                "haptic_max_gap_s_max": 0.005, "pose_to_force_p99_s_max": 0.002, "fig8_smoothness_ratio_min": 5.0}
+
+
+def run_loop_bench(duration_s: float = 30.0, log_dir=None, progress=None) -> dict:
+    """All four nodes plus a baseline bridge without local model, in closed loop for `duration_s` (R4).
+
+    Rates and period errors are given twice: as each node's own loop measured them (diagnostics)
+    and as this process saw the messages arrive (which adds its own scheduling).  The pose-to-force
+    latency is the age, on arrival here, of the device sample a force command was computed from.
+    """
+    from pathlib import Path
+
+    from liver_sim.analysis import contact_fraction, largest_force_jump_n, rate_figures
+    from liver_sim.network import closed_loop_plan, run_network
+
+    plan = closed_loop_plan(compare_without_local_model=True, extra={"phantom_sim": {"loop_script": True}})
+    snapshot = run_network(plan, duration_s, Path(log_dir or "out/bench_loop/logs"),
+                           progress or (lambda line: None))
+    arrival, force = snapshot["forces"]["local_model"]
+    _, baseline = snapshot["forces"]["without_local_model"]
+    ages = snapshot["force_stamp_age_s"]["local_model"]
+    ages = ages[np.isfinite(ages)]
+    jump_local = largest_force_jump_n(force)
+    jump_none = largest_force_jump_n(baseline)
+    diagnostics = snapshot["diagnostics"]
+    figures = {
+        "physics_on_wire": rate_figures(snapshot["nodes_arrival_s"], 150.0),
+        "haptic_on_wire": rate_figures(arrival, 1000.0),
+        "node_loops": diagnostics,
+        "pose_to_force_p50_s": float(np.percentile(ages, 50)) if ages.size else None,
+        "pose_to_force_p99_s": float(np.percentile(ages, 99)) if ages.size else None,
+        "contact_fraction": contact_fraction(force),
+        "largest_jump_with_local_model_n": jump_local,
+        "largest_jump_without_local_model_n": jump_none,
+        "fig8_smoothness_ratio": jump_none / jump_local if jump_local > 0 else None,
+    }
+    bridge = diagnostics.get("haptic_bridge: loop", {})
+    physics = diagnostics.get("liver_physics: loop", {})
+    haptic_rate = float(bridge.get("rate_hz", 0.0))
+    t = LOOP_TARGETS
+    met = {
+        "physics_rate_hz": t["physics_rate_hz"][0] <= float(physics.get("rate_hz", 0.0)) <= t["physics_rate_hz"][1],
+        "haptic_rate_hz_min": haptic_rate >= t["haptic_rate_hz_min"],
+        "haptic_period_error_p99_s_max": float(bridge.get("jitter_p99_s", 1.0)) <= t["haptic_period_error_p99_s_max"],
+        "haptic_max_gap_s_max": (figures["haptic_on_wire"]["max_gap_s"] or 1.0) <= t["haptic_max_gap_s_max"],
+        "pose_to_force_p99_s_max": (figures["pose_to_force_p99_s"] or 1.0) <= t["pose_to_force_p99_s_max"],
+        "fig8_smoothness_ratio_min": (figures["fig8_smoothness_ratio"] or 0.0) >= t["fig8_smoothness_ratio_min"],
+    }
+    return {"benchmark": "loop", "machine": machine(), "duration_s": duration_s, "results": figures,
+            "targets": LOOP_TARGETS, "met": met}

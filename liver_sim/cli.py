@@ -129,6 +129,11 @@ def add_bench_command(commands) -> None:
                          help="target tet counts of the larger livers (default: 10000 100000)")
     physics.add_argument("--seconds", type=float, default=1.0, help="timing per kernel and mesh (default: 1 s)")
     physics.set_defaults(handler=bench_physics)
+    loop = kinds.add_parser("loop", help="the four nodes in closed loop: rates, jitter, latency, Fig. 8 smoothness")
+    loop.add_argument("--json", action="store_true", help="print one JSON object")
+    loop.add_argument("--duration", type=float, default=30.0, help="seconds of closed loop (default: 30)")
+    loop.add_argument("--out", type=Path, default=Path("out/bench_loop"), help="folder for the nodes' logs")
+    loop.set_defaults(handler=bench_loop)
 
 
 def bench_physics(args) -> int:
@@ -152,18 +157,38 @@ def bench_physics(args) -> int:
     return 0
 
 
+def bench_loop(args) -> int:
+    from liver_sim.bench import run_loop_bench
+
+    report = run_loop_bench(args.duration, args.out / "logs", None if args.json else print)
+    if args.json:
+        print(json.dumps(report, default=float))
+        return 0
+    print(json.dumps(report["results"], indent=2, default=float))
+    for target, met in report["met"].items():
+        print(f"target {target} = {report['targets'][target]}: {'met' if met else 'NOT met'}")
+    return 0
+
+
 def add_demo_command(commands) -> None:
-    """``liver-sim demo [--duration S] [--out DIR]``: the headless press-and-release."""
-    parser = commands.add_parser("demo", help="scripted press-and-release on the default liver, headless")
-    parser.add_argument("--duration", type=float, default=None, help="simulated seconds (default: the script's 4.85 s)")
+    """``liver-sim demo [--duration S] [--out DIR] [--offline]``: the closed-loop demo."""
+    parser = commands.add_parser("demo", help="the four nodes in closed loop with a simulated PHANToM "
+                                              "pressing the default liver (--offline: the model alone, no ROS)")
+    parser.add_argument("--duration", type=float, default=None,
+                        help="seconds to run (default: 12 s; offline: the script's 4.85 s)")
     parser.add_argument("--out", type=Path, default=Path("out/demo"), help="output folder (default: %(default)s)")
+    parser.add_argument("--offline", action="store_true", help="scripted press-and-release in this process, no ROS")
     parser.set_defaults(handler=demo)
 
 
 def demo(args) -> int:
-    from liver_sim.demo import run_demo
+    from liver_sim.demo import run_demo, run_offline_demo
 
-    run_demo(args.out, args.duration, progress=lambda line: print(line, flush=True))
+    progress = lambda line: print(line, flush=True)  # noqa: E731
+    if args.offline:
+        run_offline_demo(args.out, args.duration, progress)
+    else:
+        run_demo(args.out, 12.0 if args.duration is None else args.duration, progress)
     return 0
 
 

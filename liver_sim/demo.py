@@ -1,4 +1,5 @@
-"""`liver-sim demo`: the scripted press-and-release on the default liver, headless (B1–B3).
+"""`liver-sim demo --offline`: the scripted press-and-release on the default liver, in one process
+without ROS (B1–B3).
 
 Writes to the output folder: summary.json and summary.md (the figures), force.png (force and
 displacement over time) and liver_press.png (the deformed liver at peak press).
@@ -14,12 +15,12 @@ import numpy as np
 
 from liver_sim.mesh.liver_shape import default_liver
 from liver_sim.physics.model import LiverModel
-from liver_sim.scenarios import PressRelease, Trace, press_release, press_target, recovery_time_s
+from liver_sim.scenarios import PressRelease, press_release, recovery_time_s
 
 PLOTTED_FIGURES = ("force.png", "liver_press.png")
 
 
-def run_demo(out_dir: Path, duration_s: float | None = None, progress=print) -> dict:
+def run_offline_demo(out_dir: Path, duration_s: float | None = None, progress=print) -> dict:
     """Run the press-and-release, write the summary and pictures into out_dir, return the summary."""
     script = PressRelease()
     if duration_s is not None:
@@ -59,7 +60,9 @@ def run_demo(out_dir: Path, duration_s: float | None = None, progress=print) -> 
     (out_dir / "summary.json").write_text(json.dumps(summary, indent=2, default=float) + "\n")
     (out_dir / "summary.md").write_text(_markdown(summary))
     _plot_force(data, script, out_dir / "force.png")
-    _plot_liver(model, trace, out_dir / "liver_press.png")
+    peak = int(np.argmax(force))
+    plot_liver(mesh.points, mesh.skin, trace.peak_positions_m, data["tool_position_m"][peak], model.tool.radius_m,
+               f"Default liver at peak press ({force[peak]:.2f} N)", out_dir / "liver_press.png")
     progress(f"peak force {summary['peak_force_n']:.2f} N, peak displacement "
              f"{summary['peak_displacement_m'] * 1e3:.1f} mm, residual {summary['final_displacement_m'] * 1e3:.2f} mm "
              f"after {script.rest_s:.1f} s; {summary['realtime_factor']:.1f}x real time")
@@ -108,34 +111,115 @@ def _plot_force(data: dict, script: PressRelease, path: Path) -> None:
     plt.close(fig)
 
 
-def _plot_liver(model: LiverModel, trace: Trace, path: Path) -> None:
+def plot_liver(rest_m: np.ndarray, skin: np.ndarray, positions_m: np.ndarray, tool_tip_m, tool_radius_m: float,
+               title: str, path: Path) -> None:
+    """A 3D picture of the deformed skin coloured by displacement, with the tool sphere in red."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
-    positions = trace.peak_positions_m if trace.peak_positions_m is not None else model.positions
-    displacement = np.linalg.norm(positions - model.mesh.points, axis=1)
-    skin = model.mesh.skin
+    displacement = np.linalg.norm(positions_m - rest_m, axis=1)
     fig = plt.figure(figsize=(8, 5.5), dpi=110)
     ax = fig.add_subplot(projection="3d")
     colours = plt.get_cmap("viridis")(displacement[skin].mean(axis=1) / max(displacement.max(), 1e-9))
-    ax.add_collection3d(Poly3DCollection(positions[skin], facecolors=colours, edgecolors="0.3", linewidths=0.2))
-    target, _ = press_target(model)
-    peak = int(np.argmax(np.linalg.norm(trace.arrays()["tool_force_n"], axis=1)))
-    tip = trace.arrays()["tool_position_m"][peak]
-    u, v = np.mgrid[0:2 * np.pi:16j, 0:np.pi:8j]
-    r = model.tool.radius_m
-    ax.plot_wireframe(tip[0] + r * np.cos(u) * np.sin(v), tip[1] + r * np.sin(u) * np.sin(v),
-                      tip[2] + r * np.cos(v), color="tab:red", linewidth=0.6)
-    lower, upper = model.mesh.bounds
+    ax.add_collection3d(Poly3DCollection(positions_m[skin], facecolors=colours, edgecolors="0.3", linewidths=0.2))
+    if tool_tip_m is not None:
+        u, v = np.mgrid[0:2 * np.pi:16j, 0:np.pi:8j]
+        tip, r = np.asarray(tool_tip_m), tool_radius_m
+        ax.plot_wireframe(tip[0] + r * np.cos(u) * np.sin(v), tip[1] + r * np.sin(u) * np.sin(v),
+                          tip[2] + r * np.cos(v), color="tab:red", linewidth=0.6)
+    lower, upper = rest_m.min(axis=0), rest_m.max(axis=0)
     centre, half = (lower + upper) / 2, (upper - lower).max() / 2
     ax.set(xlim=(centre[0] - half, centre[0] + half), ylim=(centre[1] - half, centre[1] + half),
            zlim=(centre[2] - half, centre[2] + half), xlabel="x (m)", ylabel="y (m)", zlabel="z (m)")
     ax.view_init(elev=28, azim=-60)
     mappable = plt.cm.ScalarMappable(cmap="viridis", norm=plt.Normalize(0, displacement.max() * 1e3))
     fig.colorbar(mappable, ax=ax, shrink=0.6, label="displacement (mm)")
-    ax.set_title(f"Default liver at peak press ({np.linalg.norm(trace.tool_force_n[peak]):.2f} N)")
+    ax.set_title(title)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+
+
+def run_demo(out_dir: Path, duration_s: float = 12.0, progress=print) -> dict:
+    """The main job: the four nodes in closed loop with the simulated PHANToM pressing, sliding and
+    releasing; writes summary.json/.md, force.png and liver_press.png, and the nodes' logs in logs/."""
+    from liver_sim.analysis import largest_force_jump_n, rate_figures
+    from liver_sim.network import closed_loop_plan, run_network
+
+    mesh = default_liver()
+    progress("starting the node network (the same command lines work in four terminals):")
+    snapshot = run_network(closed_loop_plan(extra={"phantom_sim": {"loop_script": True}}), duration_s,
+                           out_dir / "logs", progress)
+    arrival, haptic_force = snapshot["forces"]["local_model"]
+    wrench = snapshot["wrench_n"]
+    peak_nodes = snapshot["peak_nodes"] if snapshot["peak_nodes"] is not None else mesh.points
+    last_nodes = snapshot["last_nodes"] if snapshot["last_nodes"] is not None else mesh.points
+    haptic_norm = np.linalg.norm(haptic_force, axis=1)
+    summary = {
+        "duration_s": duration_s,
+        "physics": rate_figures(snapshot["nodes_arrival_s"], 150.0),
+        "haptic": rate_figures(arrival, 1000.0),
+        "peak_haptic_force_n": float(haptic_norm.max()) if haptic_norm.size else 0.0,
+        "peak_physics_force_n": float(np.linalg.norm(wrench, axis=1).max()) if len(wrench) else 0.0,
+        "largest_force_jump_n": largest_force_jump_n(haptic_force),
+        "peak_displacement_m": float(np.linalg.norm(peak_nodes - mesh.points, axis=1).max()),
+        "final_displacement_m": float(np.linalg.norm(last_nodes - mesh.points, axis=1).max()),
+        "diagnostics": snapshot["diagnostics"],
+    }
+    out_dir.mkdir(parents=True, exist_ok=True)
+    (out_dir / "summary.json").write_text(json.dumps(summary, indent=2, default=float) + "\n")
+    (out_dir / "summary.md").write_text(_network_markdown(summary))
+    _plot_network_forces(snapshot, out_dir / "force.png")
+    plot_liver(mesh.points, mesh.skin, peak_nodes, None, 0.0,
+               f"Default liver at peak press ({summary['peak_physics_force_n']:.2f} N)", out_dir / "liver_press.png")
+    progress(f"physics {summary['physics']['rate_hz']:.1f} Hz, haptic {summary['haptic']['rate_hz']:.1f} Hz "
+             f"(period error p99 {1e3 * (summary['haptic']['period_error_p99_s'] or 0):.2f} ms), peak force "
+             f"{summary['peak_haptic_force_n']:.2f} N, residual displacement "
+             f"{summary['final_displacement_m'] * 1e3:.2f} mm")
+    progress(f"wrote {out_dir}/summary.json, summary.md, {', '.join(PLOTTED_FIGURES)} and logs/")
+    return summary
+
+
+def _network_markdown(summary: dict) -> str:
+    physics, haptic = summary["physics"], summary["haptic"]
+    ms = lambda value: f"{value * 1e3:.2f} ms" if value is not None else "n/a"  # noqa: E731
+    return "\n".join([
+        "# Closed-loop demo: physics, haptic bridge, tool and simulated PHANToM",
+        "",
+        f"- physics: {physics['rate_hz']:.1f} Hz ({physics['samples']} frames), period error p99 "
+        f"{ms(physics['period_error_p99_s'])}",
+        f"- haptic commands: {haptic['rate_hz']:.1f} Hz ({haptic['samples']} commands), period error p50 "
+        f"{ms(haptic['period_error_p50_s'])}, p99 {ms(haptic['period_error_p99_s'])}, largest gap "
+        f"{ms(haptic['max_gap_s'])}",
+        f"- peak force sent to the device: {summary['peak_haptic_force_n']:.3f} N; physics contact force peak "
+        f"{summary['peak_physics_force_n']:.3f} N",
+        f"- largest force change between consecutive 1 ms commands in contact: "
+        f"{summary['largest_force_jump_n']:.4f} N",
+        f"- peak displacement {summary['peak_displacement_m'] * 1e3:.1f} mm; residual at the end "
+        f"{summary['final_displacement_m'] * 1e3:.2f} mm",
+        "",
+    ])
+
+
+def _plot_network_forces(snapshot: dict, path: Path) -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    arrival, force = snapshot["forces"]["local_model"]
+    origin = arrival[0] if len(arrival) else 0.0
+    fig, ax = plt.subplots(figsize=(8, 4.2), dpi=110)
+    ax.plot(arrival - origin, np.linalg.norm(force, axis=1), color="tab:red", linewidth=0.8,
+            label="force command to the device, 1 kHz (local model)")
+    if len(snapshot["wrench_n"]):
+        ax.plot(snapshot["wrench_arrival_s"] - origin, np.linalg.norm(snapshot["wrench_n"], axis=1), ".",
+                color="tab:blue", markersize=2, label="physics contact force, 150 Hz")
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("force (N)")
+    ax.set_title("Press, slide and release with the simulated PHANToM")
+    ax.legend(loc="upper right", fontsize=8)
     fig.tight_layout()
     fig.savefig(path)
     plt.close(fig)

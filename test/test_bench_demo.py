@@ -4,7 +4,7 @@ import json
 import pytest
 
 from liver_sim.bench import run_physics_bench
-from liver_sim.demo import PLOTTED_FIGURES, run_demo
+from liver_sim.demo import PLOTTED_FIGURES, run_offline_demo
 
 PNG = b"\x89PNG\r\n\x1a\n"
 
@@ -23,8 +23,8 @@ def test_physics_bench_reports_the_default_liver_first_and_agrees_with_numpy():
     json.dumps(report)
 
 
-def test_demo_writes_summary_and_pictures(tmp_path):
-    summary = run_demo(tmp_path, duration_s=3.0, progress=lambda line: None)
+def test_offline_demo_writes_summary_and_pictures(tmp_path):
+    summary = run_offline_demo(tmp_path, duration_s=3.0, progress=lambda line: None)
     for name in PLOTTED_FIGURES:
         assert (tmp_path / name).read_bytes()[:8] == PNG
     on_disk = json.loads((tmp_path / "summary.json").read_text())
@@ -34,6 +34,6 @@ def test_demo_writes_summary_and_pictures(tmp_path):
     assert "Press-and-release" in (tmp_path / "summary.md").read_text()
 
 
-def test_demo_refuses_a_duration_shorter_than_the_script(tmp_path):
+def test_offline_demo_refuses_a_duration_shorter_than_the_script(tmp_path):
     with pytest.raises(ValueError, match="--duration"):
-        run_demo(tmp_path, duration_s=1.0, progress=lambda line: None)
+        run_offline_demo(tmp_path, duration_s=1.0, progress=lambda line: None)

@@ -1,0 +1,36 @@
+"""Figures of a run from what arrived when: loop rates, period errors, force smoothness (R4, Fig. 8)."""
+from __future__ import annotations
+
+import numpy as np
+
+#: A force at least this large (N) counts as contact.
+CONTACT_FORCE_N = 0.05
+
+
+def rate_figures(arrival_s: np.ndarray, nominal_hz: float) -> dict:
+    """Achieved rate (Hz) and period error p50/p99/max (s) and largest gap (s) of a stream of arrivals."""
+    if len(arrival_s) < 3:
+        return {"rate_hz": 0.0, "period_error_p50_s": None, "period_error_p99_s": None,
+                "period_error_max_s": None, "max_gap_s": None, "samples": int(len(arrival_s))}
+    periods = np.diff(arrival_s)
+    error = np.abs(periods - 1.0 / nominal_hz)
+    return {"rate_hz": float((len(arrival_s) - 1) / (arrival_s[-1] - arrival_s[0])),
+            "period_error_p50_s": float(np.percentile(error, 50)),
+            "period_error_p99_s": float(np.percentile(error, 99)),
+            "period_error_max_s": float(error.max()), "max_gap_s": float(periods.max()),
+            "samples": int(len(arrival_s))}
+
+
+def largest_force_jump_n(forces_n: np.ndarray, contact_force_n: float = CONTACT_FORCE_N) -> float:
+    """Largest |F_k − F_{k−1}| (N) between consecutive commands while both are in contact (Fig. 8's harshness)."""
+    if len(forces_n) < 2:
+        return 0.0
+    norms = np.linalg.norm(forces_n, axis=1)
+    steady = (norms[1:] > contact_force_n) & (norms[:-1] > contact_force_n)
+    jumps = np.linalg.norm(np.diff(forces_n, axis=0), axis=1)[steady]
+    return float(jumps.max()) if jumps.size else 0.0
+
+
+def contact_fraction(forces_n: np.ndarray, contact_force_n: float = CONTACT_FORCE_N) -> float:
+    """Share of the commands given in contact."""
+    return float((np.linalg.norm(forces_n, axis=1) > contact_force_n).mean()) if len(forces_n) else 0.0

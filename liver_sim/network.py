@@ -1,0 +1,116 @@
+"""Running the four-node network as separate processes, listening to it, and stopping it cleanly.
+
+Used by `liver-sim demo` and `liver-sim bench loop`.  Processes run in the ROS_DOMAIN_ID of the
+environment and on loopback unless the environment says otherwise.
+"""
+from __future__ import annotations
+
+import os
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from liver_sim.mesh.liver_shape import default_liver
+from liver_sim.processes import NodeProcesses, command_line, printable
+
+#: Topic of the baseline bridge (`local_model: none`) in a comparison run (Fig. 8); it drives nothing.
+BASELINE_FORCE_TOPIC = "/phantom/servo_cf_without_local_model"
+
+
+def press_anchor() -> list[float]:
+    """Top of the default liver (m, liver frame): where the scripted hand presses."""
+    mesh = default_liver()
+    nodes = mesh.skin_nodes
+    return [round(float(v), 6) for v in mesh.points[nodes[np.argmax(mesh.points[nodes, 2])]]]
+
+
+@dataclass
+class NetworkPlan:
+    """The command lines of one run: label -> argv."""
+
+    commands: dict[str, list[str]] = field(default_factory=dict)
+    force_topics: dict[str, tuple[str, str]] = field(default_factory=dict)
+
+
+def closed_loop_plan(compare_without_local_model: bool = False, extra: dict | None = None) -> NetworkPlan:
+    """The four nodes in closed loop with the simulated PHANToM pressing the top of the liver.
+
+    With `compare_without_local_model`, a second bridge renders the physics wrench held between
+    updates (`local_model: none`) on BASELINE_FORCE_TOPIC, from the same inputs (Fig. 8).
+    `extra` maps an executable to more `-p` overrides.
+    """
+    extra = extra or {}
+    plan = NetworkPlan()
+    plan.commands["liver_physics"] = command_line("liver_physics", extra.get("liver_physics"))
+    plan.commands["haptic_bridge"] = command_line("haptic_bridge", extra.get("haptic_bridge"))
+    plan.commands["liver_tool"] = command_line("liver_tool", {"source": "device", **extra.get("liver_tool", {})})
+    plan.commands["phantom_sim"] = command_line("phantom_sim", {"anchor_m": press_anchor(),
+                                                                **extra.get("phantom_sim", {})})
+    plan.force_topics["local_model"] = ("/phantom/servo_cf", "wrench_stamped")
+    if compare_without_local_model:
+        plan.commands["haptic_bridge_none"] = command_line(
+            "haptic_bridge", {"local_model": "none", "force_topic": BASELINE_FORCE_TOPIC},
+            node_name="haptic_bridge_without_local_model")
+        plan.force_topics["without_local_model"] = (BASELINE_FORCE_TOPIC, "wrench_stamped")
+    return plan
+
+
+def run_network(plan: NetworkPlan, duration_s: float, log_dir: Path, progress=print,
+                settle_s: float = 1.0) -> dict:
+    """Start the plan's processes, listen for `duration_s` after they are up, stop them; return the snapshot.
+
+    Raises RuntimeError naming any node that exited early (its log is in log_dir).
+    """
+    import rclpy
+    from rclpy.experimental import EventsExecutor
+
+    from liver_sim.nodes.common import spin
+    from liver_sim.nodes.listener import NetworkListener
+
+    progress(f"ROS_DOMAIN_ID={os.environ.get('ROS_DOMAIN_ID', '0')} "
+             f"ROS_AUTOMATIC_DISCOVERY_RANGE={os.environ.get('ROS_AUTOMATIC_DISCOVERY_RANGE', '(default)')}")
+    for label, args in plan.commands.items():
+        progress(f"  {label}: {printable(args)}")
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    listener = NetworkListener(plan.force_topics, context=context)
+    executor = EventsExecutor(context=context)
+    executor.add_node(listener)
+    spinner = threading.Thread(target=spin, args=(executor, context), daemon=True)
+    spinner.start()
+    processes = NodeProcesses(log_dir)
+    try:
+        for label, args in plan.commands.items():
+            processes.start(label, args)
+        _wait_for_network(listener, processes, timeout_s=60.0)
+        time.sleep(settle_s)
+        start = time.monotonic()
+        while time.monotonic() - start < duration_s:
+            time.sleep(min(1.0, duration_s - (time.monotonic() - start)))
+            failed = processes.failed()
+            if failed:
+                raise RuntimeError(f"node(s) exited early: {failed}; see logs in {log_dir}")
+            progress(f"  {time.monotonic() - start:5.1f} / {duration_s:.1f} s")
+        return listener.snapshot()
+    finally:
+        processes.stop()
+        context.try_shutdown()
+        spinner.join(timeout=2.0)
+        listener.destroy_node()
+
+
+def _wait_for_network(listener, processes: NodeProcesses, timeout_s: float) -> None:
+    """Until the physics publishes nodes and every force topic carries commands."""
+    start = time.monotonic()
+    while time.monotonic() - start < timeout_s:
+        snapshot = listener.snapshot()
+        if len(snapshot["nodes_arrival_s"]) and all(len(t) for t, _ in snapshot["forces"].values()):
+            return
+        failed = processes.failed()
+        if failed:
+            raise RuntimeError(f"node(s) exited during start-up: {failed}; see logs in {processes.log_dir}")
+        time.sleep(0.1)
+    raise RuntimeError(f"the network did not come up within {timeout_s:.0f} s; see logs in {processes.log_dir}")

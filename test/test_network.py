@@ -1,0 +1,143 @@
+"""The node network as real processes on loopback, each test in its own ROS_DOMAIN_ID (no timing thresholds)."""
+import subprocess
+import threading
+import time
+
+import numpy as np
+import pytest
+import rclpy
+from rclpy.experimental import EventsExecutor
+from sensor_msgs.msg import PointCloud2
+
+from liver_sim.mesh.liver_shape import default_liver
+from liver_sim.network import closed_loop_plan, press_anchor, run_network
+from liver_sim.nodes.common import spin
+from liver_sim.nodes.listener import NetworkListener
+from liver_sim.processes import NodeProcesses, command_line
+from msg_defs import conversions
+from msg_defs.topics import TOPICS
+
+MAX_FORCE_N = 2.0
+
+
+def assert_safe(forces):
+    assert np.isfinite(forces).all()
+    assert np.linalg.norm(forces, axis=1).max() <= MAX_FORCE_N + 1e-9
+
+
+def test_closed_loop_press_deforms_the_liver_and_it_returns(ros_domain_id, tmp_path):
+    script = {"script": "press_release", "start_delay_s": 3.0, "depth_m": 0.015, "rest_s": 4.0}
+    snapshot = run_network(closed_loop_plan(extra={"phantom_sim": script}), 8.0, tmp_path, progress=lambda s: None)
+    _, forces = snapshot["forces"]["local_model"]
+    norms = np.linalg.norm(forces, axis=1)
+    assert_safe(forces)
+    assert norms.max() > 0.1                      # felt in contact
+    assert (norms[:50] == 0.0).all()              # nothing before the press
+    assert (norms[-200:] == 0.0).all()            # nothing once the tool is up again
+    rest = default_liver().points
+    peak = np.linalg.norm(snapshot["peak_nodes"] - rest, axis=1).max()
+    final = np.linalg.norm(snapshot["last_nodes"] - rest, axis=1).max()
+    assert peak > 0.003
+    assert final < 0.3 * peak
+
+
+class Network:
+    """Nodes started by a test, and a listener in the test process."""
+
+    def __init__(self, log_dir):
+        self.processes = NodeProcesses(log_dir)
+        self.context = rclpy.Context()
+        rclpy.init(context=self.context)
+        self.listener = NetworkListener({"local_model": ("/phantom/servo_cf", "wrench_stamped")},
+                                        context=self.context)
+        self.executor = EventsExecutor(context=self.context)
+        self.executor.add_node(self.listener)
+        self.thread = threading.Thread(target=spin, args=(self.executor, self.context), daemon=True)
+        self.thread.start()
+
+    def forces_since(self, t0):
+        arrival, forces = self.listener.snapshot()["forces"]["local_model"]
+        return forces[arrival >= t0]
+
+    def wait_for(self, condition, timeout_s, what):
+        start = time.monotonic()
+        while time.monotonic() - start < timeout_s:
+            if condition():
+                return
+            time.sleep(0.05)
+        raise AssertionError(f"timed out waiting for {what}; logs in {self.processes.log_dir}")
+
+    def close(self):
+        self.processes.stop()
+        self.context.try_shutdown()
+        self.thread.join(timeout=2.0)
+        self.listener.destroy_node()
+
+
+@pytest.fixture
+def network(ros_domain_id, tmp_path):
+    net = Network(tmp_path)
+    yield net
+    net.close()
+
+
+def start_pressing_network(net):
+    """Physics, bridge, and the tool holding the tool tip 1 cm inside the top of the liver."""
+    top = np.array(press_anchor())
+    tip = top + [0.0, 0.0, 0.015 - 0.01]
+    net.processes.start("liver_physics", command_line("liver_physics"))
+    net.processes.start("haptic_bridge", command_line("haptic_bridge"))
+    net.processes.start("liver_tool", command_line("liver_tool", {"source": "static",
+                                                                   "static_position_m": tip.tolist()}))
+    net.wait_for(lambda: np.linalg.norm(net.forces_since(0.0), axis=1).max(initial=0.0) > 0.1, 60.0,
+                 "contact force")
+
+
+def test_watchdog_zeroes_the_force_when_physics_dies_and_resumes_on_restart(network):
+    start_pressing_network(network)
+    network.processes.stop("liver_physics")
+    killed = time.monotonic()
+    network.wait_for(lambda: len(network.forces_since(killed + 0.5)) > 100, 10.0, "commands after the kill")
+    after = network.forces_since(killed + 0.2)
+    assert (after == 0.0).all()
+    assert network.processes.processes["haptic_bridge"].poll() is None
+    network.processes.start("liver_physics", command_line("liver_physics"))
+    restarted = time.monotonic()
+    network.wait_for(lambda: np.linalg.norm(network.forces_since(restarted), axis=1).max(initial=0.0) > 0.1,
+                     60.0, "force after the physics restarted")
+    assert_safe(network.forces_since(0.0))
+
+
+def test_bad_input_does_not_crash_the_network_nor_reach_the_device(network):
+    start_pressing_network(network)
+    node = rclpy.create_node("bad_input", context=network.context)
+    poses = node.create_publisher(TOPICS["tool_pose"].type, TOPICS["tool_pose"].name, TOPICS["tool_pose"].qos)
+    clouds = node.create_publisher(PointCloud2, TOPICS["nodes"].name, TOPICS["nodes"].qos)
+    nan_pose = conversions.pose_stamped([0.0, 0.0, 0.0], (0.0, 0.0, 0.0, 1.0), 0.0, "liver")
+    nan_pose.pose.position.x = float("nan")
+    far_pose = conversions.pose_stamped([50.0, 0.0, 0.0], (0.0, 0.0, 0.0, 1.0), 0.0, "liver")
+    broken = conversions.nodes_to_pointcloud2(np.zeros((10, 3)), 0.0, "liver")
+    broken.data = bytes(broken.data)[:50]
+    t0 = time.monotonic()
+    for _ in range(200):
+        poses.publish(nan_pose)
+        poses.publish(far_pose)
+        clouds.publish(broken)
+        time.sleep(0.005)
+    network.wait_for(lambda: len(network.forces_since(t0 + 1.0)) > 100, 10.0, "commands after the bad input")
+    assert network.processes.failed() == {}
+    assert_safe(network.forces_since(0.0))
+    assert np.linalg.norm(network.forces_since(t0 + 1.0), axis=1).max() > 0.1  # still pressing, still felt
+    node.destroy_node()
+
+
+@pytest.mark.parametrize("executable, parameter, value", [
+    ("liver_physics", "rate_hz", 5000.0),
+    ("liver_physics", "integrator", "runge_kutta"),
+    ("haptic_bridge", "max_force_n", 5.0),
+])
+def test_out_of_range_parameter_is_refused_by_name(ros_env, executable, parameter, value):
+    result = subprocess.run(command_line(executable, {parameter: value}), env=ros_env, capture_output=True,
+                            text=True, timeout=60)
+    assert result.returncode == 2
+    assert parameter in result.stderr
