@@ -33,6 +33,8 @@ class NetworkPlan:
 
     commands: dict[str, list[str]] = field(default_factory=dict)
     force_topics: dict[str, tuple[str, str]] = field(default_factory=dict)
+    #: started once the physics publishes, so that a scripted device does not press an absent liver
+    after_physics: tuple = ("phantom_sim",)
 
 
 def closed_loop_plan(compare_without_local_model: bool = False, extra: dict | None = None) -> NetworkPlan:
@@ -84,8 +86,12 @@ def run_network(plan: NetworkPlan, duration_s: float, log_dir: Path, progress=pr
     processes = NodeProcesses(log_dir)
     try:
         for label, args in plan.commands.items():
-            processes.start(label, args)
+            if label not in plan.after_physics:
+                processes.start(label, args)
         _wait_for_network(listener, processes, timeout_s=60.0)
+        for label in plan.after_physics:
+            if label in plan.commands:
+                processes.start(label, plan.commands[label])
         time.sleep(settle_s)
         start = time.monotonic()
         while time.monotonic() - start < duration_s:

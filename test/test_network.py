@@ -26,7 +26,7 @@ def assert_safe(forces):
 
 
 def test_closed_loop_press_deforms_the_liver_and_it_returns(ros_domain_id, tmp_path):
-    script = {"script": "press_release", "start_delay_s": 3.0, "depth_m": 0.015, "rest_s": 4.0}
+    script = {"script": "press_release", "start_delay_s": 1.0, "depth_m": 0.02, "rest_s": 4.0}
     snapshot = run_network(closed_loop_plan(extra={"phantom_sim": script}), 8.0, tmp_path, progress=lambda s: None)
     _, forces = snapshot["forces"]["local_model"]
     norms = np.linalg.norm(forces, axis=1)
@@ -37,7 +37,7 @@ def test_closed_loop_press_deforms_the_liver_and_it_returns(ros_domain_id, tmp_p
     rest = default_liver().points
     peak = np.linalg.norm(snapshot["peak_nodes"] - rest, axis=1).max()
     final = np.linalg.norm(snapshot["last_nodes"] - rest, axis=1).max()
-    assert peak > 0.003
+    assert peak > 0.002
     assert final < 0.3 * peak
 
 

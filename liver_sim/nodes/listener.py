@@ -7,6 +7,7 @@ import time
 
 import numpy as np
 from rclpy.node import Node
+from rclpy.serialization import deserialize_message
 
 from msg_defs import conversions
 from msg_defs.topics import TOPICS
@@ -14,6 +15,8 @@ from msg_defs.topics import TOPICS
 
 class NetworkListener(Node):
     """Subscribes to the force commands, the physics wrench and nodes, /diagnostics and optionally the tool pose.
+
+    `peak_nodes` are the node positions farthest (largest coordinate change) from the first ones received.
 
     `force_topics` maps a label to (topic, force_output format), e.g. {'local_model': ('/phantom/servo_cf',
     'wrench_stamped')}.  Force samples keep the monotonic arrival time, the age of their stamp on arrival
@@ -28,13 +31,14 @@ class NetworkListener(Node):
         self.wrenches, self.tool_poses, self.node_stamps = [], [], []
         self.diagnostics: dict[str, dict] = {}
         self.surface = None
-        self.peak_nodes = None
-        self.last_nodes = None
-        self._peak_norm = -1.0
-        for label, (topic, fmt) in force_topics.items():
+        self.first_nodes = self.peak_nodes = self.last_nodes = None
+        self._peak_displacement = -1.0
+        self._force_formats = {label: fmt for label, (_, fmt) in force_topics.items()}
+        self._decoded = {label: [] for label in force_topics}
+        for label, (topic, fmt) in force_topics.items():  # 1 kHz: keep bytes, deserialise in snapshot()
             self.create_subscription(conversions.force_message_type(fmt), topic,
-                                     lambda msg, label=label, fmt=fmt: self._on_force(label, fmt, msg),
-                                     TOPICS["servo_cf"].qos)
+                                     lambda data, label=label: self._on_force(label, data),
+                                     TOPICS["servo_cf"].qos, raw=True)
         self.create_subscription(TOPICS["tool_wrench"].type, TOPICS["tool_wrench"].name, self._on_wrench,
                                  TOPICS["tool_wrench"].qos)
         if tool_pose:  # 1 kHz of Python callbacks: only when asked for
@@ -46,12 +50,25 @@ class NetworkListener(Node):
         self.create_subscription(TOPICS["diagnostics"].type, TOPICS["diagnostics"].name, self._on_diagnostics,
                                  TOPICS["diagnostics"].qos)
 
-    def _on_force(self, label, fmt, message) -> None:
-        force = conversions.force_from_message(fmt, message)
-        header = getattr(message, "header", None)
-        stamp = conversions.seconds_from_stamp(header.stamp) if header is not None else np.nan
+    def _on_force(self, label, data: bytes) -> None:
         with self._lock:
-            self.forces[label].append((time.monotonic(), time.time() - stamp, force))
+            self.forces[label].append((time.monotonic(), time.time(), data))
+
+    def _decode_forces(self, label) -> tuple:
+        """(arrival_s, forces (K, 3) N, stamp age on arrival (K,) s) of the force commands so far;
+        only the samples not decoded by an earlier call are deserialised."""
+        fmt = self._force_formats[label]
+        kind = conversions.force_message_type(fmt)
+        with self._lock:
+            new = self.forces[label][len(self._decoded[label]):]
+        for arrival, wall, data in new:
+            message = deserialize_message(data, kind)
+            header = getattr(message, "header", None)
+            age = wall - conversions.seconds_from_stamp(header.stamp) if header is not None else np.nan
+            self._decoded[label].append((arrival, conversions.force_from_message(fmt, message), age))
+        decoded = self._decoded[label]
+        return (np.array([d[0] for d in decoded]), np.array([d[1] for d in decoded]).reshape(-1, 3),
+                np.array([d[2] for d in decoded]))
 
     def _on_wrench(self, message) -> None:
         f = message.wrench.force
@@ -72,10 +89,12 @@ class NetworkListener(Node):
             return
         with self._lock:
             self.node_stamps.append((time.monotonic(), conversions.seconds_from_stamp(message.header.stamp)))
+            if self.first_nodes is None or len(self.first_nodes) != len(positions):
+                self.first_nodes, self._peak_displacement = positions, -1.0
             self.last_nodes = positions
-            force = np.linalg.norm(self.wrenches[-1][2]) if self.wrenches else 0.0
-            if force > self._peak_norm:
-                self._peak_norm, self.peak_nodes = force, positions
+            displacement = float(np.abs(positions - self.first_nodes).max())
+            if displacement > self._peak_displacement:
+                self._peak_displacement, self.peak_nodes = displacement, positions
 
     def _on_surface(self, message) -> None:
         with self._lock:
@@ -88,11 +107,11 @@ class NetworkListener(Node):
 
     def snapshot(self) -> dict:
         """Copies of everything received so far, as numpy arrays where that fits."""
+        decoded = {label: self._decode_forces(label) for label in self.forces}
         with self._lock:
             return {
-                "forces": {label: (np.array([s[0] for s in samples]), np.array([s[2] for s in samples]).reshape(-1, 3))
-                           for label, samples in self.forces.items()},
-                "force_stamp_age_s": {label: np.array([s[1] for s in samples]) for label, samples in self.forces.items()},
+                "forces": {label: (arrival, values) for label, (arrival, values, _) in decoded.items()},
+                "force_stamp_age_s": {label: ages for label, (_, _, ages) in decoded.items()},
                 "wrench_arrival_s": np.array([s[0] for s in self.wrenches]),
                 "wrench_n": np.array([s[2] for s in self.wrenches]).reshape(-1, 3),
                 "tool_arrival_s": np.array([s[0] for s in self.tool_poses]),

@@ -11,6 +11,7 @@ import time
 
 import numpy as np
 from rclpy.node import Node
+from rclpy.serialization import deserialize_message
 
 from liver_sim.mesh.io import load_mesh
 from liver_sim.mesh.liver_shape import default_liver
@@ -51,7 +52,7 @@ PARAMETERS = {
     "local_model_reach_m": Param(0.02, "publish a local model while the tool is this close to the skin (m)",
                                  0.0, 1.0),
     "local_model_lifetime_s": Param(0.05, "how long the bridge may trust one local model (s)", 0.001, 10.0),
-    "tool_pose_timeout_s": Param(0.1, "a tool pose older than this is ignored: no tool (s)", 0.001, 60.0),
+    "tool_pose_timeout_s": Param(0.5, "a tool pose older than this is ignored: no tool (s)", 0.001, 60.0),
     "workspace_margin_m": Param(0.3, "tool poses farther than this from the liver's bounds are refused (m)",
                                 0.0, 100.0),
     "marker_rate_hz": Param(30.0, "rate of the /liver/marker TRIANGLE_LIST (Hz)", 0.1, 150.0),
@@ -101,7 +102,10 @@ class PhysicsNode(Node):
             for key in ("nodes", "surface", "marker", "contact_plane", "tool_wrench")}
         self._diagnostics = self.create_publisher(TOPICS["diagnostics"].type, TOPICS["diagnostics"].name,
                                                   TOPICS["diagnostics"].qos)
-        self.create_subscription(TOPICS["tool_pose"].type, p["tool_pose_topic"], self._on_pose, TOPICS["tool_pose"].qos)
+        # 1 kHz of poses for a 150 Hz consumer: keep the bytes, deserialise once per frame
+        self.create_subscription(TOPICS["tool_pose"].type, p["tool_pose_topic"], self._pose.set,
+                                 TOPICS["tool_pose"].qos, raw=True)
+        self._last_pose_bytes, self._last_pose = None, None
         self._clock_origin_s = self.get_clock().now().nanoseconds * 1e-9
         self.publish_surface()
         self.create_timer(1.0, self._publish_diagnostics)
@@ -121,16 +125,26 @@ class PhysicsNode(Node):
         """Skin triangles and rest positions: on start and on every topology change."""
         self._outputs["surface"].publish(conversions.skin_mesh_msg(self.model.mesh.skin, self.model.mesh.points))
 
-    def _on_pose(self, message) -> None:
+    def _tool_pose(self, now: float) -> ToolPose | None:
+        """The newest valid tool pose, None when it is older than tool_pose_timeout_s or refused."""
+        data, received = self._pose.get()
+        if data is None or now - received > self.p["tool_pose_timeout_s"]:
+            return None
+        if data is not self._last_pose_bytes:
+            self._last_pose_bytes, self._last_pose = data, self._parse_pose(data)
+        return self._last_pose
+
+    def _parse_pose(self, data: bytes) -> ToolPose | None:
         try:
+            message = deserialize_message(data, TOPICS["tool_pose"].type)
             position, orientation = conversions.pose_to_arrays(message.pose)
-        except ValueError as exc:
+        except (ValueError, RuntimeError) as exc:  # malformed bytes or a NaN/zero-quaternion pose
             self._refuse_pose(str(exc))
-            return
+            return None
         if np.any(position < self._workspace[0]) or np.any(position > self._workspace[1]):
             self._refuse_pose(f"tool position {position.round(3).tolist()} m is outside the workspace")
-            return
-        self._pose.set(ToolPose(position, tuple(orientation)))
+            return None
+        return ToolPose(position, tuple(orientation))
 
     def _refuse_pose(self, reason: str) -> None:
         self._bad_poses += 1
@@ -141,10 +155,7 @@ class PhysicsNode(Node):
 
     def _step(self, now: float) -> None:
         started = time.perf_counter()
-        pose, received = self._pose.get()
-        if now - received > self.p["tool_pose_timeout_s"]:
-            pose = None
-        result = self.model.step_frame(pose)
+        result = self.model.step_frame(self._tool_pose(now))
         if result.divergence:
             self.get_logger().error(result.divergence, throttle_duration_sec=1.0)
         stamp = self._stamp()
