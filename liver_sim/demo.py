@@ -15,21 +15,22 @@ import numpy as np
 
 from liver_sim.mesh.liver_shape import default_liver
 from liver_sim.physics.model import LiverModel
-from liver_sim.scenarios import PressRelease, press_release, recovery_time_s
+from liver_sim.scenarios import offline_press_release, press_release, recovery_time_s
+from liver_sim.tool_scripts import ScriptSettings
 
 PLOTTED_FIGURES = ("force.png", "liver_press.png")
 
 
 def run_offline_demo(out_dir: Path, duration_s: float | None = None, progress=print) -> dict:
     """Run the press-and-release, write the summary and pictures into out_dir, return the summary."""
-    script = PressRelease()
+    mesh = default_liver()
+    model = LiverModel(mesh)
+    script = offline_press_release(mesh, model.tool.radius_m)
     if duration_s is not None:
-        active = script.duration_s - script.rest_s
+        active = script.approach_s + script.press_s + script.hold_s + script.withdraw_s
         if duration_s <= active:
             raise ValueError(f"--duration must exceed {active:.2f} s (approach, press, hold, withdraw)")
         script = replace(script, rest_s=duration_s - active)
-    mesh = default_liver()
-    model = LiverModel(mesh)
     progress(f"liver: {len(mesh.points)} nodes, {len(mesh.tets)} tets, {len(mesh.skin)} skin triangles, "
              f"{mesh.volume * 1e3:.2f} L; {model.springs.springs} springs; "
              f"dt {model.params.dt_s * 1e6:.0f} us ({model.params.substeps} substeps at "
@@ -89,7 +90,7 @@ def _markdown(summary: dict) -> str:
     ])
 
 
-def _plot_force(data: dict, script: PressRelease, path: Path) -> None:
+def _plot_force(data: dict, script: ScriptSettings, path: Path) -> None:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -99,7 +100,8 @@ def _plot_force(data: dict, script: PressRelease, path: Path) -> None:
     ax.plot(t, np.linalg.norm(data["tool_force_n"], axis=1), color="tab:red", label="|force on tool| (N)")
     ax.set_xlabel("time (s)")
     ax.set_ylabel("force (N)", color="tab:red")
-    ax.axvspan(script.approach_s, script.release_time_s, color="0.92", label="press and hold")
+    ax.axvspan(script.approach_s, script.approach_s + script.press_s + script.hold_s, color="0.92",
+               label="press and hold")
     twin = ax.twinx()
     twin.plot(t, data["max_displacement_m"] * 1e3, color="tab:blue", label="largest node displacement (mm)")
     twin.set_ylabel("displacement (mm)", color="tab:blue")

@@ -11,20 +11,18 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import numpy as np
 
 from liver_sim.mesh.liver_shape import default_liver
 from liver_sim.processes import NodeProcesses, command_line, printable
+from liver_sim.scenarios import press_anchor
 
 #: Topic of the baseline bridge (`local_model: none`) in a comparison run (Fig. 8); it drives nothing.
 BASELINE_FORCE_TOPIC = "/phantom/servo_cf_without_local_model"
 
 
-def press_anchor() -> list[float]:
+def default_anchor() -> list[float]:
     """Top of the default liver (m, liver frame): where the scripted hand presses."""
-    mesh = default_liver()
-    nodes = mesh.skin_nodes
-    return [round(float(v), 6) for v in mesh.points[nodes[np.argmax(mesh.points[nodes, 2])]]]
+    return [round(float(v), 6) for v in press_anchor(default_liver())]
 
 
 @dataclass
@@ -49,7 +47,7 @@ def closed_loop_plan(compare_without_local_model: bool = False, extra: dict | No
     plan.commands["liver_physics"] = command_line("liver_physics", extra.get("liver_physics"))
     plan.commands["haptic_bridge"] = command_line("haptic_bridge", extra.get("haptic_bridge"))
     plan.commands["liver_tool"] = command_line("liver_tool", {"source": "device", **extra.get("liver_tool", {})})
-    plan.commands["phantom_sim"] = command_line("phantom_sim", {"anchor_m": press_anchor(),
+    plan.commands["phantom_sim"] = command_line("phantom_sim", {"anchor_m": default_anchor(),
                                                                 **extra.get("phantom_sim", {})})
     plan.force_topics["local_model"] = ("/phantom/servo_cf", "wrench_stamped")
     if compare_without_local_model:

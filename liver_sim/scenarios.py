@@ -1,7 +1,8 @@
-"""Scripted tool motions run offline on the model, and what they record (B1–B3).
+"""Tool scripts played offline on the model, and what they record (B1–B3).
 
 `press_release` lowers a sphere tool onto the top of the liver, presses, holds, withdraws and
-waits, recording the force, the tool and the shape at every frame.
+waits (the `press_release` script of liver_sim.tool_scripts), recording the force, the tool and
+the shape at every frame.
 """
 from __future__ import annotations
 
@@ -9,36 +10,16 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from liver_sim.mesh.tetmesh import TetMesh
 from liver_sim.physics.contact import ToolPose
 from liver_sim.physics.model import LiverModel
+from liver_sim.tool_scripts import ScriptSettings, make_script
 
 
-@dataclass(frozen=True)
-class PressRelease:
-    """Timing (s) and depth (m) of a press-and-release, measured along the surface normal."""
-
-    approach_s: float = 0.3
-    press_s: float = 1.0
-    hold_s: float = 0.5
-    withdraw_s: float = 0.05
-    rest_s: float = 3.0
-    depth_m: float = 0.02
-    clearance_m: float = 0.01
-
-    @property
-    def duration_s(self) -> float:
-        return self.approach_s + self.press_s + self.hold_s + self.withdraw_s + self.rest_s
-
-    @property
-    def release_time_s(self) -> float:
-        """When the tool starts to withdraw."""
-        return self.approach_s + self.press_s + self.hold_s
-
-    def depth_at(self, t: float) -> float:
-        """Nominal penetration of the tool below the rest surface at time t (negative: above it)."""
-        edges = np.cumsum([0.0, self.approach_s, self.press_s, self.hold_s, self.withdraw_s])
-        depths = [-self.clearance_m, 0.0, self.depth_m, self.depth_m, -self.clearance_m]
-        return float(np.interp(t, edges, depths))
+def offline_press_release(mesh: TetMesh, tool_radius_m: float, rest_s: float = 3.0) -> ScriptSettings:
+    """The offline press-and-release: 2 cm into the top of `mesh`, held, withdrawn quickly, then rest."""
+    return ScriptSettings(anchor_m=tuple(press_anchor(mesh)), tool_radius_m=tool_radius_m, depth_m=0.02,
+                          clearance_m=0.01, approach_s=0.3, press_s=1.0, hold_s=0.5, withdraw_s=0.05, rest_s=rest_s)
 
 
 @dataclass
@@ -61,27 +42,25 @@ class Trace:
                  "in_contact")}
 
 
-def press_target(model: LiverModel) -> tuple[np.ndarray, np.ndarray]:
-    """The topmost skin node (the diaphragmatic dome) and the downward press direction."""
-    skin_nodes = model.mesh.skin_nodes
-    top = skin_nodes[np.argmax(model.mesh.points[skin_nodes, 2])]
-    return model.mesh.points[top].copy(), np.array([0.0, 0.0, -1.0])
+def press_anchor(mesh: TetMesh) -> np.ndarray:
+    """The topmost skin node (m): the diaphragmatic dome, where the scripts press."""
+    nodes = mesh.skin_nodes
+    return mesh.points[nodes[np.argmax(mesh.points[nodes, 2])]].copy()
 
 
-def press_release(model: LiverModel, script: PressRelease = PressRelease(), progress=None) -> Trace:
-    """Run the scripted press-and-release on `model` with its tool; returns the per-frame trace.
+def press_release(model: LiverModel, settings: ScriptSettings | None = None, progress=None) -> Trace:
+    """Play the `press_release` tool script (default: offline_press_release) on `model`; returns the trace.
 
     The tool tip starts `clearance_m` above the top of the liver (tool surface to skin), goes down
     to `depth_m` below the rest surface, holds, withdraws and the model is left to recover.
     """
-    target, down = press_target(model)
-    radius = model.tool.radius_m
+    script = make_script("press_release", settings or offline_press_release(model.mesh, model.tool.radius_m))
     frames = int(round(script.duration_s * model.params.frame_rate_hz))
     trace = Trace()
     peak_force = -1.0
     for frame in range(frames):
         t = (frame + 1) * model.frame_period_s
-        tip = target - down * radius + down * script.depth_at(t)
+        tip = script.position_at(t)
         result = model.step_frame(ToolPose(tip))
         trace.time_s.append(t)
         trace.tool_position_m.append(tip)

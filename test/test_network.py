@@ -10,7 +10,7 @@ from rclpy.experimental import EventsExecutor
 from sensor_msgs.msg import PointCloud2
 
 from liver_sim.mesh.liver_shape import default_liver
-from liver_sim.network import closed_loop_plan, press_anchor, run_network
+from liver_sim.network import closed_loop_plan, default_anchor, run_network
 from liver_sim.nodes.common import spin
 from liver_sim.nodes.listener import NetworkListener
 from liver_sim.processes import NodeProcesses, command_line
@@ -83,7 +83,7 @@ def network(ros_domain_id, tmp_path):
 
 def start_pressing_network(net):
     """Physics, bridge, and the tool holding the tool tip 1 cm inside the top of the liver."""
-    top = np.array(press_anchor())
+    top = np.array(default_anchor())
     tip = top + [0.0, 0.0, 0.015 - 0.01]
     net.processes.start("liver_physics", command_line("liver_physics"))
     net.processes.start("haptic_bridge", command_line("haptic_bridge"))
