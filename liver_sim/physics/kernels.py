@@ -35,10 +35,10 @@ def _spring_tension(x, v, i, j, rest, lambda1, lambda2, mu):
     return tension, ux, uy, uz
 
 
-@numba.njit(cache=True)
-def spring_forces_serial(x, v, node_i, node_j, rest, lambda1, lambda2, mu, f):
-    """Add every spring's Eq. 1 force to f: +T·u on node i, −T·u on node j (one thread)."""
-    for s in range(node_i.shape[0]):
+@numba.njit(cache=True, inline="always")
+def _accumulate_springs(x, v, node_i, node_j, rest, lambda1, lambda2, mu, first, last, f):
+    """Add the Eq. 1 forces of springs first..last−1 to f: +T·u on node i, −T·u on node j."""
+    for s in range(first, last):
         i = node_i[s]
         j = node_j[s]
         t, ux, uy, uz = _spring_tension(x, v, i, j, rest[s], lambda1[s], lambda2[s], mu[s])
@@ -50,6 +50,12 @@ def spring_forces_serial(x, v, node_i, node_j, rest, lambda1, lambda2, mu, f):
         f[j, 2] -= t * uz
 
 
+@numba.njit(cache=True)
+def spring_forces_serial(x, v, node_i, node_j, rest, lambda1, lambda2, mu, f):
+    """Add every spring's Eq. 1 force to f (one thread)."""
+    _accumulate_springs(x, v, node_i, node_j, rest, lambda1, lambda2, mu, 0, node_i.shape[0], f)
+
+
 @numba.njit(cache=True, parallel=True)
 def spring_forces_parallel(x, v, node_i, node_j, rest, lambda1, lambda2, mu, partial, f):
     """As spring_forces_serial, on all threads: each of the len(partial) chunks of springs
@@ -59,16 +65,8 @@ def spring_forces_parallel(x, v, node_i, node_j, rest, lambda1, lambda2, mu, par
     for c in numba.prange(chunks):
         own = partial[c]
         own[:] = 0.0
-        for s in range(c * springs // chunks, (c + 1) * springs // chunks):
-            i = node_i[s]
-            j = node_j[s]
-            t, ux, uy, uz = _spring_tension(x, v, i, j, rest[s], lambda1[s], lambda2[s], mu[s])
-            own[i, 0] += t * ux
-            own[i, 1] += t * uy
-            own[i, 2] += t * uz
-            own[j, 0] -= t * ux
-            own[j, 1] -= t * uy
-            own[j, 2] -= t * uz
+        _accumulate_springs(x, v, node_i, node_j, rest, lambda1, lambda2, mu,
+                            c * springs // chunks, (c + 1) * springs // chunks, own)
     for n in numba.prange(f.shape[0]):
         for c in range(chunks):
             f[n, 0] += partial[c, n, 0]
