@@ -17,8 +17,8 @@ from rclpy.node import Node
 
 from haptic_bridge.local_model import FrameMap, contact_force, max_passive_stiffness, penetration
 from haptic_bridge.safety import DEFAULT_MAX_FORCE_N, PHANTOM_MAX_FORCE_N, SafeForceOutput
-from liver_sim.nodes.common import (Latest, Param, RateLoop, declare_parameters, diagnostic_status,
-                                    publish_diagnostics, run_node)
+from liver_sim.nodes.common import (Latest, LoopInputs, Param, RateLoop, declare_parameters,
+                                    diagnostic_status, publish_diagnostics, run_node)
 from msg_defs import conversions
 from msg_defs.topics import TOPICS
 
@@ -129,15 +129,15 @@ class HapticBridge(Node):
                                                  p["force_topic"], TOPICS["servo_cf"].qos)
         self._diagnostics = self.create_publisher(TOPICS["diagnostics"].type, TOPICS["diagnostics"].name,
                                                   TOPICS["diagnostics"].qos)
-        self.create_subscription(TOPICS["tool_pose"].type, p["tool_pose_topic"], self._on_pose,
-                                 TOPICS["tool_pose"].qos)
+        self._inputs = LoopInputs(self)  # read by the 1 kHz loop itself, not by the executor
+        self._inputs.subscribe(TOPICS["tool_pose"].type, p["tool_pose_topic"], TOPICS["tool_pose"].qos, self._on_pose)
         if self._mode == "none":
             source = p["tool_wrench_topic"]
-            self.create_subscription(TOPICS["tool_wrench"].type, source, self._on_wrench, TOPICS["tool_wrench"].qos)
+            self._inputs.subscribe(TOPICS["tool_wrench"].type, source, TOPICS["tool_wrench"].qos, self._on_wrench)
         else:
             source = p["local_model_topic"]
-            self.create_subscription(TOPICS["contact_plane"].type, source, self._on_marker,
-                                     TOPICS["contact_plane"].qos)
+            self._inputs.subscribe(TOPICS["contact_plane"].type, source, TOPICS["contact_plane"].qos,
+                                   self._on_marker)
         self.create_timer(1.0, self._publish_diagnostics)
         self._loop = RateLoop(p["rate_hz"], self._step, "haptic_bridge")
         rendering = ("physics wrench held between updates" if self._mode == "none" else
@@ -153,6 +153,7 @@ class HapticBridge(Node):
     def close(self) -> None:
         """Stop the haptic loop."""
         self._loop.stop()
+        self._inputs.destroy()
 
     def _refuse(self, kind: str, reason: str) -> None:
         self._bad[kind] += 1
@@ -192,6 +193,7 @@ class HapticBridge(Node):
         return contact_force(depth, rate, direction, self.p["stiffness_n_per_m"], self.p["damping_ns_per_m"])
 
     def _step(self, now: float) -> None:
+        self._inputs.poll()
         pose, pose_received = self._pose.get()
         tip, stamp = pose if pose is not None else (None, None)
         source, source_received = self._source.get()

@@ -126,6 +126,36 @@ class RateLoop(threading.Thread):
                 tick = behind
 
 
+class LoopInputs:
+    """Subscriptions that a rate loop reads itself, bypassing the executor's per-message cost.
+
+    They belong to a hidden node (`_<node>_loop`, not spun by any executor); `poll()`, called from
+    the loop, takes every waiting message of each subscription and hands the newest to its callback.
+    """
+
+    def __init__(self, node):
+        self._node = rclpy.create_node(f"_{node.get_name()}_loop", context=node.context,
+                                       use_global_arguments=False, start_parameter_services=False,
+                                       enable_rosout=False)
+        self._inputs = []
+
+    def subscribe(self, msg_type, topic: str, qos, callback, raw: bool = False) -> None:
+        subscription = self._node.create_subscription(msg_type, topic, callback, qos, raw=raw)
+        self._inputs.append((subscription, callback))
+
+    def poll(self) -> None:
+        for subscription, callback in self._inputs:
+            newest = None
+            with subscription.handle:
+                while (taken := subscription.handle.take_message(subscription.msg_type, subscription.raw)):
+                    newest = taken[0]
+            if newest is not None:
+                callback(newest)
+
+    def destroy(self) -> None:
+        self._node.destroy_node()
+
+
 @dataclass(frozen=True)
 class Param:
     """A declared parameter: default, description (with its unit) and optional range or choices."""

@@ -13,7 +13,8 @@ import time
 import numpy as np
 from rclpy.node import Node
 
-from liver_sim.nodes.common import Latest, Param, RateLoop, declare_parameters, publish_diagnostics, run_node
+from liver_sim.nodes.common import (Latest, LoopInputs, Param, RateLoop, declare_parameters, publish_diagnostics,
+                                    run_node)
 from liver_sim.nodes.tool_node import (DEVICE_MAP_PARAMETERS, IDENTITY_XYZW, SCRIPT_PARAMETERS, frame_map_from,
                                        loop_status, script_from)
 from liver_sim.phantom import PhantomSim, StylusParams
@@ -61,8 +62,9 @@ class PhantomNode(Node):
                                                 TOPICS["measured_cp"].qos)
         self._diagnostics = self.create_publisher(TOPICS["diagnostics"].type, TOPICS["diagnostics"].name,
                                                   TOPICS["diagnostics"].qos)
-        self.create_subscription(conversions.force_message_type(p["force_output"]), p["servo_cf_topic"],
-                                 self._on_command, TOPICS["servo_cf"].qos)
+        self._inputs = LoopInputs(self)  # read by the 1 kHz loop itself, not by the executor
+        self._inputs.subscribe(conversions.force_message_type(p["force_output"]), p["servo_cf_topic"],
+                               TOPICS["servo_cf"].qos, self._on_command)
         self.create_timer(1.0, self._publish_diagnostics)
         self._loop = RateLoop(p["rate_hz"], self._step, "phantom_sim")
         self._start = None
@@ -78,6 +80,7 @@ class PhantomNode(Node):
 
     def close(self) -> None:
         self._loop.stop()
+        self._inputs.destroy()
 
     def _on_command(self, message) -> None:
         try:
@@ -89,6 +92,7 @@ class PhantomNode(Node):
         self._command.set(force)
 
     def _step(self, now: float) -> None:
+        self._inputs.poll()
         if self._start is None:
             self._start = now
             self._clock_origin_s = self.get_clock().now().nanoseconds * 1e-9

@@ -15,8 +15,8 @@ from rclpy.serialization import deserialize_message
 
 from liver_sim.mesh.io import load_mesh
 from liver_sim.mesh.liver_shape import default_liver
-from liver_sim.nodes.common import (Latest, Param, RateLoop, declare_parameters, diagnostic_status,
-                                    publish_diagnostics, run_node)
+from liver_sim.nodes.common import (Latest, LoopInputs, Param, RateLoop, declare_parameters,
+                                    diagnostic_status, publish_diagnostics, run_node)
 from liver_sim.physics.contact import ToolPose, ToolShape
 from liver_sim.physics.model import LiverModel
 from liver_sim.physics.params import INTEGRATORS, ModelParams, SpringLaw
@@ -32,8 +32,8 @@ PARAMETERS = {
     "substeps": Param(DEFAULTS.substeps, "integration steps per frame", 1, 10_000),
     "integrator": Param(DEFAULTS.integrator, "symplectic_euler or explicit_euler (Eq. 2)", choices=INTEGRATORS),
     "capsule_lambda1_n": Param(DEFAULTS.capsule.lambda1_n, "capsule spring cubic stiffness λ1 of Eq. 1 (N)", 0.0, 1e6),
-    "capsule_lambda2_n": Param(DEFAULTS.capsule.lambda2_n, "capsule spring linear stiffness λ2 of Eq. 1 (N)", 0.0, 1e6),
-    "capsule_mu_ns_per_m": Param(DEFAULTS.capsule.mu_ns_per_m, "capsule spring viscosity μ of Eq. 1 (N·s/m)", 0.0, 1e4),
+    "capsule_lambda2_n": Param(DEFAULTS.capsule.lambda2_n, "capsule linear stiffness λ2 of Eq. 1 (N)", 0.0, 1e6),
+    "capsule_mu_ns_per_m": Param(DEFAULTS.capsule.mu_ns_per_m, "capsule viscosity μ of Eq. 1 (N·s/m)", 0.0, 1e4),
     "parenchyma_lambda1_n": Param(DEFAULTS.parenchyma.lambda1_n, "parenchyma cubic stiffness λ1 (N)", 0.0, 1e6),
     "parenchyma_lambda2_n": Param(DEFAULTS.parenchyma.lambda2_n, "parenchyma linear stiffness λ2 (N)", 0.0, 1e6),
     "parenchyma_mu_ns_per_m": Param(DEFAULTS.parenchyma.mu_ns_per_m, "parenchyma viscosity μ (N·s/m)", 0.0, 1e4),
@@ -102,9 +102,10 @@ class PhysicsNode(Node):
             for key in ("nodes", "surface", "marker", "contact_plane", "tool_wrench")}
         self._diagnostics = self.create_publisher(TOPICS["diagnostics"].type, TOPICS["diagnostics"].name,
                                                   TOPICS["diagnostics"].qos)
-        # 1 kHz of poses for a 150 Hz consumer: keep the bytes, deserialise once per frame
-        self.create_subscription(TOPICS["tool_pose"].type, p["tool_pose_topic"], self._pose.set,
-                                 TOPICS["tool_pose"].qos, raw=True)
+        # 1 kHz of poses for a 150 Hz consumer: the loop takes the newest bytes each frame
+        self._inputs = LoopInputs(self)
+        self._inputs.subscribe(TOPICS["tool_pose"].type, p["tool_pose_topic"], TOPICS["tool_pose"].qos,
+                               self._pose.set, raw=True)
         self._last_pose_bytes, self._last_pose = None, None
         self._clock_origin_s = self.get_clock().now().nanoseconds * 1e-9
         self.publish_surface()
@@ -120,6 +121,7 @@ class PhysicsNode(Node):
 
     def close(self) -> None:
         self._loop.stop()
+        self._inputs.destroy()
 
     def publish_surface(self) -> None:
         """Skin triangles and rest positions: on start and on every topology change."""
@@ -155,6 +157,7 @@ class PhysicsNode(Node):
 
     def _step(self, now: float) -> None:
         started = time.perf_counter()
+        self._inputs.poll()
         result = self.model.step_frame(self._tool_pose(now))
         if result.divergence:
             self.get_logger().error(result.divergence, throttle_duration_sec=1.0)

@@ -236,10 +236,10 @@ def run_frame(x, v, inv_mass, node_i, node_j, rest, lambda1, lambda2, mu, partia
     """`substeps` steps of the model; the tool core moves at `tool_velocity` from core_a/core_b.
 
     Runs without the GIL, so a node's executor thread keeps delivering messages meanwhile.
-
-    `external_force` (N, 3) is added to every node each step.  `candidates` are skin nodes near the tool.  Returns the contact force on the liver at the last
-    substep (N); the tool's reaction is its opposite.  For a box, the candidates' contact geometry
-    of the last substep is left in gap/point/direction.
+    `external_force` (N, 3) is added to every node each step; `candidates` are skin nodes near the
+    tool.  Returns the contact force on the liver at the last substep (N); the tool's reaction is
+    its opposite.  For a box, the candidates' contact geometry of the last substep is left in
+    gap/point/direction.
     """
     contact = np.zeros(3)
     for step in range(substeps):
