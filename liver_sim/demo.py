@@ -152,7 +152,7 @@ def run_demo(out_dir: Path, duration_s: float = 12.0, progress=print) -> dict:
 
     mesh = default_liver()
     progress("starting the node network (the same command lines work in four terminals):")
-    snapshot = run_network(closed_loop_plan(extra={"phantom_sim": {"loop_script": True}}), duration_s,
+    snapshot = run_network(closed_loop_plan(extra={"phantom_sim": {"rest_s": 6.0}}), duration_s,
                            out_dir / "logs", progress)
     arrival, haptic_force = snapshot["forces"]["local_model"]
     wrench = snapshot["wrench_n"]
@@ -211,7 +211,7 @@ def _plot_network_forces(snapshot: dict, path: Path) -> None:
     import matplotlib.pyplot as plt
 
     arrival, force = snapshot["forces"]["local_model"]
-    origin = arrival[0] if len(arrival) else 0.0
+    origin = min([a[0] for a in (arrival, snapshot["wrench_arrival_s"]) if len(a)], default=0.0)
     fig, ax = plt.subplots(figsize=(8, 4.2), dpi=110)
     ax.plot(arrival - origin, np.linalg.norm(force, axis=1), color="tab:red", linewidth=0.8,
             label="force command to the device, 1 kHz (local model)")
