@@ -141,3 +141,17 @@ def test_out_of_range_parameter_is_refused_by_name(ros_env, executable, paramete
                             text=True, timeout=60)
     assert result.returncode == 2
     assert parameter in result.stderr
+
+
+def test_demo_runs_the_network_and_writes_its_report(ros_domain_id, tmp_path):
+    from liver_sim.demo import PLOTTED_FIGURES, run_demo
+
+    summary = run_demo(tmp_path, duration_s=3.0, progress=lambda line: None)
+    for name in PLOTTED_FIGURES + ("summary.json", "summary.md"):
+        assert (tmp_path / name).stat().st_size > 0
+    assert summary["physics"]["samples"] > 100 and summary["haptic"]["samples"] > 1000
+    assert summary["peak_haptic_force_n"] <= MAX_FORCE_N
+    assert {"liver_physics: loop", "haptic_bridge: loop", "liver_tool: loop", "phantom_sim: loop"} <= set(
+        summary["diagnostics"])
+    logs = {p.name for p in (tmp_path / "logs").iterdir()}
+    assert {"liver_physics.log", "haptic_bridge.log", "liver_tool.log", "phantom_sim.log"} <= logs
