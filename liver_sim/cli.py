@@ -175,7 +175,7 @@ def add_demo_command(commands) -> None:
     parser = commands.add_parser("demo", help="the four nodes in closed loop with a simulated PHANToM "
                                               "pressing the default liver (--offline: the model alone, no ROS)")
     parser.add_argument("--duration", type=float, default=None,
-                        help="seconds to run (default: 12 s; offline: the script's 4.85 s)")
+                        help="seconds to run (default: 14 s; offline: the script's 4.85 s)")
     parser.add_argument("--out", type=Path, default=Path("out/demo"), help="output folder (default: %(default)s)")
     parser.add_argument("--offline", action="store_true", help="scripted press-and-release in this process, no ROS")
     parser.set_defaults(handler=demo)
@@ -188,7 +188,7 @@ def demo(args) -> int:
     if args.offline:
         run_offline_demo(args.out, args.duration, progress)
     else:
-        run_demo(args.out, 12.0 if args.duration is None else args.duration, progress)
+        run_demo(args.out, 14.0 if args.duration is None else args.duration, progress)
     return 0
 
 

@@ -144,7 +144,7 @@ def plot_liver(rest_m: np.ndarray, skin: np.ndarray, positions_m: np.ndarray, to
     plt.close(fig)
 
 
-def run_demo(out_dir: Path, duration_s: float = 12.0, progress=print) -> dict:
+def run_demo(out_dir: Path, duration_s: float = 14.0, progress=print) -> dict:
     """The main job: the four nodes in closed loop with the simulated PHANToM pressing, sliding and
     releasing; writes summary.json/.md, force.png and liver_press.png, and the nodes' logs in logs/."""
     from liver_sim.analysis import largest_force_jump_n, rate_figures

@@ -16,6 +16,9 @@ from liver_sim.mesh.liver_shape import default_liver
 from liver_sim.processes import NodeProcesses, command_line, printable
 from liver_sim.scenarios import press_anchor
 
+#: The scripted hand waits this long (s) before moving: DDS discovery of a new process takes seconds,
+#: and the press must not begin before the tool node relays the stylus.
+DEVICE_START_DELAY_S = 3.0
 #: Topic of the baseline bridge (`local_model: none`) in a comparison run (Fig. 8); it drives nothing.
 BASELINE_FORCE_TOPIC = "/phantom/servo_cf_without_local_model"
 
@@ -48,6 +51,7 @@ def closed_loop_plan(compare_without_local_model: bool = False, extra: dict | No
     plan.commands["haptic_bridge"] = command_line("haptic_bridge", extra.get("haptic_bridge"))
     plan.commands["liver_tool"] = command_line("liver_tool", {"source": "device", **extra.get("liver_tool", {})})
     plan.commands["phantom_sim"] = command_line("phantom_sim", {"anchor_m": default_anchor(),
+                                                                "start_delay_s": DEVICE_START_DELAY_S,
                                                                 **extra.get("phantom_sim", {})})
     plan.force_topics["local_model"] = ("/phantom/servo_cf", "wrench_stamped")
     if compare_without_local_model:

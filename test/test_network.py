@@ -26,8 +26,8 @@ def assert_safe(forces):
 
 
 def test_closed_loop_press_deforms_the_liver_and_it_returns(ros_domain_id, tmp_path):
-    script = {"script": "press_release", "start_delay_s": 1.0, "depth_m": 0.02, "rest_s": 4.0}
-    snapshot = run_network(closed_loop_plan(extra={"phantom_sim": script}), 8.0, tmp_path, progress=lambda s: None)
+    script = {"script": "press_release", "depth_m": 0.02, "rest_s": 6.0}
+    snapshot = run_network(closed_loop_plan(extra={"phantom_sim": script}), 11.0, tmp_path, progress=lambda s: None)
     _, forces = snapshot["forces"]["local_model"]
     norms = np.linalg.norm(forces, axis=1)
     assert_safe(forces)

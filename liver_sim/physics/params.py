@@ -48,7 +48,7 @@ class ModelParams:
     gravity_m_s2: tuple = (0.0, 0.0, 0.0)
     integrator: str = "symplectic_euler"
     frame_rate_hz: float = 150.0
-    substeps: int = 96
+    substeps: int = 72
     fixed_nodes: tuple | None = None
     contact_stiffness_n_per_m: float = 300.0
     contact_damping_ns_per_m: float = 1.0
