@@ -20,6 +20,7 @@ import numba
 import numpy as np
 import trimesh
 
+from liver_sim.geometry import closest_point_on_triangle, dot, sub
 from liver_sim.mesh.stuffing import tetrahedralize_to_target
 from liver_sim.mesh.tetmesh import MeshError, TetMesh
 
@@ -353,8 +354,8 @@ def _nearest_triangles(points, corners, order, box_lower, box_upper, span, child
             if child[node, 0] < 0:
                 for k in range(span[node, 0], span[node, 1]):
                     t = order[k]
-                    c, f = _closest_point_on_triangle(p, corners[t])
-                    d2 = _dot(_sub(p, c), _sub(p, c))
+                    c, f = closest_point_on_triangle(p, corners[t])
+                    d2 = dot(sub(p, c), sub(p, c))
                     if d2 < best:
                         best = d2
                         face[i], feature[i] = t, f
@@ -370,22 +371,6 @@ def _nearest_triangles(points, corners, order, box_lower, box_upper, span, child
 
 
 @numba.njit(cache=True, inline="always")
-def _sub(u, v):
-    return (u[0] - v[0], u[1] - v[1], u[2] - v[2])
-
-
-@numba.njit(cache=True, inline="always")
-def _dot(u, v):
-    return u[0] * v[0] + u[1] * v[1] + u[2] * v[2]
-
-
-@numba.njit(cache=True, inline="always")
-def _along(a, s, u):
-    """a + s u."""
-    return (a[0] + s * u[0], a[1] + s * u[1], a[2] + s * u[2])
-
-
-@numba.njit(cache=True, inline="always")
 def _box_distance2(p, lower, upper):
     """Squared distance from p to the box [lower, upper]."""
     total = 0.0
@@ -395,35 +380,3 @@ def _box_distance2(p, lower, upper):
     return total
 
 
-@numba.njit(cache=True)
-def _closest_point_on_triangle(p, triangle):
-    """Closest point to p on a triangle (3, 3) and the feature it lies on.
-
-    Features are numbered as in :func:`_feature_pseudonormals`: 0-2 corners a, b, c,
-    3-5 edges ab, bc, ca, 6 the interior (Ericson, Real-Time Collision Detection §5.1.5).
-    """
-    a = (triangle[0, 0], triangle[0, 1], triangle[0, 2])
-    b = (triangle[1, 0], triangle[1, 1], triangle[1, 2])
-    c = (triangle[2, 0], triangle[2, 1], triangle[2, 2])
-    ab, ac = _sub(b, a), _sub(c, a)
-    ap, bp, cp = _sub(p, a), _sub(p, b), _sub(p, c)
-    d1, d2 = _dot(ab, ap), _dot(ac, ap)
-    if d1 <= 0.0 and d2 <= 0.0:
-        return a, 0
-    d3, d4 = _dot(ab, bp), _dot(ac, bp)
-    if d3 >= 0.0 and d4 <= d3:
-        return b, 1
-    vc = d1 * d4 - d3 * d2
-    if vc <= 0.0 and d1 >= 0.0 and d3 <= 0.0:
-        return _along(a, d1 / (d1 - d3), ab), 3
-    d5, d6 = _dot(ab, cp), _dot(ac, cp)
-    if d6 >= 0.0 and d5 <= d6:
-        return c, 2
-    vb = d5 * d2 - d1 * d6
-    if vb <= 0.0 and d2 >= 0.0 and d6 <= 0.0:
-        return _along(a, d2 / (d2 - d6), ac), 5
-    va = d3 * d6 - d5 * d4
-    if va <= 0.0 and d4 >= d3 and d5 >= d6:
-        return _along(b, (d4 - d3) / ((d4 - d3) + (d5 - d6)), _sub(c, b)), 4
-    scale = 1.0 / (va + vb + vc)
-    return _along(_along(a, vb * scale, ab), vc * scale, ac), 6

@@ -13,6 +13,8 @@ import math
 import numba
 import numpy as np
 
+from liver_sim.geometry import closest_point_on_triangle
+
 TOOL_NONE = 0
 TOOL_SPHERE = 1
 TOOL_CAPSULE = 2
@@ -107,42 +109,6 @@ def closest_point_on_segment(p, a, b):
 
 
 @numba.njit(cache=True)
-def closest_point_on_triangle(p, a, b, c):
-    """Closest point to p on triangle abc (Ericson, Real-Time Collision Detection §5.1.5)."""
-    ab = b - a
-    ac = c - a
-    ap = p - a
-    d1 = ab @ ap
-    d2 = ac @ ap
-    if d1 <= 0.0 and d2 <= 0.0:
-        return a.copy()
-    bp = p - b
-    d3 = ab @ bp
-    d4 = ac @ bp
-    if d3 >= 0.0 and d4 <= d3:
-        return b.copy()
-    vc = d1 * d4 - d3 * d2
-    if vc <= 0.0 and d1 >= 0.0 and d3 <= 0.0:
-        t = d1 / (d1 - d3)
-        return a + t * ab
-    cp = p - c
-    d5 = ab @ cp
-    d6 = ac @ cp
-    if d6 >= 0.0 and d5 <= d6:
-        return c.copy()
-    vb = d5 * d2 - d1 * d6
-    if vb <= 0.0 and d2 >= 0.0 and d6 <= 0.0:
-        t = d2 / (d2 - d6)
-        return a + t * ac
-    va = d3 * d6 - d5 * d4
-    if va <= 0.0 and (d4 - d3) >= 0.0 and (d5 - d6) >= 0.0:
-        t = (d4 - d3) / ((d4 - d3) + (d5 - d6))
-        return b + t * (c - b)
-    denom = 1.0 / (va + vb + vc)
-    return a + (vb * denom) * ab + (vc * denom) * ac
-
-
-@numba.njit(cache=True)
 def round_tool_contacts(x, v, candidates, core_a, core_b, radius, inward_point, tool_velocity,
                         stiffness, damping, f):
     """Eq. 3 between a sphere (core_a == core_b) or capsule (segment core_a–core_b) and skin nodes.
@@ -179,19 +145,18 @@ def surface_gaps(x, skin, candidates, core_a, core_b, radius, gap, point, direct
     direction from the core to it (the triangle's inward normal if the core lies on it).
     """
     for c in range(candidates.shape[0]):
-        tri = candidates[c]
-        a, b, cc = x[skin[tri, 0]], x[skin[tri, 1]], x[skin[tri, 2]]
-        s = closest_point_on_segment((a + b + cc) / 3.0, core_a, core_b)
-        q = closest_point_on_triangle(s, a, b, cc)
+        corners = x[skin[candidates[c]]]
+        s = closest_point_on_segment((corners[0] + corners[1] + corners[2]) / 3.0, core_a, core_b)
+        q = np.array(closest_point_on_triangle((s[0], s[1], s[2]), corners)[0])
         for _ in range(4):
             s = closest_point_on_segment(q, core_a, core_b)
-            q = closest_point_on_triangle(s, a, b, cc)
+            q = np.array(closest_point_on_triangle((s[0], s[1], s[2]), corners)[0])
         delta = q - s
         dist = math.sqrt(delta @ delta)
         if dist > 1e-12:
             direction[c] = delta / dist
         else:
-            normal = np.cross(b - a, cc - a)
+            normal = np.cross(corners[1] - corners[0], corners[2] - corners[0])
             direction[c] = -normal / math.sqrt(normal @ normal)
         gap[c] = dist - radius
         point[c] = q

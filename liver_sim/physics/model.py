@@ -127,7 +127,8 @@ class LiverModel:
     def _advance(self, pose: ToolPose | None, substeps: int) -> tuple[np.ndarray, tuple]:
         """Run `substeps` steps with the tool moving from the previous pose to `pose`.
 
-        Returns the contact force on the liver (N) and the box tool's per-node (gap, point, direction).
+        Returns the contact force on the liver (N) and the candidate skin nodes with the box tool's
+        per-node (gap, point, direction).
         """
         shape = self.tool
         springs = self.springs
@@ -158,15 +159,15 @@ class LiverModel:
             kind, core_a, core_b, shape.radius_m, axes, np.asarray(shape.half_extents_m, dtype=np.float64),
             velocity, self.params.contact_stiffness_n_per_m, self.params.contact_damping_ns_per_m,
             self._centre, nodes, self.external_forces_n, self._force, gap, point, direction)
-        return liver_force, (gap, point, direction)
+        return liver_force, (nodes, gap, point, direction)
 
     def _fit_local_model(self, pose: ToolPose, box_gaps: tuple) -> LocalModel:
         """The local model at the end of the frame: from skin triangles for round tools, nodes for a box."""
         shape = self.tool
         if shape.kind == "box":
-            near_nodes = candidate_nodes(self.positions, self._skin_nodes, shape, pose, self.local_model_reach_m)
-            return fit_local_model(*box_gaps, self.local_model_reach_m, self.local_model_kind,
-                                   self.positions[near_nodes])
+            nodes, gap, point, direction = box_gaps
+            return fit_local_model(gap, point, direction, self.local_model_reach_m, self.local_model_kind,
+                                   self.positions[nodes])
         core_a, core_b = tool_core(shape, pose)
         triangles = candidate_triangles(self.positions, self._skin, shape, pose, self.local_model_reach_m)
         gap = np.full(len(triangles), np.inf)
