@@ -130,7 +130,8 @@ class HapticBridge(Node):
         self._diagnostics = self.create_publisher(TOPICS["diagnostics"].type, TOPICS["diagnostics"].name,
                                                   TOPICS["diagnostics"].qos)
         self._inputs = LoopInputs(self)  # read by the 1 kHz loop itself, not by the executor
-        self._inputs.subscribe(TOPICS["tool_pose"].type, p["tool_pose_topic"], TOPICS["tool_pose"].qos, self._on_pose)
+        self._inputs.subscribe(TOPICS["tool_pose"].type, p["tool_pose_topic"], TOPICS["tool_pose"].qos, self._on_pose,
+                               raw=True)
         if self._mode == "none":
             source = p["tool_wrench_topic"]
             self._inputs.subscribe(TOPICS["tool_wrench"].type, source, TOPICS["tool_wrench"].qos, self._on_wrench)
@@ -159,13 +160,13 @@ class HapticBridge(Node):
         self._bad[kind] += 1
         self.get_logger().warning(f"ignored {kind} message: {reason}", throttle_duration_sec=1.0)
 
-    def _on_pose(self, message) -> None:
+    def _on_pose(self, data: bytes) -> None:
         try:
-            position, _ = conversions.pose_to_arrays(message.pose)
+            position, _, stamp = conversions.pose_from_bytes(data)
         except ValueError as exc:
             self._refuse("tool_pose", str(exc))
             return
-        self._pose.set((position, message.header.stamp))
+        self._pose.set((position, stamp))
 
     def _on_marker(self, message) -> None:
         try:
@@ -208,7 +209,7 @@ class HapticBridge(Node):
         self._last_force = command
         if stamp is None:
             stamp = self.get_clock().now().to_msg()
-        message = conversions.force_message(self.p["force_output"], command, stamp, self.p["device_frame_id"])
+        message = conversions.force_message_bytes(self.p["force_output"], command, stamp, self.p["device_frame_id"])
         try:
             self._publisher.publish(message)
         except Exception:

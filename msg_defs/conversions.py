@@ -23,6 +23,7 @@ from visualization_msgs.msg import Marker
 
 from haptic_bridge.local_model import PlaneModel, SphereModel
 from liver_sim.rotations import quaternion_to_matrix
+from msg_defs import cdr
 
 SKIN_COLOUR = (0.6, 0.25, 0.2, 1.0)
 PLANE_COLOUR = (0.2, 0.8, 0.3, 0.5)
@@ -97,6 +98,12 @@ def stamp_from_seconds(t: float) -> Time:
     return Time(sec=sec, nanosec=nanosec)
 
 
+def stamp_s_from_bytes(data: bytes, type_name: str) -> float:
+    """Seconds of the header stamp of a serialized stamped message (one that begins with a Header)."""
+    sec, nanosec = cdr.stamp(data, type_name)
+    return sec + nanosec * 1e-9
+
+
 def seconds_from_stamp(stamp) -> float:
     """Seconds of a builtin_interfaces/Time (or Duration): sec + nanosec·1e-9."""
     return stamp.sec + stamp.nanosec * 1e-9
@@ -107,8 +114,25 @@ def _duration(seconds, name: str) -> Duration:
     return Duration(sec=sec, nanosec=nanosec)
 
 
+def _stamp_parts(stamp) -> tuple[int, int]:
+    """(sec, nanosec) of a builtin_interfaces/Time, a (sec, nanosec) pair or a time in seconds."""
+    if isinstance(stamp, Time):
+        return stamp.sec, stamp.nanosec
+    if isinstance(stamp, tuple):
+        return stamp
+    return _time_parts(stamp, "stamp")
+
+
+def _finite_floats(values: tuple, shape: tuple, name: str) -> tuple:
+    """`values` unchanged when all are finite floats; else the ValueError of :func:`_finite` naming `name`."""
+    if not all(map(math.isfinite, values)):
+        _finite(values, shape, name)
+    return values
+
+
 def _header(stamp, frame_id: str) -> Header:
-    return Header(stamp=stamp if isinstance(stamp, Time) else stamp_from_seconds(stamp), frame_id=frame_id)
+    sec, nanosec = _stamp_parts(stamp)
+    return Header(stamp=Time(sec=sec, nanosec=nanosec), frame_id=frame_id)
 
 
 def _vector3_msg(value, name: str) -> Vector3:
@@ -279,6 +303,21 @@ def pose_to_arrays(msg_pose: Pose | PoseStamped) -> tuple[np.ndarray, np.ndarray
     return _pose_arrays(msg_pose, "Pose")
 
 
+def pose_stamped_bytes(position, orientation_xyzw, stamp, frame_id: str) -> bytes:
+    """Serialized :func:`pose_stamped` (for ``Publisher.publish(bytes)``), without a message object."""
+    x, y, z = _finite(position, (3,), "position").tolist()
+    quaternion = _unit_quaternion(orientation_xyzw, "orientation_xyzw").tolist()
+    return cdr.encode(*_stamp_parts(stamp), frame_id, (x, y, z, *quaternion))
+
+
+def pose_from_bytes(data: bytes) -> tuple[np.ndarray, np.ndarray, tuple[int, int]]:
+    """(position (3,) m, unit quaternion (4,) x, y, z, w, stamp (sec, nanosec)) of a serialized
+    PoseStamped; refuses malformed bytes, non-finite values and a zero quaternion, naming the field."""
+    sec, nanosec, _, values = cdr.decode(data, cdr.POSE_FIELDS, "PoseStamped")
+    position = np.array(_finite_floats(values[:3], (3,), "PoseStamped.pose.position"))
+    return position, _unit_quaternion(values[3:], "PoseStamped.pose.orientation"), (sec, nanosec)
+
+
 def local_model_marker(model, stamp, frame_id: str, lifetime_s: float, patch_size_m: float = 0.04) -> Marker:
     """The physics' LocalModel as the /liver/contact_plane Marker (ns "local_model", id 0), to be trusted
     for `lifetime_s` seconds.
@@ -337,6 +376,12 @@ def wrench_stamped(force, stamp, frame_id: str, torque=(0.0, 0.0, 0.0)) -> Wrenc
                          wrench=Wrench(force=_vector3_msg(force, "force"), torque=_vector3_msg(torque, "torque")))
 
 
+def wrench_stamped_bytes(force, stamp, frame_id: str) -> bytes:
+    """Serialized :func:`wrench_stamped` with zero torque, without a message object."""
+    fx, fy, fz = _finite_floats(tuple(map(float, force)), (3,), "force")
+    return cdr.encode(*_stamp_parts(stamp), frame_id, (fx, fy, fz, 0.0, 0.0, 0.0))
+
+
 def force_message_type(fmt: str) -> type:
     """Message class of the force output format `fmt` (one of FORCE_OUTPUT_FORMATS).
 
@@ -369,6 +414,25 @@ def force_message(fmt: str, force, stamp, frame_id: str):
     if fmt == "float64_array":
         return Float64MultiArray(data=array.array("d", (vector.x, vector.y, vector.z)))
     return msg_type(force=vector)
+
+
+def force_message_bytes(fmt: str, force, stamp, frame_id: str) -> bytes:
+    """Serialized :func:`force_message`: WrenchStamped without a message object, other formats via rclpy."""
+    if fmt == "wrench_stamped":
+        return wrench_stamped_bytes(force, stamp, frame_id)
+    from rclpy.serialization import serialize_message
+
+    return serialize_message(force_message(fmt, force, stamp, frame_id))
+
+
+def force_from_bytes(fmt: str, data: bytes) -> np.ndarray:
+    """:func:`force_from_message` of a serialized force command: WrenchStamped decoded directly."""
+    if fmt == "wrench_stamped":
+        return np.array(_finite_floats(cdr.decode(data, cdr.WRENCH_FIELDS, "WrenchStamped")[3][:3], (3,),
+                                       "WrenchStamped force"))
+    from rclpy.serialization import deserialize_message
+
+    return force_from_message(fmt, deserialize_message(data, force_message_type(fmt)))
 
 
 def force_from_message(fmt: str, msg) -> np.ndarray:

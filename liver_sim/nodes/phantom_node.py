@@ -64,7 +64,7 @@ class PhantomNode(Node):
                                                   TOPICS["diagnostics"].qos)
         self._inputs = LoopInputs(self)  # read by the 1 kHz loop itself, not by the executor
         self._inputs.subscribe(conversions.force_message_type(p["force_output"]), p["servo_cf_topic"],
-                               TOPICS["servo_cf"].qos, self._on_command)
+                               TOPICS["servo_cf"].qos, self._on_command, raw=True)
         self.create_timer(1.0, self._publish_diagnostics)
         self._loop = RateLoop(p["rate_hz"], self._step, "phantom_sim")
         self._start = None
@@ -82,9 +82,9 @@ class PhantomNode(Node):
         self._loop.stop()
         self._inputs.destroy()
 
-    def _on_command(self, message) -> None:
+    def _on_command(self, data: bytes) -> None:
         try:
-            force = conversions.force_from_message(self.p["force_output"], message)
+            force = conversions.force_from_bytes(self.p["force_output"], data)
         except ValueError as exc:
             self.bad_commands += 1
             self.get_logger().warning(f"force command taken as zero: {exc}", throttle_duration_sec=1.0)
@@ -102,7 +102,8 @@ class PhantomNode(Node):
         if self.sim.advance_to(now - self._start, force, self._loop.period_s) == 0 and self.sim.time_s > 0.0:
             return  # a late tick already caught up with this one's sample
         stamp = conversions.stamp_from_seconds(self._clock_origin_s + self.sim.time_s)
-        self._publisher.publish(conversions.pose_stamped(self.sim.position, IDENTITY_XYZW, stamp, self.p["frame_id"]))
+        self._publisher.publish(conversions.pose_stamped_bytes(self.sim.position, IDENTITY_XYZW, stamp,
+                                                               self.p["frame_id"]))
 
     def _publish_diagnostics(self) -> None:
         _, received = self._command.get()

@@ -11,7 +11,6 @@ import time
 
 import numpy as np
 from rclpy.node import Node
-from rclpy.serialization import deserialize_message
 
 from liver_sim.mesh.io import load_mesh
 from liver_sim.mesh.liver_shape import default_liver
@@ -138,9 +137,8 @@ class PhysicsNode(Node):
 
     def _parse_pose(self, data: bytes) -> ToolPose | None:
         try:
-            message = deserialize_message(data, TOPICS["tool_pose"].type)
-            position, orientation = conversions.pose_to_arrays(message.pose)
-        except (ValueError, RuntimeError) as exc:  # malformed bytes or a NaN/zero-quaternion pose
+            position, orientation, _ = conversions.pose_from_bytes(data)
+        except ValueError as exc:  # malformed bytes or a NaN/zero-quaternion pose
             self._refuse_pose(str(exc))
             return None
         if np.any(position < self._workspace[0]) or np.any(position > self._workspace[1]):
@@ -166,7 +164,7 @@ class PhysicsNode(Node):
         self._outputs["nodes"].publish(conversions.nodes_to_pointcloud2(self.model.positions, stamp, frame))
         self._outputs["contact_plane"].publish(conversions.local_model_marker(
             result.local_model, stamp, frame, self.p["local_model_lifetime_s"]))
-        self._outputs["tool_wrench"].publish(conversions.wrench_stamped(result.tool_force_n, stamp, frame))
+        self._outputs["tool_wrench"].publish(conversions.wrench_stamped_bytes(result.tool_force_n, stamp, frame))
         if self._frames % self._marker_every == 0:
             self._outputs["marker"].publish(conversions.skin_marker_serialized(
                 self.model.positions, self.model.mesh.skin, stamp, frame))

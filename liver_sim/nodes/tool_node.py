@@ -134,7 +134,7 @@ class ToolNode(Node):
             self._arrivals = LoopStats(1.0 / p["rate_hz"])
             self._last_arrival = None
             self.create_subscription(TOPICS["measured_cp"].type, p["measured_cp_topic"], self._on_device,
-                                     TOPICS["measured_cp"].qos)
+                                     TOPICS["measured_cp"].qos, raw=True)
             origin = (f"device {p['measured_cp_topic']} mapped by R={list(p['device_rotation_xyzw'])}, "
                       f"t={list(p['device_translation_m'])} m, scale {p['device_scale']:g}")
         else:
@@ -158,28 +158,28 @@ class ToolNode(Node):
         if self._loop is not None:
             self._loop.stop()
 
-    def _on_device(self, message) -> None:
+    def _on_device(self, data: bytes) -> None:
         now = time.monotonic()
         if self._last_arrival is not None:
             gap = now - self._last_arrival
             self._arrivals.record(gap, gap > 2.0 * self._arrivals.period_s)
         self._last_arrival = now
         try:
-            position, orientation = self._device.pose(*conversions.pose_to_arrays(message.pose))
+            position, orientation, stamp = conversions.pose_from_bytes(data)
+            position, orientation = self._device.pose(position, orientation)
         except ValueError as exc:
             self.rejected += 1
             self.get_logger().warning(f"dropped device sample: {exc}", throttle_duration_sec=1.0)
             return
-        self._publisher.publish(conversions.pose_stamped(position, orientation, message.header.stamp,
-                                                         self.p["frame_id"]))
+        self._publisher.publish(conversions.pose_stamped_bytes(position, orientation, stamp, self.p["frame_id"]))
         self.published += 1
 
     def _step(self, now: float) -> None:
         if self._start is None:
             self._start = now
         position = self._trajectory.position_at(now - self._start)
-        self._publisher.publish(conversions.pose_stamped(position, self._orientation, self.get_clock().now().to_msg(),
-                                                         self.p["frame_id"]))
+        self._publisher.publish(conversions.pose_stamped_bytes(position, self._orientation,
+                                                               self.get_clock().now().to_msg(), self.p["frame_id"]))
         self.published += 1
 
     def _publish_diagnostics(self) -> None:
