@@ -21,12 +21,19 @@ def rate_figures(arrival_s: np.ndarray, nominal_hz: float) -> dict:
             "samples": int(len(arrival_s))}
 
 
-def largest_force_jump_n(forces_n: np.ndarray, contact_force_n: float = CONTACT_FORCE_N) -> float:
-    """Largest |F_k − F_{k−1}| (N) between consecutive commands while both are in contact (Fig. 8's harshness)."""
+def largest_force_jump_n(forces_n: np.ndarray, contact_force_n: float = CONTACT_FORCE_N,
+                         times_s: np.ndarray | None = None, max_period_s: float | None = None) -> float:
+    """Largest |F_k − F_{k−1}| (N) between consecutive commands while both are in contact (Fig. 8's harshness).
+
+    With `times_s` (when each command was sent) and `max_period_s`, only pairs sent at most
+    `max_period_s` apart count: a scheduling gap is not a step of the rendered force.
+    """
     if len(forces_n) < 2:
         return 0.0
     norms = np.linalg.norm(forces_n, axis=1)
     steady = (norms[1:] > contact_force_n) & (norms[:-1] > contact_force_n)
+    if times_s is not None and max_period_s is not None:
+        steady &= np.diff(times_s) <= max_period_s
     jumps = np.linalg.norm(np.diff(forces_n, axis=0), axis=1)[steady]
     return float(jumps.max()) if jumps.size else 0.0
 

@@ -44,3 +44,10 @@ TOPICS = {
     # "default" in the table: rclpy's usual keep-last 10, reliable, volatile.
     "diagnostics": Topic("/diagnostics", DiagnosticArray, _qos(10)),
 }
+
+
+def batch_qos(topic: Topic, depth: int = 1000) -> QoSProfile:
+    """`topic`'s reliability and durability with a keep-last `depth` history: for a subscriber that
+    takes messages in batches (a listener or recorder polling every few ms) and must keep them all."""
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth, reliability=topic.qos.reliability,
+                      durability=topic.qos.durability)

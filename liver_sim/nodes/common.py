@@ -130,7 +130,9 @@ class LoopInputs:
     """Subscriptions that a rate loop reads itself, bypassing the executor's per-message cost.
 
     They belong to a hidden node (`_<node>_loop`, not spun by any executor); `poll()`, called from
-    the loop, takes every waiting message of each subscription and hands the newest to its callback.
+    the loop, takes every waiting message of each subscription and hands the newest to its callback,
+    or, for a subscription made with `every=True`, each message with its rmw info (a dict with
+    `source_timestamp` and `received_timestamp`, system-clock ns, and `publication_sequence_number`).
     """
 
     def __init__(self, node):
@@ -139,16 +141,19 @@ class LoopInputs:
                                        enable_rosout=False)
         self._inputs = []
 
-    def subscribe(self, msg_type, topic: str, qos, callback, raw: bool = False) -> None:
+    def subscribe(self, msg_type, topic: str, qos, callback, raw: bool = False, every: bool = False) -> None:
         subscription = self._node.create_subscription(msg_type, topic, callback, qos, raw=raw)
-        self._inputs.append((subscription, callback))
+        self._inputs.append((subscription, callback, every))
 
     def poll(self) -> None:
-        for subscription, callback in self._inputs:
+        for subscription, callback, every in self._inputs:
             newest = None
             with subscription.handle:
                 while (taken := subscription.handle.take_message(subscription.msg_type, subscription.raw)):
-                    newest = taken[0]
+                    if every:
+                        callback(*taken)
+                    else:
+                        newest = taken[0]
             if newest is not None:
                 callback(newest)
 

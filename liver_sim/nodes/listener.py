@@ -1,5 +1,5 @@
 """A listening node for the demo and the loop benchmark: keeps what the network publishes, with
-the monotonic time each message arrived, for analysis after the run."""
+the time each message arrived, for analysis after the run."""
 from __future__ import annotations
 
 import threading
@@ -9,92 +9,122 @@ import numpy as np
 from rclpy.node import Node
 from rclpy.serialization import deserialize_message
 
+from liver_sim.nodes.common import LoopInputs, RateLoop
 from msg_defs import conversions
-from msg_defs.topics import TOPICS
+from msg_defs.topics import TOPICS, batch_qos
+
+
+#: How often (Hz) the listener takes the 1 kHz and 150 Hz streams, in batches.
+POLL_RATE_HZ = 200.0
 
 
 class NetworkListener(Node):
-    """Subscribes to the force commands, the physics wrench and nodes, /diagnostics and optionally the tool pose.
-
-    `peak_nodes` are the node positions farthest (largest coordinate change) from the first ones received.
+    """Listens to the force commands, the tool pose, the nodes, the physics wrench, /liver/surface and /diagnostics.
 
     `force_topics` maps a label to (topic, force_output format), e.g. {'local_model': ('/phantom/servo_cf',
-    'wrench_stamped')}.  Force samples keep the monotonic arrival time, the age of their stamp on arrival
-    (wall clock minus stamp: the bridge stamps a command with the tool pose it used) and the force.
+    'wrench_stamped')}. The force commands, tool poses and nodes are taken in batches by a POLL_RATE_HZ
+    loop (cheaper than a callback each) and timed by DDS: `*_arrival_s` is when the message reached
+    this process (the rmw's receive time, on the time.monotonic() scale). Messages are decoded in
+    `snapshot()`, only those not decoded by an earlier call. `peak_nodes` are the node positions
+    farthest (largest coordinate change) from the first ones received.
     """
 
-    def __init__(self, force_topics: dict[str, tuple[str, str]], name: str = "liver_sim_listener", context=None,
-                 tool_pose: bool = False):
+    def __init__(self, force_topics: dict[str, tuple[str, str]], name: str = "liver_sim_listener", context=None):
         super().__init__(name, context=context)
         self._lock = threading.Lock()
-        self.forces = {label: [] for label in force_topics}
-        self.wrenches, self.tool_poses, self.node_stamps = [], [], []
+        self._monotonic_minus_wall_s = time.monotonic() - time.time()
+        self._force_formats = {label: fmt for label, (_, fmt) in force_topics.items()}
+        self._received = {("force", label): [] for label in force_topics}
+        self._received["tool_pose"], self._received["nodes"] = [], []
+        self._decoded = {key: [] for key in self._received}
+        self.wrenches = []
         self.diagnostics: dict[str, dict] = {}
         self.surface = None
         self.first_nodes = self.peak_nodes = self.last_nodes = None
         self._peak_displacement = -1.0
-        self._force_formats = {label: fmt for label, (_, fmt) in force_topics.items()}
-        self._decoded = {label: [] for label in force_topics}
-        for label, (topic, fmt) in force_topics.items():  # 1 kHz: keep bytes, deserialise in snapshot()
-            self.create_subscription(conversions.force_message_type(fmt), topic,
-                                     lambda data, label=label: self._on_force(label, data),
-                                     TOPICS["servo_cf"].qos, raw=True)
+        self._polled = LoopInputs(self)
+        for label, (topic, fmt) in force_topics.items():
+            self._take(("force", label), conversions.force_message_type(fmt), topic, TOPICS["servo_cf"])
+        self._take("tool_pose", TOPICS["tool_pose"].type, TOPICS["tool_pose"].name, TOPICS["tool_pose"])
+        self._take("nodes", TOPICS["nodes"].type, TOPICS["nodes"].name, TOPICS["nodes"])
         self.create_subscription(TOPICS["tool_wrench"].type, TOPICS["tool_wrench"].name, self._on_wrench,
                                  TOPICS["tool_wrench"].qos)
-        if tool_pose:  # 1 kHz of Python callbacks: only when asked for
-            self.create_subscription(TOPICS["tool_pose"].type, TOPICS["tool_pose"].name, self._on_pose,
-                                     TOPICS["tool_pose"].qos)
-        self.create_subscription(TOPICS["nodes"].type, TOPICS["nodes"].name, self._on_nodes, TOPICS["nodes"].qos)
         self.create_subscription(TOPICS["surface"].type, TOPICS["surface"].name, self._on_surface,
                                  TOPICS["surface"].qos)
         self.create_subscription(TOPICS["diagnostics"].type, TOPICS["diagnostics"].name, self._on_diagnostics,
                                  TOPICS["diagnostics"].qos)
+        self._poller = RateLoop(POLL_RATE_HZ, lambda now: self._polled.poll(), f"{name}_poll")
+        self._poller.start()
 
-    def _on_force(self, label, data: bytes) -> None:
+    def destroy_node(self) -> None:
+        self._poller.stop()
+        self._polled.destroy()
+        super().destroy_node()
+
+    def _take(self, key, msg_type, topic: str, row) -> None:
+        """Keep every message of `topic` as (bytes, rmw info) under `key`."""
+        received = self._received[key]
+
+        def keep(data: bytes, info: dict) -> None:
+            with self._lock:
+                received.append((data, info))
+        self._polled.subscribe(msg_type, topic, batch_qos(row), keep, raw=True, every=True)
+
+    def _new(self, key) -> list:
+        """The messages under `key` not decoded yet, as (arrival on the monotonic scale s, source wall time s, bytes)."""
         with self._lock:
-            self.forces[label].append((time.monotonic(), time.time(), data))
+            new = self._received[key][len(self._decoded[key]):]
+        return [(info["received_timestamp"] * 1e-9 + self._monotonic_minus_wall_s, info["source_timestamp"] * 1e-9,
+                 data) for data, info in new]
 
     def _decode_forces(self, label) -> tuple:
-        """(arrival_s, forces (K, 3) N, stamp age on arrival (K,) s) of the force commands so far;
-        only the samples not decoded by an earlier call are deserialised."""
+        """(arrival_s, published_s (monotonic scale), forces (K, 3) N, pose stamps (K,) s or NaN) of the
+        force commands so far."""
         fmt = self._force_formats[label]
-        kind = conversions.force_message_type(fmt)
-        with self._lock:
-            new = self.forces[label][len(self._decoded[label]):]
-        for arrival, wall, data in new:
-            message = deserialize_message(data, kind)
-            header = getattr(message, "header", None)
-            age = wall - conversions.seconds_from_stamp(header.stamp) if header is not None else np.nan
-            self._decoded[label].append((arrival, conversions.force_from_message(fmt, message), age))
-        decoded = self._decoded[label]
-        return (np.array([d[0] for d in decoded]), np.array([d[1] for d in decoded]).reshape(-1, 3),
-                np.array([d[2] for d in decoded]))
+        decoded = self._decoded["force", label]
+        for arrival, published, data in self._new(("force", label)):
+            force = conversions.force_from_bytes(fmt, data)
+            stamp = conversions.stamp_s_from_bytes(data, "WrenchStamped") if fmt == "wrench_stamped" else np.nan
+            decoded.append((arrival, published + self._monotonic_minus_wall_s, force, stamp))
+        return (np.array([d[0] for d in decoded]), np.array([d[1] for d in decoded]),
+                np.array([d[2] for d in decoded]).reshape(-1, 3), np.array([d[3] for d in decoded]))
 
-    def _on_wrench(self, message) -> None:
-        f = message.wrench.force
-        with self._lock:
-            self.wrenches.append((time.monotonic(), conversions.seconds_from_stamp(message.header.stamp),
-                                  np.array([f.x, f.y, f.z])))
+    def _decode_tool_poses(self) -> tuple:
+        """(arrival_s, published_s (source wall time), stamp_s, positions (K, 3) m) of the tool poses so far."""
+        decoded = self._decoded["tool_pose"]
+        for arrival, published, data in self._new("tool_pose"):
+            try:
+                position, _, (sec, nanosec) = conversions.pose_from_bytes(data)
+            except ValueError:
+                continue  # a refused pose is the nodes' business; it has no place in the figures
+            decoded.append((arrival, published, sec + nanosec * 1e-9, position))
+        return tuple(np.array([d[i] for d in decoded]) for i in range(3)) + (
+            np.array([d[3] for d in decoded]).reshape(-1, 3),)
 
-    def _on_pose(self, message) -> None:
-        position, _ = conversions.pose_to_arrays(message.pose)
-        with self._lock:
-            self.tool_poses.append((time.monotonic(), position))
-
-    def _on_nodes(self, message) -> None:
-        try:
-            positions = conversions.pointcloud2_to_nodes(message)
-        except ValueError as exc:
-            self.get_logger().warning(f"ignored /liver/nodes message: {exc}", throttle_duration_sec=1.0)
-            return
-        with self._lock:
-            self.node_stamps.append((time.monotonic(), conversions.seconds_from_stamp(message.header.stamp)))
+    def _decode_nodes(self) -> tuple:
+        """(arrival_s, stamp_s) of the node clouds so far; tracks the first, peak and last positions."""
+        decoded = self._decoded["nodes"]
+        for arrival, _, data in self._new("nodes"):
+            message = deserialize_message(data, TOPICS["nodes"].type)
+            decoded.append((arrival, conversions.seconds_from_stamp(message.header.stamp)))
+            try:
+                positions = conversions.pointcloud2_to_nodes(message)
+            except ValueError as exc:
+                self.get_logger().warning(f"ignored /liver/nodes message: {exc}", throttle_duration_sec=1.0)
+                continue
             if self.first_nodes is None or len(self.first_nodes) != len(positions):
                 self.first_nodes, self._peak_displacement = positions, -1.0
             self.last_nodes = positions
             displacement = float(np.abs(positions - self.first_nodes).max())
             if displacement > self._peak_displacement:
                 self._peak_displacement, self.peak_nodes = displacement, positions
+        return np.array([d[0] for d in decoded]), np.array([d[1] for d in decoded])
+
+    def _on_wrench(self, message) -> None:
+        f = message.wrench.force
+        with self._lock:
+            self.wrenches.append((time.monotonic(), conversions.seconds_from_stamp(message.header.stamp),
+                                  np.array([f.x, f.y, f.z])))
 
     def _on_surface(self, message) -> None:
         with self._lock:
@@ -106,18 +136,29 @@ class NetworkListener(Node):
                 self.diagnostics[status.name] = {kv.key: kv.value for kv in status.values}
 
     def snapshot(self) -> dict:
-        """Copies of everything received so far, as numpy arrays where that fits."""
-        decoded = {label: self._decode_forces(label) for label in self.forces}
+        """Copies of everything received so far, as numpy arrays where that fits.
+
+        `pose_to_force_s[label]`: for each force command stamped with a tool pose, the time from that
+        pose's publication to the command's arrival here (DDS times, s; NaN when the pose was not seen).
+        """
+        decoded = {label: self._decode_forces(label) for label in self._force_formats}
+        tool_arrival, tool_published, tool_stamp, tool_position = self._decode_tool_poses()
+        nodes_arrival, nodes_stamp = self._decode_nodes()
+        published_by_stamp = dict(zip(tool_stamp.tolist(), tool_published.tolist()))
+        wall = -self._monotonic_minus_wall_s
         with self._lock:
             return {
-                "forces": {label: (arrival, values) for label, (arrival, values, _) in decoded.items()},
-                "force_stamp_age_s": {label: ages for label, (_, _, ages) in decoded.items()},
+                "forces": {label: (arrival, values) for label, (arrival, _, values, _) in decoded.items()},
+                "force_published_s": {label: published for label, (_, published, _, _) in decoded.items()},
+                "pose_to_force_s": {label: np.array([arrival + wall - published_by_stamp.get(stamp, np.nan)
+                                                     for arrival, stamp in zip(arrivals, stamps)])
+                                    for label, (arrivals, _, _, stamps) in decoded.items()},
                 "wrench_arrival_s": np.array([s[0] for s in self.wrenches]),
                 "wrench_n": np.array([s[2] for s in self.wrenches]).reshape(-1, 3),
-                "tool_arrival_s": np.array([s[0] for s in self.tool_poses]),
-                "tool_position_m": np.array([s[1] for s in self.tool_poses]).reshape(-1, 3),
-                "nodes_arrival_s": np.array([s[0] for s in self.node_stamps]),
-                "nodes_stamp_s": np.array([s[1] for s in self.node_stamps]),
+                "tool_arrival_s": tool_arrival,
+                "tool_position_m": tool_position,
+                "nodes_arrival_s": nodes_arrival,
+                "nodes_stamp_s": nodes_stamp,
                 "diagnostics": {k: dict(v) for k, v in self.diagnostics.items()},
                 "surface": self.surface,
                 "peak_nodes": self.peak_nodes,
