@@ -17,14 +17,15 @@ from rclpy.node import Node
 
 from haptic_bridge.local_model import FrameMap, contact_force, max_passive_stiffness, penetration
 from haptic_bridge.safety import DEFAULT_MAX_FORCE_N, PHANTOM_MAX_FORCE_N, SafeForceOutput
-from liver_sim.nodes.common import (Latest, LoopInputs, Param, RateLoop, declare_parameters,
-                                    diagnostic_status, publish_diagnostics, run_node)
+from liver_sim.nodes.common import (Latest, LoopInputs, Param, RateLoop, apply_realtime_priority, declare_parameters,
+                                    diagnostic_status, publish_diagnostics, realtime_priority_parameter, run_node)
 from msg_defs import conversions
 from msg_defs.topics import TOPICS
 
 MODES = ("plane", "sphere", "none")
 PARAMETERS = {
     "rate_hz": Param(1000.0, "haptic loop rate (Hz); its period is the T of the passivity bound", 50.0, 5000.0),
+    "realtime_priority": realtime_priority_parameter(80),
     "local_model": Param("plane", "plane or sphere: render the local model on local_model_topic (the marker's "
                          "kind decides: CUBE plane, SPHERE sphere); none: hold the physics contact wrench "
                          "(Fig. 8 baseline)", choices=MODES),
@@ -149,6 +150,7 @@ class HapticBridge(Node):
             f"in: {p['tool_pose_topic']}, {source}; out: {p['force_topic']} ({p['force_output']}, frame "
             f"{p['device_frame_id']}, max {p['max_force_n']:g} N, {p['max_force_rate_n_per_s']:g} N/s); "
             f"watchdog: lifetime {p['lifetime_s']:g} s, ramp {p['ramp_time_s']:g} s")
+        apply_realtime_priority(self, p["realtime_priority"])  # before the loop starts: it inherits it
         self._loop.start()
 
     def close(self) -> None:

@@ -6,6 +6,7 @@ Loops with a rate to keep run in their own thread (rclpy timers jitter by millis
 """
 from __future__ import annotations
 
+import os
 import sys
 import threading
 import time
@@ -23,6 +24,8 @@ from rclpy.experimental import EventsExecutor
 
 #: Seconds before a deadline at which a loop stops sleeping and spins.
 SPIN_MARGIN_S = 0.0001
+#: A rate loop at most this many periods behind runs its missed ticks at once; further behind, it skips them.
+CATCH_UP_PERIODS = 2
 #: How often (s) a thread holding the GIL is asked to hand it over.
 GIL_SWITCH_INTERVAL_S = 0.0002
 
@@ -77,20 +80,41 @@ class LoopStats:
                 "overruns": overruns, "ticks": ticks, "max_gap_s": max_gap}
 
 
+def set_realtime_priority(priority: int) -> str | None:
+    """Schedule every thread of this process SCHED_FIFO at `priority` (0: leave them as they are).
+
+    All of them: the rate loop, the executor and the DDS threads that deliver its inputs; threads
+    started later inherit it. Returns None when done (or not asked), else why the system refused.
+    """
+    if priority <= 0:
+        return None
+    try:
+        for thread_id in os.listdir("/proc/self/task"):
+            os.sched_setscheduler(int(thread_id), os.SCHED_FIFO, os.sched_param(priority))
+    except OSError as exc:
+        return (f"realtime_priority {priority} refused ({exc.strerror}): normal scheduling; grant CAP_SYS_NICE "
+                f"or an rtprio limit to keep the rate under load")
+    return None
+
+
 class RateLoop(threading.Thread):
     """Calls `step(now_monotonic_s)` at `rate_hz` on absolute deadlines in its own thread.
 
     Deadline k is start + k·period: the thread sleeps until SPIN_MARGIN_S before it, then spins.
-    A step that ends after the next deadline is an overrun; missed deadlines are skipped rather
-    than run in a burst.  An exception in a step is printed and counted (`errors`); the loop goes on.
+    A step that starts more than a period late is an overrun. A loop at most CATCH_UP_PERIODS
+    behind runs its missed ticks at once, so that a short stall costs no ticks; further behind,
+    it skips to the newest deadline rather than run a burst. An exception in a step is printed and
+    counted (`errors`); the loop goes on. `clock` and `sleep` are time.monotonic and time.sleep
+    unless a test gives its own.
     """
 
-    def __init__(self, rate_hz: float, step, name: str):
+    def __init__(self, rate_hz: float, step, name: str, clock=time.monotonic, sleep=time.sleep):
         super().__init__(name=name, daemon=True)
         self.period_s = 1.0 / rate_hz
         self.step = step
         self.stats = LoopStats(self.period_s)
         self.errors = 0
+        self._clock, self._sleep = clock, sleep
         self._stopping = threading.Event()
 
     def stop(self) -> None:
@@ -99,17 +123,18 @@ class RateLoop(threading.Thread):
             self.join(timeout=1.0)
 
     def run(self) -> None:
-        start = time.monotonic()
+        clock, sleep = self._clock, self._sleep
+        start = clock()
         tick = 0
         previous = None
         while not self._stopping.is_set():
             deadline = start + tick * self.period_s
-            remaining = deadline - time.monotonic()
+            remaining = deadline - clock()
             if remaining > SPIN_MARGIN_S:
-                time.sleep(remaining - SPIN_MARGIN_S)
-            while time.monotonic() < deadline:
-                time.sleep(0)  # spin, but let the executor thread take the GIL
-            now = time.monotonic()
+                sleep(remaining - SPIN_MARGIN_S)
+            while clock() < deadline:
+                sleep(0)  # spin, but let the executor thread take the GIL
+            now = clock()
             if previous is not None:
                 self.stats.record(now - previous, now > deadline + self.period_s)
             previous = now
@@ -121,9 +146,9 @@ class RateLoop(threading.Thread):
                 self.errors += 1
                 traceback.print_exc()
             tick += 1
-            behind = int((time.monotonic() - start) / self.period_s)
-            if behind > tick:
-                tick = behind
+            due = int((clock() - start) / self.period_s)
+            if due - tick > CATCH_UP_PERIODS:
+                tick = due
 
 
 class LoopInputs:
@@ -170,6 +195,21 @@ class Param:
     low: float | None = None
     high: float | None = None
     choices: tuple | None = None
+
+
+def realtime_priority_parameter(default: int) -> Param:
+    """The `realtime_priority` parameter of a node whose loop keeps a rate."""
+    return Param(default, "SCHED_FIFO priority (1-99) of the node's threads (its rate loop and the DDS threads "
+                 "that feed it), as haptic and control loops run; 0 = normal scheduling. Needs CAP_SYS_NICE or "
+                 "an rtprio limit (limits.conf); without it the node warns and runs with normal scheduling",
+                 0, 99)
+
+
+def apply_realtime_priority(node, priority: int) -> None:
+    """set_realtime_priority, with a refusal logged as the node's warning."""
+    refused = set_realtime_priority(priority)
+    if refused:
+        node.get_logger().warning(refused)
 
 
 def declare_parameters(node, params: dict[str, Param]) -> dict:

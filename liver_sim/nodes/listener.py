@@ -71,7 +71,7 @@ class NetworkListener(Node):
         self._polled.subscribe(msg_type, topic, batch_qos(row), keep, raw=True, every=True)
 
     def _new(self, key) -> list:
-        """The messages under `key` not decoded yet, as (arrival on the monotonic scale s, source wall time s, bytes)."""
+        """The messages under `key` not decoded yet: (arrival on the monotonic scale s, source wall time s, bytes)."""
         with self._lock:
             new = self._received[key][len(self._decoded[key]):]
         return [(info["received_timestamp"] * 1e-9 + self._monotonic_minus_wall_s, info["source_timestamp"] * 1e-9,

@@ -13,8 +13,8 @@ import time
 import numpy as np
 from rclpy.node import Node
 
-from liver_sim.nodes.common import (Latest, LoopInputs, Param, RateLoop, declare_parameters, publish_diagnostics,
-                                    run_node)
+from liver_sim.nodes.common import (Latest, LoopInputs, Param, RateLoop, apply_realtime_priority, declare_parameters,
+                                    publish_diagnostics, realtime_priority_parameter, run_node)
 from liver_sim.nodes.tool_node import (DEVICE_MAP_PARAMETERS, IDENTITY_XYZW, SCRIPT_PARAMETERS, frame_map_from,
                                        loop_status, script_from)
 from liver_sim.phantom import PhantomSim, StylusParams
@@ -29,6 +29,7 @@ _ZERO = np.zeros(3)
 
 PARAMETERS = {
     "rate_hz": Param(1000.0, "stylus integration and publishing rate (Hz)", 100.0, 10000.0),
+    "realtime_priority": realtime_priority_parameter(80),
     "stylus_mass_kg": Param(STYLUS.mass_kg, "effective stylus mass at the tip (kg)", 0.001, 10.0),
     "hand_stiffness_n_per_m": Param(STYLUS.hand_stiffness_n_per_m, "virtual hand spring to the script (N/m)",
                                     1.0, 10000.0),
@@ -76,6 +77,7 @@ class PhantomNode(Node):
             f"anchored at {list(p['anchor_m'])} m in the liver frame; in: {p['servo_cf_topic']} "
             f"({p['force_output']}, clamp {p['max_force_n']:g} N, timeout {p['command_timeout_s']:g} s); "
             f"out: {p['measured_cp_topic']} (frame {p['frame_id']})")
+        apply_realtime_priority(self, p["realtime_priority"])  # before the loop starts: it inherits it
         self._loop.start()
 
     def close(self) -> None:

@@ -14,8 +14,8 @@ from rclpy.node import Node
 
 from liver_sim.mesh.io import load_mesh
 from liver_sim.mesh.liver_shape import default_liver
-from liver_sim.nodes.common import (Latest, LoopInputs, Param, RateLoop, declare_parameters,
-                                    diagnostic_status, publish_diagnostics, run_node)
+from liver_sim.nodes.common import (Latest, LoopInputs, Param, RateLoop, apply_realtime_priority, declare_parameters,
+                                    diagnostic_status, publish_diagnostics, realtime_priority_parameter, run_node)
 from liver_sim.physics.contact import ToolPose, ToolShape
 from liver_sim.physics.model import LiverModel
 from liver_sim.physics.params import INTEGRATORS, ModelParams, SpringLaw
@@ -28,6 +28,7 @@ PARAMETERS = {
     "target_tets": Param(1150, "tetrahedra to aim for when mesh_path is a surface", 50, 2_000_000),
     "frame_id": Param("liver", "frame of every published position"),
     "rate_hz": Param(DEFAULTS.frame_rate_hz, "physics frame rate (Hz)", 1.0, 1000.0),
+    "realtime_priority": realtime_priority_parameter(60),
     "substeps": Param(DEFAULTS.substeps, "integration steps per frame", 1, 10_000),
     "integrator": Param(DEFAULTS.integrator, "symplectic_euler or explicit_euler (Eq. 2)", choices=INTEGRATORS),
     "capsule_lambda1_n": Param(DEFAULTS.capsule.lambda1_n, "capsule spring cubic stiffness λ1 of Eq. 1 (N)", 0.0, 1e6),
@@ -116,6 +117,7 @@ class PhysicsNode(Node):
             f"(dt {self.model.params.dt_s * 1e6:.0f} us, stable below {self.model.stable_dt_s * 1e6:.0f} us); "
             f"in: {p['tool_pose_topic']}; out: {p['nodes_topic']}, {p['surface_topic']}, {p['marker_topic']} "
             f"({p['marker_rate_hz']:g} Hz), {p['contact_plane_topic']} ({p['local_model']}), {p['tool_wrench_topic']}")
+        apply_realtime_priority(self, p["realtime_priority"])  # before the loop starts: it inherits it
         self._loop.start()
 
     def close(self) -> None:

@@ -17,8 +17,8 @@ import numpy as np
 from rclpy.node import Node
 
 from haptic_bridge.local_model import FrameMap
-from liver_sim.nodes.common import (LoopStats, Param, RateLoop, declare_parameters, diagnostic_status,
-                                    publish_diagnostics, run_node)
+from liver_sim.nodes.common import (LoopStats, Param, RateLoop, apply_realtime_priority, declare_parameters,
+                                    diagnostic_status, publish_diagnostics, realtime_priority_parameter, run_node)
 from liver_sim.phantom import DeviceToLiver
 from liver_sim.tool_scripts import SCRIPT_NAMES, ScriptedTrajectory, ScriptSettings, make_script
 from msg_defs import conversions
@@ -61,6 +61,7 @@ PARAMETERS = {
                     choices=("device", "script", "static")),
     "rate_hz": Param(1000.0, "publishing rate for script and static; expected device rate for diagnostics (Hz)",
                      1.0, 10000.0),
+    "realtime_priority": realtime_priority_parameter(75),
     "frame_id": Param("liver", "frame of the published tool pose"),
     "tool_pose_topic": Param(TOPICS["tool_pose"].name, "tool tip pose out, liver frame (PoseStamped)"),
     "measured_cp_topic": Param(TOPICS["measured_cp"].name, "device stylus pose in, device frame (PoseStamped)"),
@@ -151,6 +152,7 @@ class ToolNode(Node):
         self.create_timer(1.0, self._publish_diagnostics)
         rate = "as the device" if self._loop is None else f"{p['rate_hz']:g} Hz"
         self.get_logger().info(f"liver_tool: {origin} → {p['tool_pose_topic']} (frame {p['frame_id']}, {rate})")
+        apply_realtime_priority(self, p["realtime_priority"])  # before the loop starts: it inherits it
         if self._loop is not None:
             self._loop.start()
 
