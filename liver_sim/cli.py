@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import signal
 import sys
 from pathlib import Path
 
@@ -206,8 +207,15 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _terminate(signum, _frame) -> None:
+    """SIGTERM/SIGHUP end a command like Ctrl-C does: cleanup (stopping started nodes) runs."""
+    raise SystemExit(128 + signum)
+
+
 def main(argv=None) -> int:
     """Run ``liver-sim`` with `argv` (default: sys.argv[1:]); return the exit status."""
+    for signum in (signal.SIGTERM, signal.SIGHUP):
+        signal.signal(signum, _terminate)
     parser = build_parser()
     try:
         args = parser.parse_args(argv)

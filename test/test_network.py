@@ -155,3 +155,25 @@ def test_demo_runs_the_network_and_writes_its_report(ros_domain_id, tmp_path):
         summary["diagnostics"])
     logs = {p.name for p in (tmp_path / "logs").iterdir()}
     assert {"liver_physics.log", "haptic_bridge.log", "liver_tool.log", "phantom_sim.log"} <= logs
+
+
+def test_sigterm_to_the_demo_stops_the_nodes_it_started(ros_env, tmp_path):
+    import os
+    import signal
+    import sys
+    from pathlib import Path
+
+    demo = subprocess.Popen([sys.executable, "-m", "liver_sim.cli", "demo", "--duration", "60", "--out", str(tmp_path)],
+                            env=ros_env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    children_file = Path(f"/proc/{demo.pid}/task/{demo.pid}/children")
+    deadline = time.monotonic() + 60.0
+    children = []
+    while len(children) < 3 and time.monotonic() < deadline and demo.poll() is None:
+        time.sleep(0.2)
+        children = children_file.read_text().split()
+    assert len(children) >= 3, "the demo did not start its nodes"
+    demo.send_signal(signal.SIGTERM)
+    assert demo.wait(timeout=30) != 0
+    for pid in map(int, children):
+        with pytest.raises(ProcessLookupError):
+            os.kill(pid, 0)
