@@ -100,7 +100,8 @@ def set_realtime_priority(priority: int) -> str | None:
 class RateLoop(threading.Thread):
     """Calls `step(now_monotonic_s)` at `rate_hz` on absolute deadlines in its own thread.
 
-    Deadline k is start + k·period: the thread sleeps until SPIN_MARGIN_S before it, then spins.
+    Deadline k is start + k·period: the thread sleeps until SPIN_MARGIN_S before it, then spins
+    (a SCHED_FIFO thread wakes on time, and sleeps to the deadline itself).
     A step that starts more than a period late is an overrun. A loop at most CATCH_UP_PERIODS
     behind runs its missed ticks at once, so that a short stall costs no ticks; further behind,
     it skips to the newest deadline rather than run a burst. An exception in a step is printed and
@@ -124,14 +125,15 @@ class RateLoop(threading.Thread):
 
     def run(self) -> None:
         clock, sleep = self._clock, self._sleep
+        margin = 0.0 if os.sched_getscheduler(0) == os.SCHED_FIFO else SPIN_MARGIN_S
         start = clock()
         tick = 0
         previous = None
         while not self._stopping.is_set():
             deadline = start + tick * self.period_s
             remaining = deadline - clock()
-            if remaining > SPIN_MARGIN_S:
-                sleep(remaining - SPIN_MARGIN_S)
+            if remaining > margin:
+                sleep(remaining - margin)
             while clock() < deadline:
                 sleep(0)  # spin, but let the executor thread take the GIL
             now = clock()

@@ -71,26 +71,27 @@ class NetworkListener(Node):
         self._polled.subscribe(msg_type, topic, batch_qos(row), keep, raw=True, every=True)
 
     def _new(self, key) -> list:
-        """The messages under `key` not decoded yet: (arrival on the monotonic scale s, source wall time s, bytes)."""
+        """The messages under `key` not decoded yet: (arrival here s, publication s, bytes), both times as
+        DDS stamped them, on the time.monotonic() scale."""
         with self._lock:
             new = self._received[key][len(self._decoded[key]):]
-        return [(info["received_timestamp"] * 1e-9 + self._monotonic_minus_wall_s, info["source_timestamp"] * 1e-9,
-                 data) for data, info in new]
+        offset = self._monotonic_minus_wall_s
+        return [(info["received_timestamp"] * 1e-9 + offset, info["source_timestamp"] * 1e-9 + offset, data)
+                for data, info in new]
 
     def _decode_forces(self, label) -> tuple:
-        """(arrival_s, published_s (monotonic scale), forces (K, 3) N, pose stamps (K,) s or NaN) of the
-        force commands so far."""
+        """(arrival_s, published_s, forces (K, 3) N, pose stamps (K,) s or NaN) of the force commands so far."""
         fmt = self._force_formats[label]
         decoded = self._decoded["force", label]
         for arrival, published, data in self._new(("force", label)):
             force = conversions.force_from_bytes(fmt, data)
             stamp = conversions.stamp_s_from_bytes(data, "WrenchStamped") if fmt == "wrench_stamped" else np.nan
-            decoded.append((arrival, published + self._monotonic_minus_wall_s, force, stamp))
+            decoded.append((arrival, published, force, stamp))
         return (np.array([d[0] for d in decoded]), np.array([d[1] for d in decoded]),
                 np.array([d[2] for d in decoded]).reshape(-1, 3), np.array([d[3] for d in decoded]))
 
     def _decode_tool_poses(self) -> tuple:
-        """(arrival_s, published_s (source wall time), stamp_s, positions (K, 3) m) of the tool poses so far."""
+        """(arrival_s, published_s, stamp_s, positions (K, 3) m) of the tool poses so far."""
         decoded = self._decoded["tool_pose"]
         for arrival, published, data in self._new("tool_pose"):
             try:
@@ -102,11 +103,11 @@ class NetworkListener(Node):
             np.array([d[3] for d in decoded]).reshape(-1, 3),)
 
     def _decode_nodes(self) -> tuple:
-        """(arrival_s, stamp_s) of the node clouds so far; tracks the first, peak and last positions."""
+        """(arrival_s, published_s, stamp_s) of the node clouds so far; tracks the first, peak and last positions."""
         decoded = self._decoded["nodes"]
-        for arrival, _, data in self._new("nodes"):
+        for arrival, published, data in self._new("nodes"):
             message = deserialize_message(data, TOPICS["nodes"].type)
-            decoded.append((arrival, conversions.seconds_from_stamp(message.header.stamp)))
+            decoded.append((arrival, published, conversions.seconds_from_stamp(message.header.stamp)))
             try:
                 positions = conversions.pointcloud2_to_nodes(message)
             except ValueError as exc:
@@ -118,7 +119,7 @@ class NetworkListener(Node):
             displacement = float(np.abs(positions - self.first_nodes).max())
             if displacement > self._peak_displacement:
                 self._peak_displacement, self.peak_nodes = displacement, positions
-        return np.array([d[0] for d in decoded]), np.array([d[1] for d in decoded])
+        return tuple(np.array([d[i] for d in decoded]) for i in range(3))
 
     def _on_wrench(self, message) -> None:
         f = message.wrench.force
@@ -138,26 +139,28 @@ class NetworkListener(Node):
     def snapshot(self) -> dict:
         """Copies of everything received so far, as numpy arrays where that fits.
 
-        `pose_to_force_s[label]`: for each force command stamped with a tool pose, the time from that
-        pose's publication to the command's arrival here (DDS times, s; NaN when the pose was not seen).
+        `*_arrival_s` are when messages reached this process, `*_published_s` when their publisher sent
+        them (DDS times, independent of how promptly this process runs). `pose_to_force_s[label]`: for
+        each force command stamped with a tool pose, the time from that pose's publication to the
+        command's (s; NaN when the pose was not seen).
         """
         decoded = {label: self._decode_forces(label) for label in self._force_formats}
         tool_arrival, tool_published, tool_stamp, tool_position = self._decode_tool_poses()
-        nodes_arrival, nodes_stamp = self._decode_nodes()
+        nodes_arrival, nodes_published, nodes_stamp = self._decode_nodes()
         published_by_stamp = dict(zip(tool_stamp.tolist(), tool_published.tolist()))
-        wall = -self._monotonic_minus_wall_s
         with self._lock:
             return {
                 "forces": {label: (arrival, values) for label, (arrival, _, values, _) in decoded.items()},
                 "force_published_s": {label: published for label, (_, published, _, _) in decoded.items()},
-                "pose_to_force_s": {label: np.array([arrival + wall - published_by_stamp.get(stamp, np.nan)
-                                                     for arrival, stamp in zip(arrivals, stamps)])
-                                    for label, (arrivals, _, _, stamps) in decoded.items()},
+                "pose_to_force_s": {label: np.array([sent - published_by_stamp.get(stamp, np.nan)
+                                                     for sent, stamp in zip(sent_s, stamps)])
+                                    for label, (_, sent_s, _, stamps) in decoded.items()},
                 "wrench_arrival_s": np.array([s[0] for s in self.wrenches]),
                 "wrench_n": np.array([s[2] for s in self.wrenches]).reshape(-1, 3),
                 "tool_arrival_s": tool_arrival,
                 "tool_position_m": tool_position,
                 "nodes_arrival_s": nodes_arrival,
+                "nodes_published_s": nodes_published,
                 "nodes_stamp_s": nodes_stamp,
                 "diagnostics": {k: dict(v) for k, v in self.diagnostics.items()},
                 "surface": self.surface,
