@@ -83,6 +83,50 @@ def penetration(model: PlaneModel | SphereModel, tip: np.ndarray,
     return max(model.radius + tool_radius - distance, 0.0), direction
 
 
+def blend(start: PlaneModel | SphereModel | None, target: PlaneModel | SphereModel,
+          fraction: float) -> PlaneModel | SphereModel:
+    """The model `fraction` (clipped to 0..1) of the way from `start` to `target`.
+
+    Plane: point and normal interpolated linearly (the normal renormalised); sphere: centre and
+    radius. No `start`, models of different kinds, or opposite normals give `target`.
+    """
+    f = min(max(float(fraction), 0.0), 1.0)
+    if f >= 1.0 or start is None or type(start) is not type(target):
+        return target
+    if isinstance(target, PlaneModel):
+        normal = (1.0 - f) * start.normal + f * target.normal
+        if not np.linalg.norm(normal) > 1e-9:
+            return target
+        return PlaneModel(start.point + f * (target.point - start.point), normal)
+    return SphereModel(start.centre + f * (target.centre - start.centre),
+                       start.radius + f * (target.radius - start.radius))
+
+
+class ModelGlide:
+    """The model to render at each tick: a new local model replaces the shown one over `duration_s`.
+
+    The physics moves the local model in 150 Hz steps; rendered at once, each step is a force
+    jump of K·(surface motion per frame). Gliding spreads it over the ticks of one physics period
+    (at the cost of that much lag in the rendered surface). `duration_s` 0 renders each model at once.
+    """
+
+    def __init__(self, duration_s: float):
+        self.duration_s = _check_non_negative(duration_s, "duration_s")
+        self._target = self._shown = self._start = None
+        self._since = 0.0
+
+    def update(self, target: PlaneModel | SphereModel | None, now_s: float) -> PlaneModel | SphereModel | None:
+        """The model to render at `now_s` (s) given the newest `target` (None: no surface near the tool)."""
+        if target is not self._target:
+            self._target, self._start, self._since = target, self._shown, now_s
+        if target is None:
+            self._shown = None
+        else:
+            fraction = (now_s - self._since) / self.duration_s if self.duration_s > 0.0 else 1.0
+            self._shown = blend(self._start, target, fraction)
+        return self._shown
+
+
 def contact_force(depth: float, depth_rate: float, direction: np.ndarray,
                   stiffness: float, damping: float) -> np.ndarray:
     """Penalty force (N) on the tool: F = max(0, K·depth + B·depth_rate)·direction, 0 out of contact.

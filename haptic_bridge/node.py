@@ -15,7 +15,7 @@ import time
 import numpy as np
 from rclpy.node import Node
 
-from haptic_bridge.local_model import FrameMap, contact_force, max_passive_stiffness, penetration
+from haptic_bridge.local_model import FrameMap, ModelGlide, contact_force, max_passive_stiffness, penetration
 from haptic_bridge.safety import DEFAULT_MAX_FORCE_N, PHANTOM_MAX_FORCE_N, SafeForceOutput
 from liver_sim.nodes.common import (Latest, LoopInputs, Param, RateLoop, apply_realtime_priority, declare_parameters,
                                     diagnostic_status, publish_diagnostics, realtime_priority_parameter, run_node)
@@ -32,6 +32,9 @@ PARAMETERS = {
     "stiffness_n_per_m": Param(300.0, "local-model stiffness K (N/m of penetration in the liver frame); "
                                "K·device_scale must stay below 2·(device_damping_ns_per_m − "
                                "damping_ns_per_m·device_scale)/T (Colgate)", 0.0, 10000.0),
+    "model_glide_s": Param(round(1.0 / 150.0, 4), "time over which a new local model replaces the rendered one "
+                           "(s): the surface glides to its new place instead of jumping at each physics update; "
+                           "about one physics period; 0: at once", 0.0, 0.1),
     "damping_ns_per_m": Param(0.1, "local-model damping B on the penetration rate (N·s/m)", 0.0, 10.0),
     "device_damping_ns_per_m": Param(0.5, "physical damping b of the device at the stylus (N·s/m), for the "
                                      "passivity check b > K·T/2 + B; PHANToM-like default, identify yours",
@@ -121,6 +124,7 @@ class HapticBridge(Node):
             raise ValueError(f"parameter max_force_rate_n_per_s={p['max_force_rate_n_per_s']:g} with "
                              f"max_force_n={p['max_force_n']:g}, ramp_time_s={p['ramp_time_s']:g}: {exc}") from None
         self._depth_rate = DepthRate(period, p["depth_rate_cutoff_hz"])
+        self._glide = ModelGlide(p["model_glide_s"])
         self._mode = p["local_model"]
         self._pose = Latest()    # (tip position (3,) m, stamp)
         self._source = Latest()  # (local model or None, lifetime s), or (force (3,) N, stamp) in none mode
@@ -144,6 +148,7 @@ class HapticBridge(Node):
         self._loop = RateLoop(p["rate_hz"], self._step, "haptic_bridge")
         rendering = ("physics wrench held between updates" if self._mode == "none" else
                      f"local model (K {p['stiffness_n_per_m']:g} N/m, B {p['damping_ns_per_m']:g} N·s/m, "
+                     f"glide {p['model_glide_s']:g} s, "
                      f"tool radius {p['tool_radius_m']:g} m)")
         self.get_logger().info(
             f"haptic_bridge: {p['rate_hz']:g} Hz, local_model {self._mode}: {rendering}; "
@@ -205,7 +210,7 @@ class HapticBridge(Node):
             lifetime = self.p["lifetime_s"]
         else:
             model, lifetime = source if source is not None else (None, self.p["lifetime_s"])
-            force = self._render(model, tip)
+            force = self._render(self._glide.update(model, now), tip)
         command = self._safety.step(self._frame.liver_to_device_force(force), now - source_received,
                                     now - pose_received, lifetime)
         self._last_force = command
@@ -233,7 +238,7 @@ class HapticBridge(Node):
         on_rate = stats["rate_hz"] > 0.98 * self.p["rate_hz"]
         problems = ([] if on_rate else ["below rate"]) + ([] if state == "ok" else [f"watchdog {state}"])
         publish_diagnostics(self, self._diagnostics, [diagnostic_status(
-            "haptic_bridge: loop", stats, not problems, "; ".join(problems) or "ok", extra)])
+            f"{self.get_name()}: loop", stats, not problems, "; ".join(problems) or "ok", extra)])
 
 
 def main(args=None) -> int:

@@ -64,7 +64,8 @@ def closed_loop_plan(compare_without_local_model: bool = False, extra: dict | No
 
 def run_network(plan: NetworkPlan, duration_s: float, log_dir: Path, progress=print,
                 settle_s: float = 1.0) -> dict:
-    """Start the plan's processes, listen for `duration_s` after they are up, stop them; return the snapshot.
+    """Start the plan's processes, listen for `duration_s` after they are up, stop them; return the snapshot
+    (NetworkListener.snapshot) with `window_s`, the (start, end) of those `duration_s` (monotonic s).
 
     Raises RuntimeError naming any node that exited early (its log is in log_dir).
     """
@@ -102,7 +103,7 @@ def run_network(plan: NetworkPlan, duration_s: float, log_dir: Path, progress=pr
             if failed:
                 raise RuntimeError(f"node(s) exited early: {failed}; see logs in {log_dir}")
             progress(f"  {time.monotonic() - start:5.1f} / {duration_s:.1f} s")
-        return listener.snapshot()
+        return {**listener.snapshot(), "window_s": (start, time.monotonic())}
     finally:
         processes.stop()
         context.try_shutdown()

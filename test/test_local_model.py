@@ -6,8 +6,10 @@ import pytest
 
 from haptic_bridge.local_model import (
     FrameMap,
+    ModelGlide,
     PlaneModel,
     SphereModel,
+    blend,
     contact_force,
     max_passive_stiffness,
     passivity_damping_min,
@@ -175,3 +177,38 @@ def test_passivity_bounds():
         passivity_damping_min(-1.0, 0.001)
     with pytest.raises(ValueError, match="damping"):
         max_passive_stiffness(np.nan, 0.001)
+
+
+def test_blend_interpolates_planes_and_spheres_and_falls_back_to_the_target():
+    start, target = PlaneModel((0, 0, 0), (0, 0, 1)), PlaneModel((0, 0, -0.01), (0, 1, 1))
+    half = blend(start, target, 0.5)
+    np.testing.assert_allclose(half.point, (0, 0, -0.005))
+    bisector = np.array([0, 0, 1]) + np.array([0, 1, 1]) / np.sqrt(2)  # halfway between the unit normals
+    np.testing.assert_allclose(half.normal, bisector / np.linalg.norm(bisector))
+    assert blend(start, target, 1.5) is target and blend(None, target, 0.2) is target
+    sphere = SphereModel((0, 0, 0), 0.1)
+    assert blend(sphere, target, 0.5) is target  # another kind: no blend
+    assert blend(PlaneModel((0, 0, 0), (0, 0, -1)), start, 0.5) is start  # opposite normals
+    quarter = blend(sphere, SphereModel((0.04, 0, 0), 0.2), 0.25)
+    np.testing.assert_allclose(quarter.centre, (0.01, 0, 0))
+    assert quarter.radius == pytest.approx(0.125)
+
+
+def test_glide_spreads_a_physics_step_of_the_surface_over_the_ticks():
+    tick, frame = 0.001, 1.0 / 150.0
+    glide, at_once = ModelGlide(frame), ModelGlide(0.0)
+    tip = np.array([0.0, 0.0, 0.0])
+    depths = {id(glide): [], id(at_once): []}
+    models = [PlaneModel((0, 0, -0.001 * k), (0, 0, 1)) for k in range(4)]  # the surface recedes 1 mm a frame
+    for i in range(int(3.5 * frame / tick)):
+        now = i * tick
+        newest = models[min(int(now / frame), 3)]
+        for renderer in (glide, at_once):
+            depths[id(renderer)].append(penetration(renderer.update(newest, now), tip, 0.002)[0])
+    jumps_glide = np.abs(np.diff(depths[id(glide)])).max()
+    jumps_at_once = np.abs(np.diff(depths[id(at_once)])).max()
+    assert jumps_at_once == pytest.approx(0.001)
+    assert jumps_glide < jumps_at_once / 4  # one frame step spread over its ticks (~1/6.7 each)
+    assert glide.update(None, 1.0) is None and glide.update(models[0], 1.001) is models[0]  # after a gap: at once
+    with pytest.raises(ValueError, match="duration_s must be finite and >= 0"):
+        ModelGlide(-1.0)

@@ -177,3 +177,17 @@ def test_sigterm_to_the_demo_stops_the_nodes_it_started(ros_env, tmp_path):
     for pid in map(int, children):
         with pytest.raises(ProcessLookupError):
             os.kill(pid, 0)
+
+
+def test_loop_bench_reports_every_figure_against_its_target(ros_domain_id, tmp_path):
+    import json
+
+    from liver_sim.bench import LOOP_TARGETS, run_loop_bench
+
+    report = json.loads(json.dumps(run_loop_bench(duration_s=3.0, log_dir=tmp_path)))
+    assert set(report["met"]) == set(LOOP_TARGETS) and report["machine"]
+    results = report["results"]
+    assert results["haptic_on_wire"]["samples"] > 1000 and results["physics_on_wire"]["samples"] > 100
+    assert 0.0 < results["pose_to_force_p50_s"] <= results["pose_to_force_p99_s"]
+    assert {"liver_physics: loop", "haptic_bridge: loop", "haptic_bridge_without_local_model: loop",
+            "liver_tool: loop", "phantom_sim: loop"} <= set(results["node_loops"])

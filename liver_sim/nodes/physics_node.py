@@ -181,7 +181,7 @@ class PhysicsNode(Node):
                  "divergences": self.model.divergences, "bad_tool_poses": self._bad_poses,
                  "tool_pose_age_s": float(time.monotonic() - received), "simulated_s": self.model.time_s}
         ok = stats["rate_hz"] > 0.98 * self.p["rate_hz"]
-        status = diagnostic_status("liver_physics: loop", stats, ok,
+        status = diagnostic_status(f"{self.get_name()}: loop", stats, ok,
                                    "ok" if ok else "below rate", extra)
         publish_diagnostics(self, self._diagnostics, [status])
 

@@ -194,7 +194,7 @@ class ToolNode(Node):
         else:
             stats = self._loop.stats.summary()
         publish_diagnostics(self, self._diagnostics,
-                            [loop_status("liver_tool: loop", stats, self.p["rate_hz"], extra)])
+                            [loop_status(f"{self.get_name()}: loop", stats, self.p["rate_hz"], extra)])
 
 
 def main(args=None) -> int:
