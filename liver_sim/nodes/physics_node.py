@@ -7,6 +7,7 @@ simulation time of the state, counted from the node's start on the ROS clock.
 """
 from __future__ import annotations
 
+import threading
 import time
 
 import numpy as np
@@ -94,7 +95,8 @@ class PhysicsNode(Node):
         self._workspace = (lower - p["workspace_margin_m"], upper + p["workspace_margin_m"])
         self._pose = Latest()
         self._bad_poses = 0
-        self._frame_seconds = []
+        self._frame_seconds = []  # compute time of each frame since the last diagnostics (s)
+        self._frame_seconds_lock = threading.Lock()
         self._marker_every = max(1, round(p["rate_hz"] / p["marker_rate_hz"]))
         self._frames = 0
         self._outputs = {
@@ -171,11 +173,13 @@ class PhysicsNode(Node):
             self._outputs["marker"].publish(conversions.skin_marker_serialized(
                 self.model.positions, self.model.mesh.skin, stamp, frame))
         self._frames += 1
-        self._frame_seconds.append(time.perf_counter() - started)
+        with self._frame_seconds_lock:
+            self._frame_seconds.append(time.perf_counter() - started)
 
     def _publish_diagnostics(self) -> None:
         stats = self._loop.stats.summary()
-        compute, self._frame_seconds = np.array(self._frame_seconds), []
+        with self._frame_seconds_lock:
+            compute, self._frame_seconds = np.array(self._frame_seconds), []
         _, received = self._pose.get()
         extra = {"frame_compute_p99_s": float(np.percentile(compute, 99)) if compute.size else 0.0,
                  "divergences": self.model.divergences, "bad_tool_poses": self._bad_poses,
