@@ -148,12 +148,13 @@ LOOP_TARGETS = {"physics_rate_hz": (147.0, 153.0), "haptic_rate_hz_min": 995.0, 
                 "haptic_max_gap_s_max": 0.005, "pose_to_force_p99_s_max": 0.002, "fig8_smoothness_ratio_min": 5.0}
 
 
-def run_loop_bench(duration_s: float = 30.0, log_dir=None, progress=None) -> dict:
+def run_loop_bench(duration_s: float = 30.0, log_dir=None, progress=None, observers: dict | None = None) -> dict:
     """All four nodes plus a baseline bridge without local model, in closed loop for `duration_s` (R4).
 
     Rates and period errors are given twice: as each node's own loop measured them (diagnostics)
     and as this process saw the messages arrive (which adds its own scheduling).  The pose-to-force
     latency is the age, on arrival here, of the device sample a force command was computed from.
+    `observers` (label -> argv) run beside the network (NetworkPlan.observers), e.g. a recorder.
     """
     from pathlib import Path
 
@@ -161,6 +162,7 @@ def run_loop_bench(duration_s: float = 30.0, log_dir=None, progress=None) -> dic
     from liver_sim.network import closed_loop_plan, run_network
 
     plan = closed_loop_plan(compare_without_local_model=True, extra={"phantom_sim": {"loop_script": True}})
+    plan.observers.update(observers or {})
     snapshot = run_network(plan, duration_s, Path(log_dir or "out/bench_loop/logs"),
                            progress or (lambda line: None))
     arrival, force = snapshot["forces"]["local_model"]

@@ -36,6 +36,8 @@ class NetworkPlan:
     force_topics: dict[str, tuple[str, str]] = field(default_factory=dict)
     #: started once the physics publishes, so that a scripted device does not press an absent liver
     after_physics: tuple = ("phantom_sim",)
+    #: processes that watch the network (e.g. `liver-sim record`): started before the nodes, stopped after them
+    observers: dict[str, list[str]] = field(default_factory=dict)
 
 
 def closed_loop_plan(compare_without_local_model: bool = False, extra: dict | None = None) -> NetworkPlan:
@@ -76,7 +78,7 @@ def run_network(plan: NetworkPlan, duration_s: float, log_dir: Path, progress=pr
 
     progress(f"ROS_DOMAIN_ID={os.environ.get('ROS_DOMAIN_ID', '0')} "
              f"ROS_AUTOMATIC_DISCOVERY_RANGE={os.environ.get('ROS_AUTOMATIC_DISCOVERY_RANGE', '(default)')}")
-    for label, args in plan.commands.items():
+    for label, args in {**plan.observers, **plan.commands}.items():
         progress(f"  {label}: {printable(args)}")
     context = rclpy.Context()
     rclpy.init(context=context)
@@ -87,6 +89,8 @@ def run_network(plan: NetworkPlan, duration_s: float, log_dir: Path, progress=pr
     spinner.start()
     processes = NodeProcesses(log_dir)
     try:
+        for label, args in plan.observers.items():
+            processes.start(label, args)
         for label, args in plan.commands.items():
             if label not in plan.after_physics:
                 processes.start(label, args)
@@ -104,6 +108,7 @@ def run_network(plan: NetworkPlan, duration_s: float, log_dir: Path, progress=pr
             progress(f"  {time.monotonic() - start:5.1f} / {duration_s:.1f} s")
         return listener.snapshot()
     finally:
+        processes.stop([label for label in plan.commands if label in processes.processes])
         processes.stop()
         context.try_shutdown()
         spinner.join(timeout=2.0)
