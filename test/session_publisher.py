@@ -27,6 +27,7 @@ def main(ticks: int) -> None:
         time.sleep(0.05)
     time.sleep(0.5)  # both sides have matched: let the reliable handshakes finish
     counts = dict.fromkeys(publishers, 0)
+    print("publishing", flush=True)
     start = time.monotonic()
     for k in range(ticks):
         while time.monotonic() < start + k * 0.001:

@@ -34,6 +34,13 @@ def typestore():
     return get_typestore(Stores.ROS2_JAZZY)
 
 
+def canonical_cdr(data: bytes, msgtype: str) -> bytes:
+    """The same CDR message with its alignment padding zeroed (rmw serializers leave padding bytes
+    uninitialised, so equal messages can differ in bytes): deserialized and serialized again by rosbags."""
+    store = typestore()
+    return bytes(store.serialize_cdr(store.deserialize_cdr(data, msgtype), msgtype))
+
+
 @dataclass(frozen=True)
 class QosSpec:
     """The QoS a topic was offered with (what `ros2 bag play` replays it with)."""
@@ -134,7 +141,8 @@ class BagInfo:
 
 
 #: What rosbags (and the storages under it) raise on damaged files.
-_READ_ERRORS = (OSError, ValueError, KeyError, IndexError, EOFError, AssertionError, struct.error)
+_READ_ERRORS = (OSError, ValueError, KeyError, IndexError, EOFError, AssertionError, ArithmeticError, MemoryError,
+                struct.error)
 
 
 def _reader_errors():

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from liver_sim.sessions.bag import BagError, BagWriter, read_messages
+from liver_sim.sessions.bag import BagError, BagWriter, canonical_cdr, read_messages
 from liver_sim.sessions.parameters import node_parameters
 
 
@@ -169,7 +169,7 @@ def resimulate(bag: Path, out: Path, overrides=(), storage: str = "mcap", progre
 
         def emit(topic, key, t, data):
             msgtype, qos = types[key]
-            writer.write(topic, msgtype, _ns(t), data, qos)
+            writer.write(topic, msgtype, _ns(t), data if key == "tool_pose" else canonical_cdr(data, msgtype), qos)
 
         session.emit = emit
         session.run(poses)
