@@ -16,7 +16,9 @@ from liver_sim.mesh.io import (CAPSULE_REGION, PARENCHYMA_REGION, WRITE_SUFFIXES
                                load_mesh, write_mesh)
 from liver_sim.mesh.liver_shape import build_liver, default_liver
 from liver_sim.mesh.tetmesh import TetMesh
-from liver_sim.sessions.cli import add_record_command, add_replay_command, add_report_command, add_resimulate_command
+from liver_sim.sessions.bag import STORAGES
+from liver_sim.sessions.cli import (add_bench_record_parser, add_record_command, add_replay_command, add_report_command,
+                                   add_resimulate_command)
 
 PROG = "liver-sim"
 #: Exit status of a command that refused its input.
@@ -135,13 +137,7 @@ def add_bench_command(commands) -> None:
     loop.add_argument("--duration", type=float, default=30.0, help="seconds of closed loop (default: 30)")
     loop.add_argument("--out", type=Path, default=Path("out/bench_loop"), help="folder for the nodes' logs")
     loop.set_defaults(handler=bench_loop)
-    record = kinds.add_parser("record", help="the closed loop while `liver-sim record` records it: recorder CPU share, "
-                                             "haptic loop figures")
-    record.add_argument("--json", action="store_true", help="print one JSON object")
-    record.add_argument("--duration", type=float, default=30.0, help="seconds of closed loop (default: 30)")
-    record.add_argument("--storage", choices=("mcap", "sqlite3"), default="mcap", help="bag storage")
-    record.add_argument("--out", type=Path, default=Path("out/bench_record"), help="folder for the bag and the logs")
-    record.set_defaults(handler=bench_record)
+    add_bench_record_parser(kinds)
 
 
 def bench_physics(args) -> int:
@@ -178,21 +174,8 @@ def bench_loop(args) -> int:
     return 0
 
 
-def bench_record(args) -> int:
-    from liver_sim.sessions.bench import run_record_bench
-
-    report = run_record_bench(args.duration, args.out, args.storage, None if args.json else print)
-    if args.json:
-        print(json.dumps(report, default=float))
-        return 0
-    print(json.dumps({k: report[k] for k in ("recorder", "bag")}, indent=2, default=float))
-    for target, met in report["met"].items():
-        print(f"target {target} = {report['targets'][target]}: {'met' if met else 'NOT met'}")
-    return 0
-
-
 def add_demo_command(commands) -> None:
-    """``liver-sim demo [--duration S] [--out DIR] [--offline]``: the closed-loop demo."""
+    """``liver-sim demo [--duration S] [--out DIR] [--offline] [--record [--storage …]]``: the closed-loop demo."""
     parser = commands.add_parser("demo", help="the four nodes in closed loop with a simulated PHANToM "
                                               "pressing the default liver (--offline: the model alone, no ROS)")
     parser.add_argument("--duration", type=float, default=None,
@@ -200,7 +183,7 @@ def add_demo_command(commands) -> None:
     parser.add_argument("--out", type=Path, default=Path("out/demo"), help="output folder (default: %(default)s)")
     parser.add_argument("--offline", action="store_true", help="scripted press-and-release in this process, no ROS")
     parser.add_argument("--record", action="store_true", help="record the run with `liver-sim record` into OUT/session")
-    parser.add_argument("--storage", choices=("mcap", "sqlite3"), default="mcap", help="storage of the recorded bag")
+    parser.add_argument("--storage", choices=STORAGES, default="mcap", help="storage of the recorded bag")
     parser.set_defaults(handler=demo)
 
 

@@ -15,12 +15,11 @@ from pathlib import Path
 from liver_sim.mesh.liver_shape import default_liver
 from liver_sim.processes import NodeProcesses, command_line, printable
 from liver_sim.scenarios import press_anchor
+from msg_defs.topics import BASELINE_FORCE_TOPIC
 
 #: The scripted hand waits this long (s) before moving: DDS discovery of a new process takes seconds,
 #: and the press must not begin before the tool node relays the stylus.
 DEVICE_START_DELAY_S = 3.0
-#: Topic of the baseline bridge (`local_model: none`) in a comparison run (Fig. 8); it drives nothing.
-BASELINE_FORCE_TOPIC = "/phantom/servo_cf_without_local_model"
 
 
 def default_anchor() -> list[float]:

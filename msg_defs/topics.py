@@ -44,3 +44,6 @@ TOPICS = {
     # "default" in the table: rclpy's usual keep-last 10, reliable, volatile.
     "diagnostics": Topic("/diagnostics", DiagnosticArray, _qos(10)),
 }
+#: Force topic of a baseline bridge (`local_model: none`) beside the normal one: the Fig. 8 comparison
+#: in `liver-sim bench loop`; it drives nothing.
+BASELINE_FORCE_TOPIC = "/phantom/servo_cf_without_local_model"

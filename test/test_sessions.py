@@ -249,3 +249,21 @@ def test_a_damaged_bag_is_refused_with_a_clear_error(tmp_path, capsys, kind, say
     assert status == 2
     assert error.startswith(f"liver-sim: error: {bag}: ") and says in error
     assert not (tmp_path / "out").exists() or command == "report"
+
+
+def test_demo_records_its_run_and_the_report_reads_it(ros_domain_id, tmp_path):
+    from liver_sim.demo import run_demo
+
+    summary = run_demo(tmp_path, duration_s=8.0, progress=lambda line: None, record_storage="mcap")
+    bag = tmp_path / "session"
+    read = rosbags_read(bag)
+    assert {"/liver/nodes", "/liver/surface", "/liver/contact_plane", "/liver/tool_wrench", "/tool/pose",
+            "/phantom/measured_cp", "/phantom/servo_cf", "/diagnostics"} <= set(read)
+    assert "/liver/marker" not in read  # only with --marker
+    # the recorder starts before the nodes and stops after them: it holds every frame the demo saw
+    assert len(read["/liver/nodes"]) >= summary["physics"]["samples"]
+    assert (tmp_path / "logs" / "recorder.log").read_text().startswith("recording to")
+    report = write_report(bag, tmp_path / "report", progress=lambda line: None)
+    assert report["topics"]["/liver/nodes"]["messages"] == len(read["/liver/nodes"])
+    assert {"force.png", "tool_path.png", "loop_rates.png"} <= set(report["figures"])
+    assert report["diagnostics_last"]["haptic_bridge: loop"]["rate_hz"]

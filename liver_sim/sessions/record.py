@@ -17,9 +17,9 @@ from pathlib import Path
 from liver_sim.sessions.bag import BagWriter, QosSpec
 
 RECORDER_NODE = "liver_sim_recorder"
-#: Messages kept per subscription between two drains: 2 s at 1 kHz.
+#: Messages kept per subscription between two drains: 2 s at 1 kHz, 100 drain periods.
 HISTORY_DEPTH = 2000
-DRAIN_PERIOD_S = 0.005
+DRAIN_PERIOD_S = 0.02
 #: How often (s) topics of unknown type are looked up in the ROS graph.
 DISCOVERY_PERIOD_S = 0.5
 PROGRESS_PERIOD_S = 5.0
@@ -27,8 +27,7 @@ PROGRESS_PERIOD_S = 5.0
 
 def default_topics(marker: bool = False) -> list[str]:
     """DESIGN.md's topics (and the Fig. 8 baseline force); /liver/marker only when asked for."""
-    from liver_sim.network import BASELINE_FORCE_TOPIC
-    from msg_defs.topics import TOPICS
+    from msg_defs.topics import BASELINE_FORCE_TOPIC, TOPICS
 
     names = [t.name for key, t in TOPICS.items() if marker or key != "marker"]
     return names + [BASELINE_FORCE_TOPIC]
@@ -40,8 +39,7 @@ def known_topics() -> dict:
     from geometry_msgs.msg import WrenchStamped
     from rclpy.qos import DurabilityPolicy, ReliabilityPolicy
 
-    from liver_sim.network import BASELINE_FORCE_TOPIC
-    from msg_defs.topics import TOPICS
+    from msg_defs.topics import BASELINE_FORCE_TOPIC, TOPICS
 
     known = {}
     for topic in TOPICS.values():

@@ -34,7 +34,7 @@ def session_arrays(bag: Path, physics: dict, bridge: dict) -> dict:
     """One pass over the bag: log times of every topic, forces, wrench, tool tips, local models, diagnostics."""
     from rclpy.serialization import deserialize_message
 
-    from liver_sim.network import BASELINE_FORCE_TOPIC
+    from msg_defs.topics import BASELINE_FORCE_TOPIC
     from liver_sim.sessions.record import message_class
     from msg_defs import conversions
     from msg_defs.topics import TOPICS
@@ -106,12 +106,13 @@ def penetration_series(tool_t, tips, model_t, models, tool_radius_m: float) -> n
 
 
 def windowed_rate(t: np.ndarray, window_s: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
-    """Messages per second in consecutive windows: (window centres s, rate Hz)."""
-    if len(t) < 2:
+    """Messages per second in the consecutive full windows from the first message: (window centres s, rate Hz)."""
+    windows = int((t[-1] - t[0]) // window_s) if len(t) >= 2 else 0
+    if windows < 1:
         return np.array([]), np.array([])
-    edges = np.arange(t[0], t[-1] + window_s, window_s)
+    edges = t[0] + window_s * np.arange(windows + 1)
     counts, _ = np.histogram(t, edges)
-    return edges[:-1] + window_s / 2, counts[:len(edges) - 1] / window_s
+    return edges[:-1] + window_s / 2, counts / window_s
 
 
 def _plots():
