@@ -267,3 +267,20 @@ def test_demo_records_its_run_and_the_report_reads_it(ros_domain_id, tmp_path):
     assert report["topics"]["/liver/nodes"]["messages"] == len(read["/liver/nodes"])
     assert {"force.png", "tool_path.png", "loop_rates.png"} <= set(report["figures"])
     assert report["diagnostics_last"]["haptic_bridge: loop"]["rate_hz"]
+
+
+def test_recorder_follows_the_published_type_and_records_other_topics(ros_env, tmp_path):
+    bag = tmp_path / "session"
+    recorder = subprocess.Popen(cli_command_line("record", "--out", str(bag), "--topics", "/phantom/servo_cf",
+                                                 "/custom/topic"),
+                                env=ros_env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        published = subprocess.run([sys.executable, str(PUBLISHER), "300", "other"], env=ros_env,
+                                   capture_output=True, text=True, timeout=120, check=True)
+    finally:
+        status, output = stop(recorder, signal.SIGINT)
+    assert status == 0, output
+    read = rosbags_read(bag)
+    assert {t: len(m) for t, m in read.items()} == json.loads(published.stdout.splitlines()[-1])
+    assert read["/phantom/servo_cf"][0][0] == "geometry_msgs/msg/Vector3"  # a bridge with force_output: vector3
+    assert [m.data for _, _, m in read["/custom/topic"]] == [str(k) for k in range(300)]

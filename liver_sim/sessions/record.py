@@ -109,6 +109,7 @@ class Recorder:
             else:
                 self._pending.append(topic)
         self._next_discovery = 0.0
+        self._unknown = set()
 
     def _subscribe(self, topic: str, msg_class, spec: QosSpec) -> None:
         subscription = self.node.create_subscription(msg_class, topic, lambda _: None,
@@ -116,18 +117,36 @@ class Recorder:
         self._subscriptions.append((topic, type_name(msg_class), spec, subscription))
 
     def discover(self) -> None:
-        """Subscribe to the requested topics whose type the graph now shows; warn about type clashes."""
-        graph = dict(self.node.get_topic_names_and_types())
+        """Subscribe to the requested topics once a publisher shows their type, and re-subscribe a topic
+        published with another type than expected (e.g. servo_cf of a bridge with another force_output)."""
         for topic in list(self._pending):
-            types = graph.get(topic)
-            if types:
-                spec = offered_qos(self.node, topic) or QosSpec()
-                self._subscribe(topic, message_class(types[0]), spec)
+            if self._try_subscribe(topic):
                 self._pending.remove(topic)
-                self.progress(f"recording {topic} ({types[0]})")
-        for topic, name, _, _ in self._subscriptions:
-            if graph.get(topic) and name not in graph[topic]:
-                self.progress(f"warning: {topic} is published as {graph[topic]}, recorded as {name}: not recorded")
+        for entry in list(self._subscriptions):
+            topic, name, _, subscription = entry
+            published = {p.topic_type for p in self.node.get_publishers_info_by_topic(topic)}
+            if published and name not in published:
+                self.node.destroy_subscription(subscription)
+                self._subscriptions.remove(entry)
+                if not self._try_subscribe(topic):
+                    self._pending.append(topic)
+
+    def _try_subscribe(self, topic: str) -> bool:
+        """Subscribe to `topic` with its publishers' type and QoS; False while it has no publisher."""
+        publishers = self.node.get_publishers_info_by_topic(topic)
+        if not publishers:
+            return False
+        kind = publishers[0].topic_type
+        try:
+            msg_class = message_class(kind)
+        except ValueError as exc:
+            if topic not in self._unknown:
+                self._unknown.add(topic)
+                self.progress(f"warning: {topic} not recorded: {exc}")
+            return False
+        self._subscribe(topic, msg_class, offered_qos(self.node, topic))
+        self.progress(f"recording {topic} ({kind})")
+        return True
 
     def drain(self) -> int:
         """Take every waiting message and write them in order of reception; return how many."""
@@ -151,7 +170,7 @@ class Recorder:
         next_drain = next_progress = start
         while not stop.is_set() and (duration_s is None or time.monotonic() - start < duration_s):
             now = time.monotonic()
-            if self._pending and now >= self._next_discovery:
+            if now >= self._next_discovery:
                 self.discover()
                 self._next_discovery = now + DISCOVERY_PERIOD_S
             self.drain()

@@ -211,6 +211,7 @@ def write_report(bag: Path, out: Path, progress=print) -> dict:
     """Read the bag, write the PNGs and summary.json/.md into `out`; return the summary."""
     from liver_sim.analysis import contact_fraction, largest_force_jump_n, rate_figures
     from liver_sim.sessions.parameters import node_parameters
+    from msg_defs.topics import TOPICS
 
     info = bag_info(bag)
     params = node_parameters()
@@ -223,7 +224,7 @@ def write_report(bag: Path, out: Path, progress=print) -> dict:
                "topics": {t: {"type": kind, "messages": n} for t, (kind, n) in sorted(info.topics.items())},
                "recorder": info.custom_data}
     nominal = {physics["tool_pose_topic"]: bridge["rate_hz"], bridge["force_topic"]: bridge["rate_hz"],
-               "/phantom/measured_cp": bridge["rate_hz"], physics["nodes_topic"]: physics["rate_hz"],
+               TOPICS["measured_cp"].name: bridge["rate_hz"], physics["nodes_topic"]: physics["rate_hz"],
                physics["contact_plane_topic"]: physics["rate_hz"], physics["tool_wrench_topic"]: physics["rate_hz"]}
     rate_topics = [t for t in nominal if t in data["times"]]
     summary["rates_on_wire"] = {t: rate_figures(data["times"][t], nominal[t]) for t in rate_topics}
