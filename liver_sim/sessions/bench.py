@@ -29,7 +29,8 @@ def run_record_bench(duration_s: float = 30.0, out: Path = Path("out/bench_recor
                      progress=None, compare: bool = True) -> dict:
     """run_loop_bench with a recorder into out/session (replaced if there) — and first without it when
     `compare` — adding the recorder's CPU share (CPU seconds per wall second, of one core and of the
-    machine, start-up included), the bag's counts and rates, and the loop figures side by side."""
+    machine, from its rclpy start-up to the closed bag; imports excluded), the bag's counts and rates,
+    and the loop figures side by side."""
     import shutil
 
     from liver_sim.bench import run_loop_bench

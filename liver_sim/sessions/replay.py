@@ -6,6 +6,7 @@ reliable (transient local when the bag says their publishers offered it).
 """
 from __future__ import annotations
 
+import itertools
 import signal
 import threading
 import time
@@ -28,8 +29,9 @@ def run_replay(bag: Path, rate: float = 1.0, topics: list[str] | None = None, de
         raise ValueError(f"--rate must be > 0, got {rate!r}")
     info = bag_info(bag)
     wanted = sorted(info.topics) if topics is None else topics
-    messages = list(read_messages(bag, wanted))
-    if not messages:
+    messages = read_messages(bag, wanted)  # streamed: a long session need not fit in memory
+    first = next(messages, None)
+    if first is None:
         raise ValueError(f"{bag}: holds no messages on {', '.join(wanted)}")
     stop = threading.Event()
     previous = {sig: signal.signal(sig, lambda *_: stop.set()) for sig in (signal.SIGINT, signal.SIGTERM)}
@@ -45,14 +47,14 @@ def run_replay(bag: Path, rate: float = 1.0, topics: list[str] | None = None, de
             spec = known[topic][1] if topic in known else None
             qos = _rclpy_qos(spec, spec.depth) if spec else 10
             publishers[topic] = node.create_publisher(message_class(msgtype), topic, qos)
-        t0 = messages[0].timestamp_ns
-        span = (messages[-1].timestamp_ns - t0) * 1e-9 / rate
-        progress(f"replaying {len(messages)} messages of {bag} ({span:.1f} s at rate {rate:g}) on "
-                 f"{', '.join(wanted)}")
+        t0 = first.timestamp_ns
+        span = (info.start_ns + info.duration_ns - t0) * 1e-9 / rate
+        progress(f"replaying {sum(info.topics[t][1] for t in wanted)} messages of {bag} ({span:.1f} s at rate "
+                 f"{rate:g}) on {', '.join(wanted)}")
         stop.wait(delay_s)
         start = time.monotonic()
         next_progress = start + 5.0
-        for message in messages:
+        for message in itertools.chain([first], messages):
             due = start + (message.timestamp_ns - t0) * 1e-9 / rate
             if stop.wait(max(0.0, due - time.monotonic())):
                 break
@@ -64,6 +66,7 @@ def run_replay(bag: Path, rate: float = 1.0, topics: list[str] | None = None, de
         stop.wait(0.5)  # let reliable messages reach their subscribers before the publishers go
         node.destroy_node()
     finally:
+        messages.close()
         context.try_shutdown()
         for sig, handler in previous.items():
             signal.signal(sig, handler)
