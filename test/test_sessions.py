@@ -114,16 +114,20 @@ def messages(path):
 
 def test_resimulation_is_deterministic_and_follows_changed_parameters(tmp_path):
     source = pose_bag(tmp_path / "poses")
-    first = resimulate(source, tmp_path / "a", progress=lambda line: None)
-    second = resimulate(source, tmp_path / "b", storage="sqlite3", progress=lambda line: None)
+    first = resimulate(source, tmp_path / "a", progress=lambda line: None, compare=True)
+    second = resimulate(source, tmp_path / "b", storage="sqlite3", progress=lambda line: None, compare=True)
     stiffer = resimulate(source, tmp_path / "c", ["contact_stiffness_n_per_m:=900"], progress=lambda line: None)
     assert messages(tmp_path / "a") == messages(tmp_path / "b")  # byte-identical, whatever the storage
     read = rosbags_read(tmp_path / "a")
     assert {t: read[t][0][0] for t in read} == {
         "/tool/pose": POSE, "/phantom/servo_cf": WRENCH, "/liver/tool_wrench": WRENCH,
         "/liver/nodes": "sensor_msgs/msg/PointCloud2", "/liver/contact_plane": "visualization_msgs/msg/Marker",
-        "/liver/marker": "visualization_msgs/msg/Marker", "/liver/surface": "shape_msgs/msg/Mesh"}
+        "/liver/marker": "visualization_msgs/msg/Marker", "/liver/surface": "shape_msgs/msg/Mesh",
+        "/phantom/servo_cf_without_local_model": WRENCH}
     assert len(read["/tool/pose"]) == len(read["/phantom/servo_cf"]) == first["commands"] == 1600
+    assert len(read["/phantom/servo_cf_without_local_model"]) == 1600
+    held = max(m.wrench.force.z for _, _, m in read["/phantom/servo_cf_without_local_model"])
+    assert held == pytest.approx(max(m.wrench.force.z for _, _, m in read["/liver/tool_wrench"]), abs=0.02)
     assert first["frames"] == 240 and first["divergences"] == 0
     assert first["peak_command_n"] == second["peak_command_n"] > 0.1  # the press is felt
     physics = lambda result: [m.wrench.force.z for _, _, m in rosbags_read(result)["/liver/tool_wrench"]]  # noqa

@@ -58,7 +58,7 @@ def replay(args) -> int:
 
 
 def add_resimulate_command(commands) -> None:
-    """``liver-sim resimulate BAG [-p name:=value …] [--out BAG2] [--storage …]``."""
+    """``liver-sim resimulate BAG [-p name:=value …] [--out BAG2] [--storage …] [--compare]``."""
     parser = commands.add_parser("resimulate", help="re-run physics and haptic bridge offline on a bag's tool poses")
     parser.add_argument("bag", type=Path, metavar="BAG", help="rosbag2 bag folder holding /tool/pose")
     parser.add_argument("-p", dest="overrides", action="append", default=[], metavar="NAME:=VALUE",
@@ -66,6 +66,8 @@ def add_resimulate_command(commands) -> None:
                              "to set only one node's); repeatable")
     parser.add_argument("--out", type=Path, default=None, help="output bag folder (default: BAG_resimulated)")
     parser.add_argument("--storage", choices=STORAGES, default="mcap", help="output storage (default: %(default)s)")
+    parser.add_argument("--compare", action="store_true", help="also render the force without local model (the "
+                        "physics force held, Fig. 8) on /phantom/servo_cf_without_local_model")
     parser.set_defaults(handler=resimulate)
 
 
@@ -73,7 +75,7 @@ def resimulate(args) -> int:
     from liver_sim.sessions.resimulate import resimulate as run
 
     out = args.out or args.bag.with_name(args.bag.name + "_resimulated")
-    run(args.bag, out, args.overrides, args.storage, _progress)
+    run(args.bag, out, args.overrides, args.storage, _progress, args.compare)
     return 0
 
 

@@ -192,7 +192,8 @@ def _plot_fig8(data: dict, path: Path) -> None:
     plt = _plots()
     (t1, f1), (t0, f0) = data["forces"]["local_model"], data["forces"]["without_local_model"]
     n1, n0 = np.linalg.norm(f1, axis=1), np.linalg.norm(f0, axis=1)
-    contact = t1[n1 > CONTACT_FORCE_N]
+    newest = np.clip(np.searchsorted(t0, t1, side="right") - 1, 0, None)
+    contact = t1[(n1 > CONTACT_FORCE_N) & (n0[newest] > CONTACT_FORCE_N)] if len(t0) else t1[:0]
     fig, axes = plt.subplots(2, 1, figsize=(8, 6), dpi=110)
     for ax in axes:
         ax.plot(t0, n0, color="tab:orange", linewidth=0.8, label="without local model (physics force held)")
@@ -202,7 +203,7 @@ def _plot_fig8(data: dict, path: Path) -> None:
     if contact.size:
         middle = contact[len(contact) // 2]
         axes[1].set_xlim(middle - 0.1, middle + 0.1)
-        axes[1].set_title("0.2 s in steady contact")
+        axes[1].set_title("0.2 s where both are in contact")
     axes[0].legend(loc="upper right", fontsize=8)
     _save(fig, path, plt)
 

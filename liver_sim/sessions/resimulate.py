@@ -5,8 +5,9 @@ Simulation time is the recorded poses' stamps.  Physics frame k starts at t₀ +
 first pose) with the newest pose stamped before it (none when older than tool_pose_timeout_s or
 outside the workspace, as in the node) and is published at its end, stamped t₀ + model time.  The
 bridge ticks once per recorded pose with the newest published frame (BridgeTick, the node's own
-tick), and its command is stamped with the pose.  Nothing depends on the wall clock, so the same
-bag and parameters give byte-identical messages.  Messages are built by msg_defs.conversions and
+tick), and its command is stamped with the pose; `--compare` adds the Fig. 8 baseline bridge
+(local_model none) on the same poses.  Nothing depends on the wall clock, and the outputs' CDR
+padding is zeroed (canonical_cdr), so the same bag and parameters give byte-identical messages.  Messages are built by msg_defs.conversions and
 serialized by rclpy's serializer (no node, no context).
 """
 from __future__ import annotations
@@ -19,6 +20,7 @@ import numpy as np
 
 from liver_sim.sessions.bag import BagError, BagWriter, canonical_cdr, read_messages
 from liver_sim.sessions.parameters import node_parameters
+from msg_defs.topics import BASELINE_FORCE_TOPIC
 
 
 def _ns(seconds: float) -> int:
@@ -32,13 +34,16 @@ def _ns(seconds: float) -> int:
 class _Session:
     """The offline loop; `emit(topic, msg_class, time_s, data)` receives every output message in time order."""
 
-    def __init__(self, physics: dict, bridge: dict, emit, progress):
+    def __init__(self, physics: dict, bridge: dict, emit, progress, compare: bool = False):
         from haptic_bridge.tick import BridgeTick
         from liver_sim.nodes.physics_node import build_model
 
         self.p, self.b = physics, bridge
         self.model = build_model(physics)
         self.tick = BridgeTick(bridge)
+        #: the Fig. 8 baseline: a second bridge holding the physics wrench (local_model: none)
+        self.baseline = BridgeTick({**bridge, "local_model": "none"}) if compare and bridge["local_model"] != "none" \
+            else None
         lower, upper = self.model.mesh.bounds
         self.workspace = (lower - physics["workspace_margin_m"], upper + physics["workspace_margin_m"])
         self.marker_every = max(1, round(physics["rate_hz"] / physics["marker_rate_hz"]))
@@ -60,7 +65,7 @@ class _Session:
         return ToolPose(position, tuple(orientation)), position
 
     def _frame(self, t0: float, pose):
-        """Step one frame; return (publish time s, messages, bridge source)."""
+        """Step one frame; return (publish time s, messages, (local model, lifetime), contact force N)."""
         from rclpy.serialization import serialize_message
 
         from msg_defs import conversions
@@ -78,12 +83,9 @@ class _Session:
             messages.append((self.p["marker_topic"], "marker", conversions.skin_marker_serialized(
                 self.model.positions, self.model.mesh.skin, stamp, frame_id)))
         self.frames += 1
-        if self.b["local_model"] == "none":
-            source = conversions.force_from_message("wrench_stamped", wrench)
-        else:
-            model, lifetime = conversions.marker_to_local_model(marker)
-            source = (model, lifetime if lifetime > 0.0 else self.b["lifetime_s"])
-        return t, messages, source
+        model, lifetime = conversions.marker_to_local_model(marker)
+        return (t, messages, (model, lifetime if lifetime > 0.0 else self.b["lifetime_s"]),
+                conversions.force_from_message("wrench_stamped", wrench))
 
     def run(self, poses: list) -> None:
         """`poses`: [(time s, PoseStamped, recorded bytes)] in time order."""
@@ -97,7 +99,7 @@ class _Session:
         physics_pose, physics_pose_time = None, -np.inf
         tip, tip_time = None, -np.inf
         pending = deque()
-        source, source_time = None, -np.inf
+        local, held, source_time = None, None, -np.inf
         next_progress = t0 + 1.0
         for t, message, data in poses:
             while t0 + self.model.time_s < t:  # frames that start before this pose see the poses before it
@@ -105,20 +107,24 @@ class _Session:
                 fresh = start - physics_pose_time <= self.p["tool_pose_timeout_s"]
                 pending.append(self._frame(t0, physics_pose if fresh else None))
             while pending and pending[0][0] <= t:
-                published, messages, source = pending.popleft()
-                source_time = published
+                source_time, messages, local, held = pending.popleft()
                 for topic, key, frame_data in messages:
-                    self.emit(topic, key, published, frame_data)
+                    self.emit(topic, key, source_time, frame_data)
             physics_pose, pose_tip = self._tool_pose(message)
             physics_pose_time = t
             self.refused += physics_pose is None
             if pose_tip is not None:
                 tip, tip_time = pose_tip, t
             self.emit(self.p["tool_pose_topic"], "tool_pose", t, data)
-            command = self.tick.step(tip, t - tip_time, source, t - source_time)
+            command = self.tick.step(tip, t - tip_time, held if self.b["local_model"] == "none" else local,
+                                     t - source_time)
             self.peak_force_n = max(self.peak_force_n, float(np.linalg.norm(command)))
             self.emit(self.b["force_topic"], "servo_cf", t, serialize_message(conversions.force_message(
                 self.b["force_output"], command, message.header.stamp, self.b["device_frame_id"])))
+            if self.baseline is not None:
+                command = self.baseline.step(tip, t - tip_time, held, t - source_time)
+                self.emit(BASELINE_FORCE_TOPIC, "servo_cf", t, serialize_message(conversions.force_message(
+                    self.b["force_output"], command, message.header.stamp, self.b["device_frame_id"])))
             self.commands += 1
             if t >= next_progress:
                 next_progress += 1.0
@@ -145,9 +151,11 @@ def recorded_poses(bag: Path, topic: str) -> list:
     return poses
 
 
-def resimulate(bag: Path, out: Path, overrides=(), storage: str = "mcap", progress=print) -> dict:
+def resimulate(bag: Path, out: Path, overrides=(), storage: str = "mcap", progress=print,
+               compare: bool = False) -> dict:
     """Re-run physics and bridge on the tool poses of `bag` with parameter `overrides` ('name:=value');
-    write the outputs (and the input poses) to a new bag `out`; return a summary."""
+    write the outputs (and the input poses) to a new bag `out`; return a summary.  With `compare`, a
+    second bridge without local model writes BASELINE_FORCE_TOPIC from the same inputs (Fig. 8)."""
     from liver_sim.sessions.record import known_topics, type_name
     from msg_defs.conversions import force_message_type
     from msg_defs.topics import TOPICS
@@ -161,7 +169,7 @@ def resimulate(bag: Path, out: Path, overrides=(), storage: str = "mcap", progre
     types["servo_cf"] = (type_name(force_message_type(bridge["force_output"])), types["servo_cf"][1])
     progress(f"re-simulating {len(poses)} tool poses ({poses[-1][0] - poses[0][0]:.2f} s) of {bag}"
              + (f" with {' '.join(overrides)}" if overrides else ""))
-    session = _Session(physics, bridge, None, progress)  # refuses bad parameters before the bag exists
+    session = _Session(physics, bridge, None, progress, compare)  # refuses bad parameters before the bag exists
     started = time.perf_counter()
     with BagWriter(out, storage) as writer:
         writer.set_custom_data("resimulated_from", str(bag))
