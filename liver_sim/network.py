@@ -90,6 +90,7 @@ def run_network(plan: NetworkPlan, duration_s: float, log_dir: Path, progress=pr
     try:
         for label, args in plan.observers.items():
             processes.start(label, args)
+        _wait_for_observers(listener, processes, len(plan.observers), timeout_s=60.0)
         for label, args in plan.commands.items():
             if label not in plan.after_physics:
                 processes.start(label, args)
@@ -112,6 +113,18 @@ def run_network(plan: NetworkPlan, duration_s: float, log_dir: Path, progress=pr
         context.try_shutdown()
         spinner.join(timeout=2.0)
         listener.destroy_node()
+
+
+def _wait_for_observers(listener, processes: NodeProcesses, count: int, timeout_s: float) -> None:
+    """Until `count` nodes besides the listener are in the graph: the observers are up before the nodes start."""
+    start = time.monotonic()
+    while len(listener.get_node_names()) < 1 + count:
+        if processes.failed():
+            raise RuntimeError(f"exited during start-up: {processes.failed()}; see logs in {processes.log_dir}")
+        if time.monotonic() - start > timeout_s:
+            raise RuntimeError(f"the observers did not come up within {timeout_s:.0f} s; see logs in "
+                               f"{processes.log_dir}")
+        time.sleep(0.1)
 
 
 def _wait_for_network(listener, processes: NodeProcesses, timeout_s: float) -> None:
