@@ -66,6 +66,8 @@ setup(
         'meshio>=5.3',
         'trimesh>=4.0',
         'matplotlib>=3.6',
+        'rosbags>=0.11',  # sessions: rosbag2 bags (record, replay, resimulate, report)
+        'PyYAML>=6.0',
     ],
     extras_require={
         'test': ['pytest'],

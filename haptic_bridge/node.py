@@ -9,14 +9,13 @@ it was computed from (the tool pose; the wrench in `none` mode), or the node's c
 """
 from __future__ import annotations
 
-import math
 import time
 
 import numpy as np
 from rclpy.node import Node
 
-from haptic_bridge.local_model import FrameMap, ModelGlide, contact_force, max_passive_stiffness, penetration
-from haptic_bridge.safety import DEFAULT_MAX_FORCE_N, PHANTOM_MAX_FORCE_N, SafeForceOutput
+from haptic_bridge.safety import DEFAULT_MAX_FORCE_N, PHANTOM_MAX_FORCE_N
+from haptic_bridge.tick import BridgeTick
 from liver_sim.nodes.common import (Latest, LoopInputs, Param, RateLoop, apply_realtime_priority, declare_parameters,
                                     diagnostic_status, publish_diagnostics, realtime_priority_parameter, run_node)
 from msg_defs import conversions
@@ -65,48 +64,6 @@ PARAMETERS = {
 }
 
 
-def check_passivity(p: dict) -> None:
-    """Refuse a stiffness the device cannot render passively at rate_hz (Colgate: b > K·T/2 + |B|).
-
-    At the device a liver-side stiffness K and damping B are felt as K·scale and B·scale.
-    """
-    stiffness, scale = p["stiffness_n_per_m"], p["device_scale"]
-    limit = max_passive_stiffness(p["device_damping_ns_per_m"], 1.0 / p["rate_hz"], p["damping_ns_per_m"] * scale)
-    if stiffness * scale >= limit and stiffness + p["damping_ns_per_m"] > 0.0:
-        raise ValueError(
-            f"parameter stiffness_n_per_m={stiffness:g} is not passive: with device_damping_ns_per_m="
-            f"{p['device_damping_ns_per_m']:g}, damping_ns_per_m={p['damping_ns_per_m']:g}, "
-            f"device_scale={scale:g} and rate_hz={p['rate_hz']:g}, Colgate's b > K·T/2 + B allows "
-            f"stiffness_n_per_m < {limit / scale:g} N/m")
-
-
-def frame_map(p: dict) -> FrameMap:
-    """The device→liver map named by the parameters, or ValueError naming the bad one."""
-    for name, size in (("device_rotation_xyzw", 4), ("device_translation_m", 3)):
-        if len(p[name]) != size or not np.isfinite(p[name]).all():
-            raise ValueError(f"parameter {name} must be {size} finite numbers, got {list(p[name])!r}")
-    if not np.linalg.norm(p["device_rotation_xyzw"]) > 0.0:
-        raise ValueError("parameter device_rotation_xyzw must be a non-zero quaternion (x, y, z, w)")
-    return FrameMap(np.array(p["device_rotation_xyzw"]), np.array(p["device_translation_m"]), p["device_scale"])
-
-
-class DepthRate:
-    """Rate (m/s) of the penetration depth: finite difference over the tick, one-pole low-passed."""
-
-    def __init__(self, period_s: float, cutoff_hz: float):
-        self.period_s = period_s
-        self.alpha = 1.0 - math.exp(-2.0 * math.pi * cutoff_hz * period_s) if cutoff_hz > 0.0 else 1.0
-        self.depth = 0.0
-        self.rate = 0.0
-
-    def update(self, depth: float) -> float:
-        """The filtered rate after this tick's `depth` (m)."""
-        raw = (depth - self.depth) / self.period_s
-        self.depth = depth
-        self.rate += self.alpha * (raw - self.rate)
-        return self.rate
-
-
 class HapticBridge(Node):
     """Tool pose + newest local model (or physics wrench) → safe force command, at rate_hz."""
 
@@ -114,17 +71,7 @@ class HapticBridge(Node):
         super().__init__("haptic_bridge")
         p = declare_parameters(self, PARAMETERS)
         self.p = p
-        check_passivity(p)
-        self._frame = frame_map(p)
-        period = 1.0 / p["rate_hz"]
-        try:
-            self._safety = SafeForceOutput(p["max_force_n"], p["max_force_rate_n_per_s"], period,
-                                           p["lifetime_s"], p["ramp_time_s"])
-        except ValueError as exc:
-            raise ValueError(f"parameter max_force_rate_n_per_s={p['max_force_rate_n_per_s']:g} with "
-                             f"max_force_n={p['max_force_n']:g}, ramp_time_s={p['ramp_time_s']:g}: {exc}") from None
-        self._depth_rate = DepthRate(period, p["depth_rate_cutoff_hz"])
-        self._glide = ModelGlide(p["model_glide_s"])
+        self._tick = BridgeTick(p)
         self._mode = p["local_model"]
         self._pose = Latest()    # (tip position (3,) m, stamp)
         self._source = Latest()  # (local model or None, lifetime s), or (force (3,) N, stamp) in none mode
@@ -191,28 +138,14 @@ class HapticBridge(Node):
             return
         self._source.set((force, message.header.stamp))
 
-    def _render(self, model, tip: np.ndarray | None) -> np.ndarray:
-        """Local-model force on the tool (N, liver frame); zero without a model or a tip."""
-        if model is None or tip is None:
-            depth, direction = 0.0, np.zeros(3)
-        else:
-            depth, direction = penetration(model, tip, self.p["tool_radius_m"])
-        rate = self._depth_rate.update(depth)
-        return contact_force(depth, rate, direction, self.p["stiffness_n_per_m"], self.p["damping_ns_per_m"])
-
     def _step(self, now: float) -> None:
         self._inputs.poll()
         pose, pose_received = self._pose.get()
         tip, stamp = pose if pose is not None else (None, None)
         source, source_received = self._source.get()
         if self._mode == "none":
-            force, stamp = source if source is not None else (np.zeros(3), None)
-            lifetime = self.p["lifetime_s"]
-        else:
-            model, lifetime = source if source is not None else (None, self.p["lifetime_s"])
-            force = self._render(self._glide.update(model, now), tip)
-        command = self._safety.step(self._frame.liver_to_device_force(force), now - source_received,
-                                    now - pose_received, lifetime)
+            source, stamp = source if source is not None else (None, None)
+        command = self._tick.step(now, tip, now - pose_received, source, now - source_received)
         self._last_force = command
         if stamp is None:
             stamp = self.get_clock().now().to_msg()
@@ -229,7 +162,7 @@ class HapticBridge(Node):
         now = time.monotonic()
         _, pose_received = self._pose.get()
         _, source_received = self._source.get()
-        state = self._safety.state
+        state = self._tick.safety.state
         extra = {"watchdog": state, "local_model": self._mode,
                  "bad_messages": sum(self._bad.values()), **{f"bad_{k}": v for k, v in self._bad.items()},
                  "last_force_n": float(np.linalg.norm(self._last_force)),

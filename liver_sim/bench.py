@@ -152,13 +152,14 @@ LOOP_TARGETS = {"physics_rate_hz": (147.0, 153.0), "haptic_rate_hz_min": 995.0, 
 FIG8_MAX_PERIOD_S = 0.0015
 
 
-def run_loop_bench(duration_s: float = 30.0, log_dir=None, progress=None) -> dict:
+def run_loop_bench(duration_s: float = 30.0, log_dir=None, progress=None, observers: dict | None = None) -> dict:
     """All four nodes plus a baseline bridge without local model, in closed loop for `duration_s` (R4).
 
     Rates and period errors are given twice: as each node's own loop measured them (diagnostics)
     and as the messages went on the wire (DDS publication times), over the `duration_s` in which all
     nodes ran.  The pose-to-force latency runs from the publication of a tool pose on /tool/pose to
-    that of the force command computed from it.
+    that of the force command computed from it.  `observers` (label -> argv) run beside the network
+    (NetworkPlan.observers), e.g. a recorder.
     """
     from pathlib import Path
 
@@ -166,6 +167,7 @@ def run_loop_bench(duration_s: float = 30.0, log_dir=None, progress=None) -> dic
     from liver_sim.network import closed_loop_plan, run_network
 
     plan = closed_loop_plan(compare_without_local_model=True, extra={"phantom_sim": {"loop_script": True}})
+    plan.observers.update(observers or {})
     snapshot = run_network(plan, duration_s, Path(log_dir or "out/bench_loop/logs"),
                            progress or (lambda line: None))
     start, end = snapshot["window_s"]

@@ -17,6 +17,9 @@ from liver_sim.mesh.io import (CAPSULE_REGION, PARENCHYMA_REGION, WRITE_SUFFIXES
                                load_mesh, write_mesh)
 from liver_sim.mesh.liver_shape import build_liver, default_liver
 from liver_sim.mesh.tetmesh import TetMesh
+from liver_sim.sessions.bag import STORAGES
+from liver_sim.sessions.cli import (add_bench_record_parser, add_record_command, add_replay_command, add_report_command,
+                                   add_resimulate_command)
 
 PROG = "liver-sim"
 #: Exit status of a command that refused its input.
@@ -135,6 +138,7 @@ def add_bench_command(commands) -> None:
     loop.add_argument("--duration", type=float, default=30.0, help="seconds of closed loop (default: 30)")
     loop.add_argument("--out", type=Path, default=Path("out/bench_loop"), help="folder for the nodes' logs")
     loop.set_defaults(handler=bench_loop)
+    add_bench_record_parser(kinds)
 
 
 def bench_physics(args) -> int:
@@ -172,13 +176,15 @@ def bench_loop(args) -> int:
 
 
 def add_demo_command(commands) -> None:
-    """``liver-sim demo [--duration S] [--out DIR] [--offline]``: the closed-loop demo."""
+    """``liver-sim demo [--duration S] [--out DIR] [--offline] [--record [--storage …]]``: the closed-loop demo."""
     parser = commands.add_parser("demo", help="the four nodes in closed loop with a simulated PHANToM "
                                               "pressing the default liver (--offline: the model alone, no ROS)")
     parser.add_argument("--duration", type=float, default=None,
                         help="seconds to run (default: 14 s; offline: the script's 4.85 s)")
     parser.add_argument("--out", type=Path, default=Path("out/demo"), help="output folder (default: %(default)s)")
     parser.add_argument("--offline", action="store_true", help="scripted press-and-release in this process, no ROS")
+    parser.add_argument("--record", action="store_true", help="record the run with `liver-sim record` into OUT/session")
+    parser.add_argument("--storage", choices=STORAGES, default="mcap", help="storage of the recorded bag")
     parser.set_defaults(handler=demo)
 
 
@@ -187,14 +193,18 @@ def demo(args) -> int:
 
     progress = lambda line: print(line, flush=True)  # noqa: E731
     if args.offline:
+        if args.record:
+            raise ValueError("--record records the node network; --offline runs without ROS")
         run_offline_demo(args.out, args.duration, progress)
     else:
-        run_demo(args.out, 14.0 if args.duration is None else args.duration, progress)
+        run_demo(args.out, 14.0 if args.duration is None else args.duration, progress,
+                 record_storage=args.storage if args.record else None)
     return 0
 
 
 #: The subcommands, in the order `liver-sim --help` lists them.
-COMMANDS = (add_mesh_command, add_traction_command, add_bench_command, add_demo_command)
+COMMANDS = (add_mesh_command, add_traction_command, add_bench_command, add_demo_command, add_record_command,
+            add_replay_command, add_resimulate_command, add_report_command)
 
 
 def build_parser() -> argparse.ArgumentParser:

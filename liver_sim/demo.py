@@ -144,16 +144,20 @@ def plot_liver(rest_m: np.ndarray, skin: np.ndarray, positions_m: np.ndarray, to
     plt.close(fig)
 
 
-def run_demo(out_dir: Path, duration_s: float = 14.0, progress=print) -> dict:
+def run_demo(out_dir: Path, duration_s: float = 14.0, progress=print, record_storage: str | None = None) -> dict:
     """The main job: the four nodes in closed loop with the simulated PHANToM pressing, sliding and
-    releasing; writes summary.json/.md, force.png and liver_press.png, and the nodes' logs in logs/."""
+    releasing; writes summary.json/.md, force.png and liver_press.png, and the nodes' logs in logs/.
+    With `record_storage` (mcap or sqlite3), `liver-sim record` records the run into out_dir/session."""
     from liver_sim.analysis import largest_force_jump_n, rate_figures
     from liver_sim.network import closed_loop_plan, run_network
+    from liver_sim.sessions.bench import recorder_command
 
     mesh = default_liver()
+    plan = closed_loop_plan(extra={"phantom_sim": {"rest_s": 6.0}})
+    if record_storage:
+        plan.observers["recorder"] = recorder_command(out_dir / "session", record_storage)
     progress("starting the node network (the same command lines work in four terminals):")
-    snapshot = run_network(closed_loop_plan(extra={"phantom_sim": {"rest_s": 6.0}}), duration_s,
-                           out_dir / "logs", progress)
+    snapshot = run_network(plan, duration_s, out_dir / "logs", progress)
     arrival, haptic_force = snapshot["forces"]["local_model"]
     wrench = snapshot["wrench_n"]
     peak_nodes = snapshot["peak_nodes"] if snapshot["peak_nodes"] is not None else mesh.points
@@ -180,7 +184,9 @@ def run_demo(out_dir: Path, duration_s: float = 14.0, progress=print) -> dict:
              f"(period error p99 {1e3 * (summary['haptic']['period_error_p99_s'] or 0):.2f} ms), peak force "
              f"{summary['peak_haptic_force_n']:.2f} N, residual displacement "
              f"{summary['final_displacement_m'] * 1e3:.2f} mm")
-    progress(f"wrote {out_dir}/summary.json, summary.md, {', '.join(PLOTTED_FIGURES)} and logs/")
+    progress(f"wrote {out_dir}/summary.json, summary.md, {', '.join(PLOTTED_FIGURES)} and logs/"
+             + (f"; the recorded session is {out_dir / 'session'} (liver-sim report {out_dir / 'session'})"
+                if record_storage else ""))
     return summary
 
 

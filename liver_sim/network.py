@@ -15,12 +15,11 @@ from pathlib import Path
 from liver_sim.mesh.liver_shape import default_liver
 from liver_sim.processes import NodeProcesses, command_line, printable
 from liver_sim.scenarios import press_anchor
+from msg_defs.topics import BASELINE_FORCE_TOPIC
 
 #: The scripted hand waits this long (s) before moving: DDS discovery of a new process takes seconds,
 #: and the press must not begin before the tool node relays the stylus.
 DEVICE_START_DELAY_S = 3.0
-#: Topic of the baseline bridge (`local_model: none`) in a comparison run (Fig. 8); it drives nothing.
-BASELINE_FORCE_TOPIC = "/phantom/servo_cf_without_local_model"
 
 
 def default_anchor() -> list[float]:
@@ -36,6 +35,8 @@ class NetworkPlan:
     force_topics: dict[str, tuple[str, str]] = field(default_factory=dict)
     #: started once the physics publishes, so that a scripted device does not press an absent liver
     after_physics: tuple = ("phantom_sim",)
+    #: processes that watch the network (e.g. `liver-sim record`): started before the nodes, stopped after them
+    observers: dict[str, list[str]] = field(default_factory=dict)
 
 
 def closed_loop_plan(compare_without_local_model: bool = False, extra: dict | None = None) -> NetworkPlan:
@@ -77,7 +78,7 @@ def run_network(plan: NetworkPlan, duration_s: float, log_dir: Path, progress=pr
 
     progress(f"ROS_DOMAIN_ID={os.environ.get('ROS_DOMAIN_ID', '0')} "
              f"ROS_AUTOMATIC_DISCOVERY_RANGE={os.environ.get('ROS_AUTOMATIC_DISCOVERY_RANGE', '(default)')}")
-    for label, args in plan.commands.items():
+    for label, args in {**plan.observers, **plan.commands}.items():
         progress(f"  {label}: {printable(args)}")
     context = rclpy.Context()
     rclpy.init(context=context)
@@ -88,13 +89,23 @@ def run_network(plan: NetworkPlan, duration_s: float, log_dir: Path, progress=pr
     spinner.start()
     processes = NodeProcesses(log_dir)
     try:
+        present = len(listener.get_node_names())  # the listener's own nodes, and any left over in the domain
+        for label, args in plan.observers.items():
+            processes.start(label, args)
+        _wait_until(listener, processes, f"the observers {', '.join(plan.observers)}",
+                    lambda heard: len(heard.get_node_names()) >= present + len(plan.observers))
         for label, args in plan.commands.items():
             if label not in plan.after_physics:
                 processes.start(label, args)
-        _wait_for_network(listener, processes, timeout_s=60.0)
-        for label in plan.after_physics:
-            if label in plan.commands:
-                processes.start(label, plan.commands[label])
+        _wait_until(listener, processes, "the network (node positions and every force topic)",
+                    lambda heard: all(len(t) for t, _ in heard.snapshot()["forces"].values())
+                    and len(heard.snapshot()["nodes_arrival_s"]))
+        late = [label for label in plan.after_physics if label in plan.commands]
+        for label in late:
+            processes.start(label, plan.commands[label])
+        if late:
+            _wait_until(listener, processes, f"the tool pose from {', '.join(late)}",
+                        lambda heard: len(heard.snapshot()["tool_arrival_s"]) > 0)
         time.sleep(settle_s)
         start = time.monotonic()
         while time.monotonic() - start < duration_s:
@@ -105,21 +116,21 @@ def run_network(plan: NetworkPlan, duration_s: float, log_dir: Path, progress=pr
             progress(f"  {time.monotonic() - start:5.1f} / {duration_s:.1f} s")
         return {**listener.snapshot(), "window_s": (start, time.monotonic())}
     finally:
+        processes.stop([label for label in plan.commands if label in processes.processes])
         processes.stop()
         context.try_shutdown()
         spinner.join(timeout=2.0)
         listener.destroy_node()
 
 
-def _wait_for_network(listener, processes: NodeProcesses, timeout_s: float) -> None:
-    """Until the physics publishes nodes and every force topic carries commands."""
+def _wait_until(listener, processes: NodeProcesses, what: str, ready, timeout_s: float = 60.0) -> None:
+    """Until `ready(listener)`; RuntimeError naming `what` after `timeout_s`, or naming a node that exited."""
     start = time.monotonic()
     while time.monotonic() - start < timeout_s:
-        snapshot = listener.snapshot()
-        if len(snapshot["nodes_arrival_s"]) and all(len(t) for t, _ in snapshot["forces"].values()):
+        if ready(listener):
             return
         failed = processes.failed()
         if failed:
             raise RuntimeError(f"node(s) exited during start-up: {failed}; see logs in {processes.log_dir}")
         time.sleep(0.1)
-    raise RuntimeError(f"the network did not come up within {timeout_s:.0f} s; see logs in {processes.log_dir}")
+    raise RuntimeError(f"{what} did not come up within {timeout_s:.0f} s; see logs in {processes.log_dir}")

@@ -47,6 +47,13 @@ def command_line(executable: str, overrides: dict | None = None, node_name: str 
     return args
 
 
+def cli_command_line(*args: str) -> list[str]:
+    """`liver-sim ARGS…` (its console script, or `python -m liver_sim.cli` when not installed)."""
+    script = Path(sys.executable).parent / "liver-sim"
+    program = [str(script)] if script.exists() else [sys.executable, "-m", "liver_sim.cli"]
+    return program + list(args)
+
+
 def printable(args: list[str]) -> str:
     """A command line as a shell would take it."""
     return " ".join(shlex.quote(a) for a in args)
@@ -69,9 +76,9 @@ class NodeProcesses:
         self.processes[label] = process
         return process
 
-    def stop(self, label: str | None = None, timeout_s: float = 5.0) -> None:
-        """Stop one node (or all), politely first."""
-        labels = [label] if label else list(self.processes)
+    def stop(self, label: str | list[str] | None = None, timeout_s: float = 5.0) -> None:
+        """Stop one node, a list of them, or all, politely first."""
+        labels = [label] if isinstance(label, str) else list(self.processes if label is None else label)
         for name in labels:
             process = self.processes[name]
             if process.poll() is None:

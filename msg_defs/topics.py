@@ -45,6 +45,10 @@ TOPICS = {
     "diagnostics": Topic("/diagnostics", DiagnosticArray, _qos(10)),
 }
 
+#: Force topic of a baseline bridge (`local_model: none`) beside the normal one: the Fig. 8 comparison
+#: in `liver-sim bench loop`; it drives nothing.
+BASELINE_FORCE_TOPIC = "/phantom/servo_cf_without_local_model"
+
 
 def batch_qos(topic: Topic, depth: int = 1000) -> QoSProfile:
     """`topic`'s reliability and durability with a keep-last `depth` history: for a subscriber that

@@ -234,12 +234,17 @@ def declare_parameters(node, params: dict[str, Param]) -> dict:
             value = node.declare_parameter(name, spec.default, descriptor).value
         except ParameterException as exc:
             raise ValueError(f"parameter {name}: {exc}") from None
-        if spec.low is not None and not (spec.low <= value <= spec.high):
-            raise ValueError(f"parameter {name}={value!r} is outside [{spec.low}, {spec.high}]")
-        if spec.choices and value not in spec.choices:
-            raise ValueError(f"parameter {name}={value!r} must be one of {spec.choices}")
-        values[name] = value
+        values[name] = check_parameter(name, spec, value)
     return values
+
+
+def check_parameter(name: str, spec: Param, value):
+    """`value` if it lies in the range and choices of `spec`, else ValueError naming the parameter."""
+    if spec.low is not None and not (spec.low <= value <= spec.high):
+        raise ValueError(f"parameter {name}={value!r} is outside [{spec.low}, {spec.high}]")
+    if spec.choices and value not in spec.choices:
+        raise ValueError(f"parameter {name}={value!r} must be one of {spec.choices}")
+    return value
 
 
 def diagnostic_status(name: str, stats: dict, level_ok: bool, message: str,

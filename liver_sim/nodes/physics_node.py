@@ -80,6 +80,16 @@ def model_params(values: dict) -> ModelParams:
         contact_damping_ns_per_m=values["contact_damping_ns_per_m"]).validate()
 
 
+def build_model(values: dict) -> LiverModel:
+    """The LiverModel (mesh, parameters, tool, local model) named by the node's parameter values, warmed up."""
+    mesh = load_mesh(values["mesh_path"], values["target_tets"]) if values["mesh_path"] else default_liver()
+    tool = ToolShape(values["tool_shape"], values["tool_radius_m"], values["tool_length_m"],
+                     tuple(values["tool_half_extents_m"]))
+    model = LiverModel(mesh, model_params(values), tool, values["local_model"], values["local_model_reach_m"])
+    model.warm_up()
+    return model
+
+
 class PhysicsNode(Node):
     """The physics node: a LiverModel stepped by a RateLoop, its state published each frame."""
 
@@ -87,10 +97,8 @@ class PhysicsNode(Node):
         super().__init__("liver_physics")
         p = declare_parameters(self, PARAMETERS)
         self.p = p
-        mesh = load_mesh(p["mesh_path"], p["target_tets"]) if p["mesh_path"] else default_liver()
-        tool = ToolShape(p["tool_shape"], p["tool_radius_m"], p["tool_length_m"], tuple(p["tool_half_extents_m"]))
-        self.model = LiverModel(mesh, model_params(p), tool, p["local_model"], p["local_model_reach_m"])
-        self.model.warm_up()
+        self.model = build_model(p)
+        mesh = self.model.mesh
         lower, upper = mesh.bounds
         self._workspace = (lower - p["workspace_margin_m"], upper + p["workspace_margin_m"])
         self._pose = Latest()

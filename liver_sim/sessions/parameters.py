@@ -1,0 +1,92 @@
+"""The physics' and the bridge's parameters for offline runs: the nodes' own declarations
+(PARAMETERS), their config/<node>.yaml values, then `name:=value` overrides, range-checked as the
+nodes check them (liver_sim.nodes.common.check_parameter).
+
+An override `name:=value` applies to every node declaring `name` (tool_radius_m: both);
+`liver_physics.name:=value` or `haptic_bridge.name:=value` to one.  Values are YAML, as after `-p`.
+"""
+from __future__ import annotations
+
+import yaml
+
+from liver_sim.processes import config_dir
+
+NODES = ("liver_physics", "haptic_bridge")
+
+
+def declarations() -> dict:
+    """{node: PARAMETERS} of the physics node and the haptic bridge."""
+    from haptic_bridge.node import PARAMETERS as BRIDGE
+    from liver_sim.nodes.physics_node import PARAMETERS as PHYSICS
+
+    return {"liver_physics": PHYSICS, "haptic_bridge": BRIDGE}
+
+
+def _config_values(node: str) -> dict:
+    path = config_dir() / f"{node}.yaml"
+    if not path.is_file():
+        return {}
+    try:
+        return (yaml.safe_load(path.read_text()) or {})[node]["ros__parameters"]
+    except (yaml.YAMLError, KeyError, TypeError) as exc:
+        raise ValueError(f"{path}: not a parameter file of {node} ({exc})") from None
+
+
+def _typed(name: str, default, value):
+    """`value` in the type of `default` (an integer is taken for a float), or ValueError naming `name`."""
+    if isinstance(default, bool):
+        ok = isinstance(value, bool)
+    elif isinstance(default, int):
+        ok = isinstance(value, int) and not isinstance(value, bool)
+    elif isinstance(default, float):
+        ok = isinstance(value, (int, float)) and not isinstance(value, bool)
+        value = float(value) if ok else value
+    elif isinstance(default, list):
+        ok = isinstance(value, list)
+        if ok and default:
+            value = [_typed(name, default[0], v) for v in value]
+    else:
+        ok = isinstance(value, str)
+    if not ok:
+        raise ValueError(f"parameter {name}={value!r} must be a {type(default).__name__} like its default "
+                         f"{default!r}")
+    return value
+
+
+def parse_override(text: str) -> tuple[str | None, str, object]:
+    """(node or None, name, value) of 'name:=value' or 'node.name:=value'."""
+    name, sep, raw = text.partition(":=")
+    if not sep or not name:
+        raise ValueError(f"parameter override {text!r} must look like name:=value")
+    node, dot, short = name.rpartition(".")
+    if dot and node not in NODES:
+        raise ValueError(f"parameter override {text!r}: node {node!r} is not one of {', '.join(NODES)}")
+    try:
+        value = yaml.safe_load(raw) if raw.strip() else ""
+    except yaml.YAMLError as exc:
+        raise ValueError(f"parameter override {text!r}: value is not YAML ({exc})") from None
+    return (node if dot else None), short, value
+
+
+def node_parameters(overrides=()) -> dict[str, dict]:
+    """{node: {name: value}} for liver_physics and haptic_bridge: defaults, config file, overrides; checked."""
+    from liver_sim.nodes.common import check_parameter
+
+    declared = declarations()
+    values = {node: {name: spec.default for name, spec in declared[node].items()} for node in NODES}
+    for node in NODES:
+        for name, value in _config_values(node).items():
+            if name in declared[node]:
+                values[node][name] = value
+    for text in overrides:
+        node, name, value = parse_override(text)
+        targets = [n for n in ([node] if node else NODES) if name in declared[n]]
+        if not targets:
+            raise ValueError(f"unknown parameter {name!r}" + (f" of {node}" if node else
+                             f": neither {' nor '.join(NODES)} declares it"))
+        for target in targets:
+            values[target][name] = value
+    for node in NODES:
+        for name, spec in declared[node].items():
+            values[node][name] = check_parameter(name, spec, _typed(name, spec.default, values[node][name]))
+    return values

@@ -1,0 +1,310 @@
+"""`liver-sim report`: plots and a summary of a recorded (or re-simulated) session.
+
+Writes force.png (force command and physics contact force over time), penetration.png (depth of the
+tool sphere below the local model, the bridge's penetration()), tool_path.png, loop_rates.png
+(on-wire rates per second, and the nodes' own loop rate and jitter from /diagnostics when recorded),
+fig8.png when the bag holds the force with and without local model (Fig. 8), and summary.json/.md.
+Times are the bag's log times, from its first message.
+"""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from liver_sim.sessions.bag import BagError, bag_info, read_messages
+
+
+def _force_format(msgtype: str) -> str | None:
+    """The force_output format whose message type is `msgtype`, or None."""
+    from liver_sim.sessions.record import type_name
+    from msg_defs.conversions import FORCE_OUTPUT_FORMATS, force_message_type
+
+    for fmt in FORCE_OUTPUT_FORMATS:
+        try:
+            if type_name(force_message_type(fmt)) == msgtype:
+                return fmt
+        except ValueError:  # omni_feedback without omni_msgs
+            continue
+    return None
+
+
+def session_arrays(bag: Path, physics: dict, bridge: dict) -> dict:
+    """One pass over the bag: log times of every topic, forces, wrench, tool tips, local models, diagnostics."""
+    from rclpy.serialization import deserialize_message
+
+    from msg_defs.topics import BASELINE_FORCE_TOPIC
+    from liver_sim.sessions.record import message_class
+    from msg_defs import conversions
+    from msg_defs.topics import TOPICS
+
+    force_topics = {"local_model": bridge["force_topic"], "without_local_model": BASELINE_FORCE_TOPIC}
+    decoded = {bridge["force_topic"], BASELINE_FORCE_TOPIC, physics["tool_wrench_topic"], physics["tool_pose_topic"],
+               physics["contact_plane_topic"], TOPICS["diagnostics"].name}
+    times: dict[str, list] = {}
+    values: dict[str, list] = {}
+    diagnostics: list = []
+    classes = {}
+    for m in read_messages(bag):
+        t = m.timestamp_ns * 1e-9
+        times.setdefault(m.topic, []).append(t)
+        if m.topic not in decoded:
+            continue
+        if m.msgtype not in classes:
+            classes[m.msgtype] = message_class(m.msgtype)
+        try:
+            message = deserialize_message(m.data, classes[m.msgtype])
+            if m.topic in force_topics.values():
+                fmt = _force_format(m.msgtype)
+                if fmt is None:
+                    raise ValueError(f"{m.msgtype} is not a force command type")
+                value = conversions.force_from_message(fmt, message)
+            elif m.topic == physics["tool_wrench_topic"]:
+                value = conversions.force_from_message("wrench_stamped", message)
+            elif m.topic == physics["tool_pose_topic"]:
+                value = conversions.pose_to_arrays(message.pose)[0]
+            elif m.topic == physics["contact_plane_topic"]:
+                value = conversions.marker_to_local_model(message)[0]
+            else:
+                for status in message.status:
+                    diagnostics.append((t, status.name, {kv.key: kv.value for kv in status.values}))
+                continue
+        except Exception as exc:  # a message that does not decode: the bag is not a session of this product
+            raise BagError(bag, f"a {m.topic} message ({m.msgtype}) does not decode: {exc}") from None
+        values.setdefault(m.topic, []).append((t, value))
+    origin = min((ts[0] for ts in times.values()), default=0.0)
+
+    def series(topic):
+        pairs = values.get(topic, [])
+        return np.array([p[0] - origin for p in pairs]), [p[1] for p in pairs]
+
+    forces = {}
+    for label, topic in force_topics.items():
+        t, f = series(topic)
+        if len(t):
+            forces[label] = (t, np.array(f).reshape(-1, 3))
+    wrench_t, wrench = series(physics["tool_wrench_topic"])
+    pose_t, tips = series(physics["tool_pose_topic"])
+    plane_t, models = series(physics["contact_plane_topic"])
+    return {"origin_s": origin, "times": {k: np.array(v) - origin for k, v in times.items()},
+            "forces": forces, "wrench": (wrench_t, np.array(wrench).reshape(-1, 3)),
+            "tool": (pose_t, np.array(tips).reshape(-1, 3)), "local_models": (plane_t, models),
+            "diagnostics": [(t - origin, name, kv) for t, name, kv in diagnostics]}
+
+
+def penetration_series(tool_t, tips, model_t, models, tool_radius_m: float) -> np.ndarray:
+    """Depth (m) of the tool sphere at each tip below the newest local model logged before it (0 without one)."""
+    from haptic_bridge.local_model import penetration
+
+    index = np.searchsorted(model_t, tool_t, side="right") - 1
+    depth = np.zeros(len(tool_t))
+    for k, (i, tip) in enumerate(zip(index, tips)):
+        if i >= 0 and models[i] is not None:
+            depth[k] = penetration(models[i], tip, tool_radius_m)[0]
+    return depth
+
+
+def windowed_rate(t: np.ndarray, window_s: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """Messages per second in the consecutive full windows from the first message: (window centres s, rate Hz)."""
+    windows = int((t[-1] - t[0]) // window_s) if len(t) >= 2 else 0
+    if windows < 1:
+        return np.array([]), np.array([])
+    edges = t[0] + window_s * np.arange(windows + 1)
+    counts, _ = np.histogram(t, edges)
+    return edges[:-1] + window_s / 2, counts / window_s
+
+
+def _plots():
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _save(fig, path: Path, plt) -> None:
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+
+
+def _plot_force(data: dict, path: Path) -> None:
+    plt = _plots()
+    fig, ax = plt.subplots(figsize=(8, 4.2), dpi=110)
+    colours = {"local_model": "tab:red", "without_local_model": "tab:orange"}
+    for label, (t, f) in data["forces"].items():
+        ax.plot(t, np.linalg.norm(f, axis=1), color=colours[label], linewidth=0.8,
+                label=f"force command, {label.replace('_', ' ')}")
+    wt, w = data["wrench"]
+    if len(wt):
+        ax.plot(wt, np.linalg.norm(w, axis=1), ".", color="tab:blue", markersize=2, label="physics contact force")
+    ax.set(xlabel="time (s)", ylabel="|force| (N)", title="Force over time")
+    ax.legend(loc="upper right", fontsize=8)
+    _save(fig, path, plt)
+
+
+def _plot_penetration(t, depth_m, path: Path) -> None:
+    plt = _plots()
+    fig, ax = plt.subplots(figsize=(8, 3.6), dpi=110)
+    ax.plot(t, depth_m * 1e3, color="tab:purple", linewidth=0.8)
+    ax.set(xlabel="time (s)", ylabel="penetration (mm)", title="Tool penetration below the local model")
+    _save(fig, path, plt)
+
+
+def _plot_tool_path(t, tips, path: Path) -> None:
+    plt = _plots()
+    fig, axes = plt.subplots(1, 2, figsize=(9, 4.2), dpi=110)
+    for ax, (i, j), name in zip(axes, ((0, 2), (0, 1)), ("side (x-z)", "top (x-y)")):
+        points = ax.scatter(tips[:, i] * 1e3, tips[:, j] * 1e3, c=t, s=2, cmap="viridis")
+        ax.set(xlabel=f"{'xyz'[i]} (mm)", ylabel=f"{'xyz'[j]} (mm)", title=f"Tool path, {name}")
+        ax.set_aspect("equal", adjustable="datalim")
+    fig.colorbar(points, ax=axes, label="time (s)", shrink=0.8)
+    fig.savefig(path)
+    plt.close(fig)
+
+
+def _plot_rates(data: dict, topics: list[str], path: Path) -> None:
+    plt = _plots()
+    nodes = sorted({name for _, name, _ in data["diagnostics"]})
+    fig, axes = plt.subplots(3 if nodes else 1, 1, figsize=(8, 7.5 if nodes else 3.6), dpi=110, squeeze=False)
+    axes = axes[:, 0]
+    for topic in topics:
+        centres, rate = windowed_rate(data["times"][topic])
+        axes[0].plot(centres, rate, marker=".", label=topic)
+    axes[0].set(xlabel="time (s)", ylabel="messages/s", title="Rates on the wire (1 s windows)")
+    axes[0].legend(fontsize=7)
+    for name in nodes:
+        rows = [(t, kv) for t, n, kv in data["diagnostics"] if n == name and "rate_hz" in kv]
+        t = [r[0] for r in rows]
+        axes[1].plot(t, [float(r[1]["rate_hz"]) for r in rows], marker=".", label=name)
+        axes[2].plot(t, [float(r[1].get("jitter_p99_s", "nan")) * 1e3 for r in rows], marker=".", label=name)
+    if nodes:
+        axes[1].set(xlabel="time (s)", ylabel="loop rate (Hz)", title="Loop rates (diagnostics)", yscale="log")
+        axes[2].set(xlabel="time (s)", ylabel="period error p99 (ms)", title="Loop jitter (diagnostics)")
+        axes[1].legend(fontsize=7)
+    _save(fig, path, plt)
+
+
+def _plot_fig8(data: dict, path: Path) -> None:
+    from liver_sim.analysis import CONTACT_FORCE_N
+
+    plt = _plots()
+    (t1, f1), (t0, f0) = data["forces"]["local_model"], data["forces"]["without_local_model"]
+    n1, n0 = np.linalg.norm(f1, axis=1), np.linalg.norm(f0, axis=1)
+    newest = np.clip(np.searchsorted(t0, t1, side="right") - 1, 0, None)
+    contact = t1[(n1 > CONTACT_FORCE_N) & (n0[newest] > CONTACT_FORCE_N)] if len(t0) else t1[:0]
+    fig, axes = plt.subplots(2, 1, figsize=(8, 6), dpi=110)
+    for ax in axes:
+        ax.plot(t0, n0, color="tab:orange", linewidth=0.8, label="without local model (physics force held)")
+        ax.plot(t1, n1, color="tab:red", linewidth=0.8, label="with local model")
+        ax.set(xlabel="time (s)", ylabel="|force| (N)")
+    axes[0].set_title("Fig. 8: force sent to the device with and without the local model")
+    if contact.size:
+        middle = contact[len(contact) // 2]
+        axes[1].set_xlim(middle - 0.1, middle + 0.1)
+        axes[1].set_title("0.2 s where both are in contact")
+    axes[0].legend(loc="upper right", fontsize=8)
+    _save(fig, path, plt)
+
+
+def write_report(bag: Path, out: Path, progress=print) -> dict:
+    """Read the bag, write the PNGs and summary.json/.md into `out`; return the summary."""
+    from liver_sim.analysis import contact_fraction, largest_force_jump_n, rate_figures
+    from liver_sim.sessions.parameters import node_parameters
+    from msg_defs.topics import TOPICS
+
+    info = bag_info(bag)
+    params = node_parameters()
+    physics, bridge = params["liver_physics"], params["haptic_bridge"]
+    progress(f"reading {bag}: {info.message_count} messages on {len(info.topics)} topics")
+    data = session_arrays(bag, physics, bridge)
+    out.mkdir(parents=True, exist_ok=True)
+    figures = []
+    summary = {"bag": str(bag), "storage": info.storage, "duration_s": info.duration_ns * 1e-9,
+               "topics": {t: {"type": kind, "messages": n} for t, (kind, n) in sorted(info.topics.items())},
+               "recorder": info.custom_data}
+    nominal = {physics["tool_pose_topic"]: bridge["rate_hz"], bridge["force_topic"]: bridge["rate_hz"],
+               TOPICS["measured_cp"].name: bridge["rate_hz"], physics["nodes_topic"]: physics["rate_hz"],
+               physics["contact_plane_topic"]: physics["rate_hz"], physics["tool_wrench_topic"]: physics["rate_hz"]}
+    rate_topics = [t for t in nominal if t in data["times"]]
+    summary["rates_on_wire"] = {t: rate_figures(data["times"][t], nominal[t]) for t in rate_topics}
+    latest = {}
+    for _, name, kv in data["diagnostics"]:
+        latest[name] = kv
+    summary["diagnostics_last"] = latest
+    if data["forces"] or len(data["wrench"][0]):
+        _plot_force(data, out / "force.png")
+        figures.append("force.png")
+    summary["forces"] = {label: {"commands": len(f), "peak_n": float(np.linalg.norm(f, axis=1).max()),
+                                 "contact_fraction": contact_fraction(f),
+                                 "largest_jump_in_contact_n": largest_force_jump_n(f)}
+                         for label, (_, f) in data["forces"].items()}
+    wt, w = data["wrench"]
+    summary["physics_force_peak_n"] = float(np.linalg.norm(w, axis=1).max()) if len(wt) else None
+    tool_t, tips = data["tool"]
+    if len(tool_t):
+        model_t, models = data["local_models"]
+        depth = penetration_series(tool_t, tips, model_t, models, bridge["tool_radius_m"])
+        summary["penetration_max_m"] = float(depth.max())
+        summary["tool_path"] = {"samples": len(tips), "length_m": float(np.linalg.norm(np.diff(tips, axis=0),
+                                                                                        axis=1).sum()),
+                                "lower_m": tips.min(axis=0).tolist(), "upper_m": tips.max(axis=0).tolist()}
+        if len(model_t):
+            _plot_penetration(tool_t, depth, out / "penetration.png")
+            figures.append("penetration.png")
+        _plot_tool_path(tool_t, tips, out / "tool_path.png")
+        figures.append("tool_path.png")
+    if rate_topics or data["diagnostics"]:
+        _plot_rates(data, rate_topics, out / "loop_rates.png")
+        figures.append("loop_rates.png")
+    if {"local_model", "without_local_model"} <= set(data["forces"]):
+        with_lm = summary["forces"]["local_model"]["largest_jump_in_contact_n"]
+        without = summary["forces"]["without_local_model"]["largest_jump_in_contact_n"]
+        summary["fig8"] = {"largest_jump_with_local_model_n": with_lm, "largest_jump_without_local_model_n": without,
+                           "smoothness_ratio": without / with_lm if with_lm > 0 else None}
+        _plot_fig8(data, out / "fig8.png")
+        figures.append("fig8.png")
+    else:
+        summary["fig8"] = None
+    summary["figures"] = figures
+    (out / "summary.json").write_text(json.dumps(summary, indent=2, default=float) + "\n")
+    (out / "summary.md").write_text(_markdown(summary))
+    progress(f"wrote {out}/summary.json, summary.md, {', '.join(figures)}")
+    return summary
+
+
+def _markdown(s: dict) -> str:
+    ms = lambda v: f"{v * 1e3:.2f} ms" if v is not None else "n/a"  # noqa: E731
+    lines = [f"# Session {s['bag']}", "", f"- {s['storage']} bag, {s['duration_s']:.2f} s, "
+             f"{sum(t['messages'] for t in s['topics'].values())} messages", "", "| topic | type | messages |",
+             "|---|---|---|"]
+    lines += [f"| `{t}` | `{v['type']}` | {v['messages']} |" for t, v in s["topics"].items()]
+    lines += ["", "## Forces", ""]
+    for label, f in s["forces"].items():
+        lines.append(f"- command ({label.replace('_', ' ')}): {f['commands']} commands, peak {f['peak_n']:.3f} N, "
+                     f"in contact {100 * f['contact_fraction']:.0f} %, largest change between consecutive commands "
+                     f"in contact {f['largest_jump_in_contact_n']:.4f} N")
+    if s["physics_force_peak_n"] is not None:
+        lines.append(f"- physics contact force peak: {s['physics_force_peak_n']:.3f} N")
+    if "penetration_max_m" in s:
+        lines.append(f"- deepest penetration below the local model: {s['penetration_max_m'] * 1e3:.2f} mm; "
+                     f"tool path {s['tool_path']['length_m'] * 1e3:.0f} mm long")
+    if s["fig8"]:
+        f8 = s["fig8"]
+        ratio = f"{f8['smoothness_ratio']:.1f}x" if f8["smoothness_ratio"] else "n/a"
+        lines += ["", "## Fig. 8: with and without the local model", "",
+                  f"- largest force change between consecutive 1 ms commands in steady contact: "
+                  f"{f8['largest_jump_with_local_model_n']:.4f} N with, {f8['largest_jump_without_local_model_n']:.4f} N "
+                  f"without the local model (smoothness ratio {ratio})"]
+    lines += ["", "## Rates", "", "| topic | rate | period error p50 | p99 | largest gap |", "|---|---|---|---|---|"]
+    for t, r in s["rates_on_wire"].items():
+        lines.append(f"| `{t}` | {r['rate_hz']:.1f} Hz | {ms(r['period_error_p50_s'])} | "
+                     f"{ms(r['period_error_p99_s'])} | {ms(r['max_gap_s'])} |")
+    if s["diagnostics_last"]:
+        lines += ["", "Loops as the nodes measured them (last /diagnostics):", ""]
+        for name, kv in sorted(s["diagnostics_last"].items()):
+            lines.append(f"- {name}: {kv.get('rate_hz', '?')} Hz, period error p99 {kv.get('jitter_p99_s', '?')} s, "
+                         f"overruns {kv.get('overruns', '?')}")
+    lines += ["", "Figures: " + ", ".join(s["figures"]), ""]
+    return "\n".join(lines)

@@ -1,0 +1,194 @@
+"""`liver-sim resimulate`: the physics and the haptic bridge re-run offline, as fast as the machine
+allows, on the tool poses of a recorded session, with changed parameters if asked.
+
+Simulation time is the recorded poses' stamps.  Physics frame k starts at t₀ + k/rate_hz (t₀: the
+first pose) with the newest pose stamped before it (none when older than tool_pose_timeout_s or
+outside the workspace, as in the node) and is published at its end, stamped t₀ + model time.  The
+bridge ticks once per recorded pose with the newest published frame (BridgeTick, the node's own
+tick), and its command is stamped with the pose; `--compare` adds the Fig. 8 baseline bridge
+(local_model none) on the same poses.  Nothing depends on the wall clock, and the outputs' CDR
+padding is zeroed (canonical_cdr), so the same bag and parameters give byte-identical messages.  Messages are built by msg_defs.conversions and
+serialized by rclpy's serializer (no node, no context).
+"""
+from __future__ import annotations
+
+import time
+from collections import deque
+from pathlib import Path
+
+import numpy as np
+
+from liver_sim.sessions.bag import BagError, BagWriter, canonical_cdr, read_messages
+from liver_sim.sessions.parameters import node_parameters
+from msg_defs.topics import BASELINE_FORCE_TOPIC
+
+
+def _ns(seconds: float) -> int:
+    """Nanoseconds of a time as its message stamp carries it."""
+    from msg_defs.conversions import stamp_from_seconds
+
+    stamp = stamp_from_seconds(seconds)
+    return stamp.sec * 1_000_000_000 + stamp.nanosec
+
+
+class _Session:
+    """The offline loop; `emit(topic, msg_class, time_s, data)` receives every output message in time order."""
+
+    def __init__(self, physics: dict, bridge: dict, emit, progress, compare: bool = False):
+        from haptic_bridge.tick import BridgeTick
+        from liver_sim.nodes.physics_node import build_model
+
+        self.p, self.b = physics, bridge
+        self.model = build_model(physics)
+        self.tick = BridgeTick(bridge)
+        #: the Fig. 8 baseline: a second bridge holding the physics wrench (local_model: none)
+        self.baseline = BridgeTick({**bridge, "local_model": "none"}) if compare and bridge["local_model"] != "none" \
+            else None
+        lower, upper = self.model.mesh.bounds
+        self.workspace = (lower - physics["workspace_margin_m"], upper + physics["workspace_margin_m"])
+        self.marker_every = max(1, round(physics["rate_hz"] / physics["marker_rate_hz"]))
+        self.emit, self.progress = emit, progress
+        self.frames = self.commands = self.refused = 0
+        self.peak_force_n = 0.0
+
+    def _tool_pose(self, message):
+        """(ToolPose for the physics, tip for the bridge) of a recorded pose; (None, None) when refused."""
+        from liver_sim.physics.contact import ToolPose
+        from msg_defs.conversions import pose_to_arrays
+
+        try:
+            position, orientation = pose_to_arrays(message.pose)
+        except ValueError:
+            return None, None
+        if np.any(position < self.workspace[0]) or np.any(position > self.workspace[1]):
+            return None, position
+        return ToolPose(position, tuple(orientation)), position
+
+    def _frame(self, t0: float, pose):
+        """Step one frame; return (publish time s, messages, (local model, lifetime), contact force N)."""
+        from rclpy.serialization import serialize_message
+
+        from msg_defs import conversions
+
+        result = self.model.step_frame(pose)
+        t = t0 + self.model.time_s
+        stamp, frame_id = conversions.stamp_from_seconds(t), self.p["frame_id"]
+        marker = conversions.local_model_marker(result.local_model, stamp, frame_id, self.p["local_model_lifetime_s"])
+        wrench = conversions.wrench_stamped(result.tool_force_n, stamp, frame_id)
+        messages = [(self.p["nodes_topic"], "nodes",
+                     serialize_message(conversions.nodes_to_pointcloud2(self.model.positions, stamp, frame_id))),
+                    (self.p["contact_plane_topic"], "contact_plane", serialize_message(marker)),
+                    (self.p["tool_wrench_topic"], "tool_wrench", serialize_message(wrench))]
+        if self.frames % self.marker_every == 0:
+            messages.append((self.p["marker_topic"], "marker", conversions.skin_marker_serialized(
+                self.model.positions, self.model.mesh.skin, stamp, frame_id)))
+        self.frames += 1
+        model, lifetime = conversions.marker_to_local_model(marker)
+        return (t, messages, (model, lifetime if lifetime > 0.0 else self.b["lifetime_s"]),
+                conversions.force_from_message("wrench_stamped", wrench))
+
+    def run(self, poses: list) -> None:
+        """`poses`: [(time s, PoseStamped, recorded bytes)] in time order."""
+        from rclpy.serialization import serialize_message
+
+        from msg_defs import conversions
+
+        t0 = poses[0][0]
+        self.emit(self.p["surface_topic"], "surface", t0, serialize_message(
+            conversions.skin_mesh_msg(self.model.mesh.skin, self.model.mesh.points)))
+        physics_pose, physics_pose_time = None, -np.inf
+        tip, tip_time = None, -np.inf
+        pending = deque()
+        local, held, source_time = None, None, -np.inf
+        next_progress = t0 + 1.0
+        for t, message, data in poses:
+            while t0 + self.model.time_s < t:  # frames that start before this pose see the poses before it
+                start = t0 + self.model.time_s
+                fresh = start - physics_pose_time <= self.p["tool_pose_timeout_s"]
+                pending.append(self._frame(t0, physics_pose if fresh else None))
+            while pending and pending[0][0] <= t:
+                source_time, messages, local, held = pending.popleft()
+                for topic, key, frame_data in messages:
+                    self.emit(topic, key, source_time, frame_data)
+            physics_pose, pose_tip = self._tool_pose(message)
+            physics_pose_time = t
+            self.refused += physics_pose is None
+            if pose_tip is not None:
+                tip, tip_time = pose_tip, t
+            self.emit(self.p["tool_pose_topic"], "tool_pose", t, data)
+            command = self.tick.step(t, tip, t - tip_time, held if self.b["local_model"] == "none" else local,
+                                     t - source_time)
+            self.peak_force_n = max(self.peak_force_n, float(np.linalg.norm(command)))
+            self.emit(self.b["force_topic"], "servo_cf", t, serialize_message(conversions.force_message(
+                self.b["force_output"], command, message.header.stamp, self.b["device_frame_id"])))
+            if self.baseline is not None:
+                command = self.baseline.step(t, tip, t - tip_time, held, t - source_time)
+                self.emit(BASELINE_FORCE_TOPIC, "servo_cf", t, serialize_message(conversions.force_message(
+                    self.b["force_output"], command, message.header.stamp, self.b["device_frame_id"])))
+            self.commands += 1
+            if t >= next_progress:
+                next_progress += 1.0
+                self.progress(f"  simulated {t - t0:6.1f} / {poses[-1][0] - t0:.1f} s")
+
+
+def recorded_poses(bag: Path, topic: str) -> list:
+    """[(stamp s, PoseStamped, bytes)] of the bag's `topic`, ordered by stamp (stable)."""
+    from geometry_msgs.msg import PoseStamped
+    from rclpy.serialization import deserialize_message
+
+    from msg_defs.conversions import seconds_from_stamp
+
+    poses = []
+    for recorded in read_messages(bag, [topic]):
+        try:
+            message = deserialize_message(recorded.data, PoseStamped)
+        except Exception as exc:  # rclpy raises its own error types on bad CDR
+            raise BagError(bag, f"a {topic} message is not a geometry_msgs/PoseStamped ({exc})") from None
+        poses.append((seconds_from_stamp(message.header.stamp), message, recorded.data))
+    if not poses:
+        raise BagError(bag, f"holds no {topic} messages to re-simulate")
+    poses.sort(key=lambda item: item[0])
+    return poses
+
+
+def resimulate(bag: Path, out: Path, overrides=(), storage: str = "mcap", progress=print,
+               compare: bool = False) -> dict:
+    """Re-run physics and bridge on the tool poses of `bag` with parameter `overrides` ('name:=value');
+    write the outputs (and the input poses) to a new bag `out`; return a summary.  With `compare`, a
+    second bridge without local model writes BASELINE_FORCE_TOPIC from the same inputs (Fig. 8)."""
+    from liver_sim.sessions.record import known_topics, type_name
+    from msg_defs.conversions import force_message_type
+    from msg_defs.topics import TOPICS
+
+    params = node_parameters(overrides)
+    physics, bridge = params["liver_physics"], params["haptic_bridge"]
+    poses = recorded_poses(bag, physics["tool_pose_topic"])
+    known = known_topics()
+    types = {key: (type_name(topic.type) if topic.type else None, known[topic.name][1])
+             for key, topic in TOPICS.items()}
+    types["servo_cf"] = (type_name(force_message_type(bridge["force_output"])), types["servo_cf"][1])
+    progress(f"re-simulating {len(poses)} tool poses ({poses[-1][0] - poses[0][0]:.2f} s) of {bag}"
+             + (f" with {' '.join(overrides)}" if overrides else ""))
+    session = _Session(physics, bridge, None, progress, compare)  # refuses bad parameters before the bag exists
+    started = time.perf_counter()
+    with BagWriter(out, storage) as writer:
+        writer.set_custom_data("resimulated_from", str(bag))
+        writer.set_custom_data("parameter_overrides", " ".join(overrides))
+
+        def emit(topic, key, t, data):
+            msgtype, qos = types[key]
+            writer.write(topic, msgtype, _ns(t), data if key == "tool_pose" else canonical_cdr(data, msgtype), qos)
+
+        session.emit = emit
+        session.run(poses)
+        counts = dict(writer.counts)
+    wall = time.perf_counter() - started
+    simulated = poses[-1][0] - poses[0][0]
+    summary = {"bag": str(bag), "out": str(out), "overrides": list(overrides), "poses": len(poses),
+               "refused_poses": session.refused, "frames": session.frames, "commands": session.commands,
+               "divergences": session.model.divergences, "simulated_s": simulated, "wall_s": wall,
+               "speed_vs_real_time": simulated / wall if wall > 0 else None,
+               "peak_command_n": session.peak_force_n, "counts": counts}
+    progress(f"wrote {out}: {session.frames} physics frames, {session.commands} force commands "
+             f"(peak {session.peak_force_n:.3f} N), {simulated:.2f} s simulated in {wall:.2f} s")
+    return summary

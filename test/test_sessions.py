@@ -1,0 +1,290 @@
+"""Sessions: recording real processes on loopback (each test in its own ROS domain), reading the bags
+back with the rosbags library, replay, deterministic re-simulation, reports, refused bags."""
+import json
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from rclpy.serialization import serialize_message
+
+from liver_sim.analysis import largest_force_jump_n
+from liver_sim.cli import main
+from liver_sim.processes import cli_command_line
+from liver_sim.sessions.bag import BagWriter, QosSpec, read_messages
+from liver_sim.sessions.parameters import node_parameters
+from liver_sim.sessions.report import write_report
+from liver_sim.sessions.resimulate import resimulate
+from liver_sim.tool_scripts import ScriptSettings, make_script
+from msg_defs import conversions
+
+PUBLISHER = Path(__file__).with_name("session_publisher.py")
+POSE = "geometry_msgs/msg/PoseStamped"
+WRENCH = "geometry_msgs/msg/WrenchStamped"
+PNG = b"\x89PNG\r\n\x1a\n"
+
+
+def rosbags_read(path):
+    """{topic: [(msgtype, log time ns, deserialized message)]} read by rosbags alone."""
+    from rosbags.rosbag2 import Reader
+    from rosbags.typesys import Stores, get_typestore
+
+    store = get_typestore(Stores.ROS2_JAZZY)
+    read = {}
+    with Reader(path) as reader:
+        for connection, timestamp, data in reader.messages():
+            read.setdefault(connection.topic, []).append(
+                (connection.msgtype, timestamp, store.deserialize_cdr(data, connection.msgtype)))
+    return read
+
+
+def start_recorder(bag, ros_env, storage):
+    process = subprocess.Popen(cli_command_line("record", "--out", str(bag), "--storage", storage),
+                               env=ros_env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    return process
+
+
+def stop(process, sig):
+    process.send_signal(sig)
+    output, _ = process.communicate(timeout=30)
+    return process.returncode, output
+
+
+def test_recorded_bag_holds_every_published_message_read_back_by_rosbags(ros_env, tmp_path):
+    bag = tmp_path / "session"
+    recorder = start_recorder(bag, ros_env, "mcap")
+    try:
+        published = subprocess.run([sys.executable, str(PUBLISHER), "2000"], env=ros_env, capture_output=True,
+                                   text=True, timeout=120, check=True)
+    finally:
+        status, output = stop(recorder, signal.SIGINT)
+    assert status == 0, output
+    sent = json.loads(published.stdout.splitlines()[-1])
+    read = rosbags_read(bag)
+    assert {topic: len(messages) for topic, messages in read.items()} == sent
+    assert {read[t][0][0] for t in read} == {WRENCH, POSE, "sensor_msgs/msg/PointCloud2"}
+    forces = [m.wrench.force.z for _, _, m in read["/phantom/servo_cf"]]
+    np.testing.assert_allclose(forces, np.arange(2000) * 1e-4)  # every command, in order
+    times = [t for _, t, _ in read["/tool/pose"]]
+    assert times == sorted(times)  # logged at their reception
+    assert read["/liver/nodes"][0][2].width == read["/liver/nodes"][-1][2].width > 100
+
+
+def test_a_recording_stopped_mid_stream_by_sigterm_is_a_complete_sqlite3_bag(ros_env, tmp_path):
+    bag = tmp_path / "session"
+    recorder = start_recorder(bag, ros_env, "sqlite3")
+    publisher = subprocess.Popen([sys.executable, str(PUBLISHER), "5000"], env=ros_env, stdout=subprocess.PIPE,
+                                 text=True)
+    try:
+        assert publisher.stdout.readline().strip() == "publishing"
+        time.sleep(1.0)
+        status, output = stop(recorder, signal.SIGTERM)
+    finally:
+        publisher.kill()
+        publisher.wait()
+    assert status == 0, output
+    assert (bag / "metadata.yaml").is_file()
+    read = rosbags_read(bag)
+    written = {t: len(m) for t, m in read.items()}
+    assert 0 < written["/phantom/servo_cf"] < 5000
+    from rosbags.rosbag2 import Reader
+    with Reader(bag) as reader:
+        assert {c.topic: c.msgcount for c in reader.connections} == written  # metadata.yaml agrees
+
+
+def pose_bag(path, duration_s=1.6, depth_m=0.01, storage="mcap"):
+    """A bag of /tool/pose at 1 kHz pressing the default liver (press and release)."""
+    script = make_script("press_release", ScriptSettings(depth_m=depth_m, approach_s=0.3, press_s=0.5, hold_s=0.3,
+                                                          withdraw_s=0.2, rest_s=0.2))
+    with BagWriter(path, storage) as writer:
+        for k in range(int(duration_s * 1000)):
+            t = 50.0 + k * 1e-3
+            message = conversions.pose_stamped(script.position_at(k * 1e-3), (0, 0, 0, 1), t, "liver")
+            writer.write("/tool/pose", POSE, round(t * 1e9), serialize_message(message), QosSpec(False, False, 1))
+    return path
+
+
+def messages(path):
+    return [(m.topic, m.msgtype, m.timestamp_ns, m.data) for m in read_messages(path)]
+
+
+def test_resimulation_is_deterministic_and_follows_changed_parameters(tmp_path):
+    source = pose_bag(tmp_path / "poses")
+    first = resimulate(source, tmp_path / "a", progress=lambda line: None, compare=True)
+    second = resimulate(source, tmp_path / "b", storage="sqlite3", progress=lambda line: None, compare=True)
+    stiffer = resimulate(source, tmp_path / "c", ["contact_stiffness_n_per_m:=900"], progress=lambda line: None)
+    assert messages(tmp_path / "a") == messages(tmp_path / "b")  # byte-identical, whatever the storage
+    read = rosbags_read(tmp_path / "a")
+    assert {t: read[t][0][0] for t in read} == {
+        "/tool/pose": POSE, "/phantom/servo_cf": WRENCH, "/liver/tool_wrench": WRENCH,
+        "/liver/nodes": "sensor_msgs/msg/PointCloud2", "/liver/contact_plane": "visualization_msgs/msg/Marker",
+        "/liver/marker": "visualization_msgs/msg/Marker", "/liver/surface": "shape_msgs/msg/Mesh",
+        "/phantom/servo_cf_without_local_model": WRENCH}
+    assert len(read["/tool/pose"]) == len(read["/phantom/servo_cf"]) == first["commands"] == 1600
+    assert len(read["/phantom/servo_cf_without_local_model"]) == 1600
+    held = max(m.wrench.force.z for _, _, m in read["/phantom/servo_cf_without_local_model"])
+    assert held == pytest.approx(max(m.wrench.force.z for _, _, m in read["/liver/tool_wrench"]), abs=0.02)
+    assert first["frames"] == 240 and first["divergences"] == 0
+    assert first["peak_command_n"] == second["peak_command_n"] > 0.1  # the press is felt
+    physics = lambda result: [m.wrench.force.z for _, _, m in rosbags_read(result)["/liver/tool_wrench"]]  # noqa
+    assert max(physics(tmp_path / "c")) > max(physics(tmp_path / "a"))  # a stiffer contact pushes back harder
+    stamps = [m.header.stamp.sec + m.header.stamp.nanosec * 1e-9 for _, _, m in read["/liver/tool_wrench"]]
+    np.testing.assert_allclose(np.diff(stamps), 1 / 150, atol=1e-8)  # simulation time at the frame rate
+    assert stiffer["overrides"] == ["contact_stiffness_n_per_m:=900"]
+
+
+def test_parameter_overrides_are_checked_as_the_nodes_check_them():
+    both = node_parameters(["tool_radius_m:=0.01"])
+    assert both["liver_physics"]["tool_radius_m"] == both["haptic_bridge"]["tool_radius_m"] == 0.01
+    one = node_parameters(["haptic_bridge.rate_hz:=500"])
+    assert one["haptic_bridge"]["rate_hz"] == 500.0 and one["liver_physics"]["rate_hz"] == 150.0
+    for override, named in (("contact_stiffness_n_per_m:=-1", "contact_stiffness_n_per_m"),
+                            ("integrator:=rk4", "integrator"), ("substeps:=many", "substeps"),
+                            ("no_such_parameter:=1", "no_such_parameter"), ("rate_hz", "name:=value"),
+                            ("phantom.rate_hz:=1", "phantom")):
+        with pytest.raises(ValueError, match=named):
+            node_parameters([override])
+
+
+def test_replay_republishes_the_recorded_messages_in_order(ros_env, tmp_path, ros_domain_id):
+    import rclpy
+    from geometry_msgs.msg import WrenchStamped
+    from rclpy.qos import QoSProfile
+
+    bag = tmp_path / "wrenches"
+    sent = []
+    with BagWriter(bag) as writer:
+        for k in range(300):
+            data = serialize_message(conversions.wrench_stamped([0.0, 0.0, 0.01 * k], 10.0 + k / 150, "liver"))
+            writer.write("/liver/tool_wrench", WRENCH, round((10.0 + k / 150) * 1e9), data)
+            sent.append(data)
+        writer.write("/tool/pose", POSE, round(20e9), serialize_message(
+            conversions.pose_stamped([0, 0, 0], (0, 0, 0, 1), 20.0, "liver")))
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    received = []
+    try:
+        node = rclpy.create_node("replay_listener", context=context)
+        node.create_subscription(WrenchStamped, "/liver/tool_wrench", received.append, QoSProfile(depth=1000),
+                                 raw=True)
+        replay = subprocess.Popen(cli_command_line("replay", str(bag), "--rate", "4", "--delay", "3",
+                                                   "--topics", "/liver/tool_wrench"),
+                                  env=ros_env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        executor = rclpy.executors.SingleThreadedExecutor(context=context)
+        executor.add_node(node)
+        deadline = time.monotonic() + 60
+        while replay.poll() is None and time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=0.05)
+        for _ in range(20):
+            executor.spin_once(timeout_sec=0.05)
+        output = replay.communicate(timeout=10)[0]
+    finally:
+        context.try_shutdown()
+    assert replay.returncode == 0, output
+    assert received == sent
+    assert "/liver/tool_wrench 300" in output
+
+
+def test_report_plots_the_session_and_the_fig8_comparison(tmp_path):
+    bag = tmp_path / "session"
+    t = np.arange(3000) * 1e-3
+    smooth = np.clip(np.sin(np.pi * t / 3.0), 0, None)[:, None] * [0.0, 0.0, 1.0]     # rendered at 1 kHz
+    held = smooth[(np.floor(t * 150) / 150 * 1000).astype(int)]                       # held between 150 Hz frames
+    plane = conversions.local_model_marker(type("M", (), {"valid": True, "kind": "plane", "point": np.zeros(3),
+                                                          "normal": np.array([0, 0, 1.0])})(), 0.0, "liver", 0.05)
+    with BagWriter(bag) as writer:
+        writer.write("/liver/contact_plane", "visualization_msgs/msg/Marker", 1, serialize_message(plane))
+        for k, tk in enumerate(t):
+            ns = round((1.0 + tk) * 1e9)
+            tip = [0.0, 0.0, 0.015 - 0.004 * smooth[k, 2]]
+            writer.write("/tool/pose", POSE, ns, serialize_message(conversions.pose_stamped(tip, (0, 0, 0, 1), tk,
+                                                                                              "liver")))
+            writer.write("/phantom/servo_cf", WRENCH, ns, serialize_message(conversions.wrench_stamped(
+                smooth[k], tk, "phantom_base")))
+            writer.write("/phantom/servo_cf_without_local_model", WRENCH, ns, serialize_message(
+                conversions.wrench_stamped(held[k], tk, "phantom_base")))
+    summary = write_report(bag, tmp_path / "report", progress=lambda line: None)
+    for name in ("force.png", "penetration.png", "tool_path.png", "loop_rates.png", "fig8.png"):
+        assert (tmp_path / "report" / name).read_bytes()[:8] == PNG
+    fig8 = summary["fig8"]
+    assert fig8["largest_jump_with_local_model_n"] == pytest.approx(largest_force_jump_n(smooth))
+    assert fig8["largest_jump_without_local_model_n"] == pytest.approx(largest_force_jump_n(held))
+    assert fig8["smoothness_ratio"] > 5.0
+    assert summary["penetration_max_m"] == pytest.approx(0.004, abs=1e-5)
+    assert summary["topics"]["/phantom/servo_cf"]["messages"] == 3000
+    assert json.loads((tmp_path / "report" / "summary.json").read_text())["fig8"] == fig8
+    assert "Fig. 8" in (tmp_path / "report" / "summary.md").read_text()
+
+
+def damage(kind, bag):
+    if kind == "missing":
+        shutil.rmtree(bag)
+    elif kind == "no metadata":
+        (bag / "metadata.yaml").unlink()
+    elif kind == "truncated storage":
+        data = next(bag.glob("*.mcap"))
+        data.write_bytes(data.read_bytes()[:data.stat().st_size // 2])
+    elif kind == "garbage storage":
+        data = next(bag.glob("*.mcap"))
+        raw = bytearray(data.read_bytes())
+        raw[len(raw) // 3:len(raw) // 3 + 4000] = b"\xa5" * 4000
+        data.write_bytes(bytes(raw))
+    elif kind == "metadata promises more":
+        meta = bag / "metadata.yaml"
+        meta.write_text(meta.read_text().replace("message_count: 1600", "message_count: 1700"))
+    elif kind == "not a bag":
+        shutil.rmtree(bag)
+        bag.write_text("hello")
+
+
+@pytest.mark.parametrize("kind, says", [("missing", "does not exist"), ("no metadata", "no metadata.yaml"),
+                                        ("truncated storage", "unreadable"), ("garbage storage", ""),
+                                        ("metadata promises more", "truncated"), ("not a bag", "not a bag folder")])
+@pytest.mark.parametrize("command", ["report", "resimulate", "replay"])
+def test_a_damaged_bag_is_refused_with_a_clear_error(tmp_path, capsys, kind, says, command):
+    bag = pose_bag(tmp_path / "poses")
+    damage(kind, bag)
+    status = main([command, str(bag), "--out", str(tmp_path / "out")] if command != "replay" else [command, str(bag)])
+    error = capsys.readouterr().err
+    assert status == 2
+    assert error.startswith(f"liver-sim: error: {bag}: ") and says in error
+    assert not (tmp_path / "out").exists() or command == "report"
+
+
+def test_demo_records_its_run_and_the_report_reads_it(ros_domain_id, tmp_path):
+    from liver_sim.demo import run_demo
+
+    summary = run_demo(tmp_path, duration_s=8.0, progress=lambda line: None, record_storage="mcap")
+    bag = tmp_path / "session"
+    read = rosbags_read(bag)
+    assert {"/liver/nodes", "/liver/surface", "/liver/contact_plane", "/liver/tool_wrench", "/tool/pose",
+            "/phantom/measured_cp", "/phantom/servo_cf", "/diagnostics"} <= set(read)
+    assert "/liver/marker" not in read  # only with --marker
+    # the recorder starts before the nodes and stops after them: it holds every frame the demo saw
+    assert len(read["/liver/nodes"]) >= summary["physics"]["samples"]
+    assert (tmp_path / "logs" / "recorder.log").read_text().startswith("recording to")
+    report = write_report(bag, tmp_path / "report", progress=lambda line: None)
+    assert report["topics"]["/liver/nodes"]["messages"] == len(read["/liver/nodes"])
+    assert {"force.png", "tool_path.png", "loop_rates.png"} <= set(report["figures"])
+    assert report["diagnostics_last"]["haptic_bridge: loop"]["rate_hz"]
+
+
+def test_recorder_follows_the_published_type_and_records_other_topics(ros_env, tmp_path):
+    bag = tmp_path / "session"
+    recorder = subprocess.Popen(cli_command_line("record", "--out", str(bag), "--topics", "/phantom/servo_cf",
+                                                 "/custom/topic"),
+                                env=ros_env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        published = subprocess.run([sys.executable, str(PUBLISHER), "300", "other"], env=ros_env,
+                                   capture_output=True, text=True, timeout=120, check=True)
+    finally:
+        status, output = stop(recorder, signal.SIGINT)
+    assert status == 0, output
+    read = rosbags_read(bag)
+    assert {t: len(m) for t, m in read.items()} == json.loads(published.stdout.splitlines()[-1])
+    assert read["/phantom/servo_cf"][0][0] == "geometry_msgs/msg/Vector3"  # a bridge with force_output: vector3
+    assert [m.data for _, _, m in read["/custom/topic"]] == [str(k) for k in range(300)]
