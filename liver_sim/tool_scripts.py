@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 #: Every script name, for parameter choices.
-SCRIPT_NAMES = ("press", "press_release", "slide", "withdraw", "press_slide_release", "hold")
+SCRIPT_NAMES = ("press", "press_release", "slide", "withdraw", "press_slide_release", "hold", "pull")
 
 
 @dataclass(frozen=True)
@@ -28,6 +28,7 @@ class ScriptSettings:
     depth_m: float = 0.01
     clearance_m: float = 0.01
     slide_m: float = 0.03
+    pull_m: float = 0.05
     approach_s: float = 0.5
     press_s: float = 1.0
     hold_s: float = 0.5
@@ -80,7 +81,7 @@ def _checked(settings: ScriptSettings) -> np.ndarray:
     anchor = np.array(settings.anchor_m, dtype=np.float64)
     if anchor.shape != (3,) or not np.isfinite(anchor).all():
         raise ValueError(f"parameter anchor_m must be a finite [x, y, z] (m), got {settings.anchor_m!r}")
-    for name in ("tool_radius_m", "depth_m", "clearance_m", "slide_m", "approach_s", "press_s", "hold_s",
+    for name in ("tool_radius_m", "depth_m", "clearance_m", "slide_m", "pull_m", "approach_s", "press_s", "hold_s",
                  "slide_s", "withdraw_s", "rest_s", "start_delay_s"):
         value = getattr(settings, name)
         if not (math.isfinite(value) and value >= 0.0):
@@ -97,7 +98,9 @@ def make_script(name: str, settings: ScriptSettings = ScriptSettings()) -> Scrip
     - slide: press, hold, slide `slide_m` along +x and back at depth, withdraw, rest;
     - press_slide_release: press, hold, slide `slide_m` along +x, withdraw there, then return
       above the start during `rest_s` (so it loops smoothly);
-    - withdraw: from depth back to clearance, rest.
+    - withdraw: from depth back to clearance, rest;
+    - pull: press, hold, then pull `pull_m` back along +z during `slide_s` and stay there (a grasped
+      tool tearing the tissue: see the physics node's `tool_mode: grasp`).
 
     Unknown names raise ValueError naming the parameter `script`; `loop` with a script that
     does not end where it starts raises ValueError naming `loop_script`.
@@ -117,6 +120,7 @@ def make_script(name: str, settings: ScriptSettings = ScriptSettings()) -> Scrip
         "press_slide_release": (up, press + [(s.slide_s, deep + along), (s.withdraw_s, up + along),
                                              (s.rest_s, up)]),
         "withdraw": (deep, [(s.withdraw_s, up), (s.rest_s, up)]),
+        "pull": (up, press + [(s.slide_s, deep + [0.0, 0.0, s.pull_m]), (s.rest_s, deep + [0.0, 0.0, s.pull_m])]),
     }
     if name not in legs:
         raise ValueError(f"parameter script={name!r} is not a script; one of {', '.join(SCRIPT_NAMES)}")

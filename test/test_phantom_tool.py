@@ -30,7 +30,7 @@ def test_default_anchor_is_the_default_livers_dome():
     np.testing.assert_allclose(ScriptSettings().anchor_m, skin[np.argmax(skin[:, 2])], atol=1e-6)
 
 
-@pytest.mark.parametrize("name", ["press", "press_release", "slide", "press_slide_release"])
+@pytest.mark.parametrize("name", ["press", "press_release", "slide", "press_slide_release", "pull"])
 def test_pressing_scripts_start_above_contact_and_reach_depth(name):
     times, points = sampled(make_script(name, SETTINGS))
     np.testing.assert_allclose(points[0], [0.01, -0.02, UP_Z])
@@ -95,7 +95,18 @@ def test_unknown_script_is_refused_by_parameter_name():
         make_script("poke", SETTINGS)
 
 
-@pytest.mark.parametrize("name", ["press", "withdraw"])
+def test_pull_presses_then_pulls_back_along_z_and_stays():
+    settings = replace(SETTINGS, pull_m=0.04)
+    trajectory = make_script("pull", settings)
+    times, points = sampled(trajectory)
+    pulled = DEEP_Z + 0.04
+    assert points[:, 2].max() == pytest.approx(pulled)
+    assert times[np.argmax(points[:, 2])] > times[np.argmin(points[:, 2])], "the pull follows the press"
+    assert trajectory.position_at(trajectory.duration_s + 5.0)[2] == pytest.approx(pulled)
+    np.testing.assert_allclose(points[:, :2], [[0.01, -0.02]] * len(points))
+
+
+@pytest.mark.parametrize("name", ["press", "withdraw", "pull"])
 def test_scripts_that_do_not_end_at_their_start_refuse_to_loop(name):
     with pytest.raises(ValueError, match="loop_script"):
         make_script(name, replace(SETTINGS, loop=True))

@@ -39,11 +39,12 @@ SCRIPT_PARAMETERS = {
     "depth_m": Param(SCRIPT.depth_m, "press depth of the tool below the rest surface (m)", 0.0, 0.2),
     "clearance_m": Param(SCRIPT.clearance_m, "gap between tool and rest surface when up (m)", 0.0, 0.5),
     "slide_m": Param(SCRIPT.slide_m, "slide length along +x at depth (m)", 0.0, 0.5),
+    "pull_m": Param(SCRIPT.pull_m, "pull length back along +z after the hold, script pull (m)", 0.0, 0.5),
     "start_delay_s": Param(SCRIPT.start_delay_s, "wait at the start point before the script (s)", *_SEGMENT_S),
     "approach_s": Param(SCRIPT.approach_s, "clearance → contact (s)", *_SEGMENT_S),
     "press_s": Param(SCRIPT.press_s, "contact → depth (s)", *_SEGMENT_S),
     "hold_s": Param(SCRIPT.hold_s, "hold at depth (s)", *_SEGMENT_S),
-    "slide_s": Param(SCRIPT.slide_s, "each slide along x (s)", *_SEGMENT_S),
+    "slide_s": Param(SCRIPT.slide_s, "each slide along x, or the pull (s)", *_SEGMENT_S),
     "withdraw_s": Param(SCRIPT.withdraw_s, "depth → clearance (s)", *_SEGMENT_S),
     "rest_s": Param(SCRIPT.rest_s, "rest at clearance after the release (s)", *_SEGMENT_S),
     "loop_script": Param(False, "repeat the script (press_release, slide, press_slide_release, hold)"),
@@ -96,8 +97,9 @@ def script_from(values: dict) -> ScriptedTrajectory:
     """The script named by the SCRIPT_PARAMETERS values."""
     settings = ScriptSettings(
         anchor_m=tuple(vector_parameter(values, "anchor_m", 3)), loop=values["loop_script"],
-        **{name: values[name] for name in ("tool_radius_m", "depth_m", "clearance_m", "slide_m", "start_delay_s",
-                                           "approach_s", "press_s", "hold_s", "slide_s", "withdraw_s", "rest_s")})
+        **{name: values[name] for name in ("tool_radius_m", "depth_m", "clearance_m", "slide_m", "pull_m",
+                                           "start_delay_s", "approach_s", "press_s", "hold_s", "slide_s",
+                                           "withdraw_s", "rest_s")})
     return make_script(values["script"], settings)
 
 
