@@ -53,9 +53,17 @@ def dihedral_angles_deg(points: np.ndarray, tets: np.ndarray) -> np.ndarray:
 
 
 def unique_edges(cells: np.ndarray, local_edges: np.ndarray) -> np.ndarray:
-    """Sorted unique undirected edges (E, 2) of the given cells."""
+    """Sorted unique undirected edges (E, 2) of the given cells, in lexicographic order."""
     edges = np.sort(cells[:, local_edges].reshape(-1, 2), axis=1)
-    return np.unique(edges, axis=0)
+    n = int(edges.max()) + 1 if len(edges) else 1
+    keys = np.unique(edges[:, 0] * n + edges[:, 1])  # integer keys: far faster than np.unique(axis=0)
+    return np.stack([keys // n, keys % n], axis=1)
+
+
+def face_keys(faces: np.ndarray, node_count: int) -> np.ndarray:
+    """One int64 key per unordered node triple (F, 3), increasing with the sorted triple (nodes < node_count)."""
+    s = np.sort(faces, axis=1)
+    return (s[:, 0] * node_count + s[:, 1]) * node_count + s[:, 2]
 
 
 @dataclass(frozen=True, eq=False)
@@ -117,8 +125,7 @@ class TetMesh:
     def _check_face_pairing(self) -> None:
         """Every face is on one tet (skin) or two tets lying on opposite sides of it."""
         faces = self.tets[:, TET_FACES].reshape(-1, 3)
-        keys = np.sort(faces, axis=1)
-        _, inverse, counts = np.unique(keys, axis=0, return_inverse=True, return_counts=True)
+        _, inverse, counts = np.unique(face_keys(faces, len(self.points)), return_inverse=True, return_counts=True)
         if (counts > 2).any():
             raise MeshError(self.source, f"{int((counts > 2).sum())} faces shared by more than two "
                                          "tetrahedra (overlapping or non-manifold elements)")
@@ -135,12 +142,12 @@ class TetMesh:
 
     @cached_property
     def skin(self) -> np.ndarray:
-        """Boundary triangles (K, 3), outward oriented, sorted for determinism."""
+        """Boundary triangles (K, 3), outward oriented, sorted by their sorted node triple for determinism."""
         faces = self.tets[:, TET_FACES].reshape(-1, 3)
-        keys = np.sort(faces, axis=1)
-        _, inverse, counts = np.unique(keys, axis=0, return_inverse=True, return_counts=True)
-        skin = faces[counts[inverse] == 1]
-        return skin[np.lexsort(np.sort(skin, axis=1).T[::-1])]
+        keys = face_keys(faces, len(self.points))
+        _, inverse, counts = np.unique(keys, return_inverse=True, return_counts=True)
+        on_skin = counts[inverse] == 1
+        return faces[on_skin][np.argsort(keys[on_skin], kind="stable")]
 
     @cached_property
     def volumes(self) -> np.ndarray:
