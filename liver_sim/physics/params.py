@@ -38,6 +38,8 @@ class ModelParams:
     The capsule (Glisson's capsule, skin triangle edges) is stiff and barely viscous;
     the parenchyma (tet edges) is soft and strongly viscous (P6).  Both keep Fig. 2's
     cubic-to-linear ratio λ1/λ2 ≈ 143, linear below ~10 % strain.
+    With `tearing`, an interior face whose stretch across it exceeds `tear_strain_parenchyma`
+    (`tear_strain_capsule` for a face with an edge on the capsule) opens (P13, §2.6).
     """
 
     capsule: SpringLaw = SpringLaw(lambda1_n=1430.0, lambda2_n=10.0, mu_ns_per_m=0.02)
@@ -53,6 +55,9 @@ class ModelParams:
     contact_stiffness_n_per_m: float = 300.0
     contact_damping_ns_per_m: float = 1.0
     max_node_speed_m_s: float = 20.0
+    tearing: bool = False
+    tear_strain_parenchyma: float = 0.4
+    tear_strain_capsule: float = 0.5
 
     @property
     def dt_s(self) -> float:
@@ -93,6 +98,13 @@ class ModelParams:
             raise ValueError(f"parameter integrator must be one of {INTEGRATORS}, got {self.integrator!r}")
         if not (isinstance(self.substeps, int) and 1 <= self.substeps <= 10_000):
             raise ValueError(f"parameter substeps must be an integer in 1..10000, got {self.substeps!r}")
+        if not isinstance(self.tearing, bool):
+            raise ValueError(f"parameter tearing must be True or False, got {self.tearing!r}")
+        for name in ("tear_strain_parenchyma", "tear_strain_capsule"):
+            value = getattr(self, name)
+            numeric = isinstance(value, (int, float)) and not isinstance(value, bool)
+            if not (numeric and math.isfinite(value) and value > 0.0):
+                raise ValueError(f"parameter {name} must be finite and > 0, got {value!r}")
         if len(self.gravity_m_s2) != 3 or not all(math.isfinite(g) for g in self.gravity_m_s2):
             raise ValueError(f"parameter gravity_m_s2 must be three finite numbers, got {self.gravity_m_s2!r}")
         return self

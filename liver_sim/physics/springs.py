@@ -1,7 +1,7 @@
 """The spring-damper network built on a tet mesh (P3) and its stability bound.
 
-Parenchyma springs sit on every tet edge, capsule springs on every skin-triangle
-edge; an edge on the skin carries both.  Two Eq. 1 springs on one edge with one
+Parenchyma springs sit on every tet edge, capsule springs on every capsule-triangle
+edge (the skin, less faces opened by tears and cuts); such an edge carries both.  Two Eq. 1 springs on one edge with one
 rest length act exactly as one spring whose λ1, λ2 and μ are the sums, so the
 kernels evaluate one connector per edge with the summed coefficients.
 """
@@ -10,11 +10,12 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 import scipy.sparse
 import scipy.sparse.linalg
 
-from liver_sim.mesh.tetmesh import TetMesh
+from liver_sim.mesh.tetmesh import TetMesh, unique_edges
 from liver_sim.physics.params import ModelParams
 
 
@@ -42,11 +43,21 @@ class SpringNetwork:
         return self.capsule_springs + self.parenchyma_springs
 
 
-def build_springs(mesh: TetMesh, params: ModelParams, rest_points: np.ndarray | None = None) -> SpringNetwork:
-    """Springs on `mesh`'s edges with rest lengths from `rest_points` (default: the mesh nodes)."""
+def build_springs(mesh: TetMesh, params: ModelParams, rest_points: np.ndarray | None = None,
+                  capsule_triangles: np.ndarray | None = None) -> SpringNetwork:
+    """Springs on `mesh`'s edges with rest lengths from `rest_points` (default: the mesh nodes).
+
+    Capsule springs sit on the edges of `capsule_triangles` (default: the whole skin); skin opened
+    by a tear or a cut is parenchyma surface and carries none.
+    """
     points = mesh.points if rest_points is None else rest_points
     edges = mesh.edges
-    on_skin = _rows_in(edges, mesh.skin_edges)
+    if capsule_triangles is None:
+        capsule_edges = mesh.skin_edges
+    else:
+        capsule_edges = unique_edges(np.asarray(capsule_triangles, dtype=np.int64).reshape(-1, 3),
+                                     np.array([[0, 1], [1, 2], [2, 0]]))
+    on_skin = _rows_in(edges, capsule_edges) if len(capsule_edges) else np.zeros(len(edges), dtype=bool)
     par, cap = params.parenchyma, params.capsule
     node_i = np.ascontiguousarray(edges[:, 0])
     node_j = np.ascontiguousarray(edges[:, 1])
@@ -85,6 +96,33 @@ def stable_time_step(springs: SpringNetwork, masses_kg: np.ndarray, environment_
     scale = 1.0 / np.sqrt(np.repeat(masses_kg, 3))
     omega2 = _largest_eigenvalue(springs, unit, springs.lambda2_n / springs.rest_length_m, scale)
     c = _largest_eigenvalue(springs, unit, springs.mu_ns_per_m, scale) + environment_damping_per_s
+    return _time_step(springs, omega2, c, environment_damping_per_s, integrator)
+
+
+def estimate_stable_time_step(springs: SpringNetwork, masses_kg: np.ndarray, environment_damping_per_s: float,
+                              integrator: str, positions: np.ndarray, start: np.ndarray | None = None,
+                              max_iterations: int = 400, tolerance: float = 1e-2) -> tuple[float, np.ndarray]:
+    """stable_time_step's bound with λmax from a matrix-free power iteration (fast; for topology changes).
+
+    λmax is taken as ρ + ‖A·v − ρ·v‖ (Rayleigh quotient plus residual: an upper bound of the eigenvalue
+    the iterate approaches, which is the largest once converged).  `start` (2, N, 3), e.g. the previous
+    stiffness and damping modes carried to the new nodes, speeds convergence.  Returns (time step s,
+    the two modes found (2, N, 3)).
+    """
+    axis = positions[springs.node_j] - positions[springs.node_i]
+    unit = np.ascontiguousarray(axis / np.linalg.norm(axis, axis=1)[:, None])
+    scale = 1.0 / np.sqrt(masses_kg)
+    modes = np.random.default_rng(0).standard_normal((2, len(masses_kg), 3)) if start is None else start.copy()
+    omega2 = _power_iteration(springs.node_i, springs.node_j, unit, springs.lambda2_n / springs.rest_length_m,
+                              scale, modes[0], max_iterations, tolerance)
+    c = _power_iteration(springs.node_i, springs.node_j, unit, springs.mu_ns_per_m, scale, modes[1],
+                         max_iterations, tolerance) + environment_damping_per_s
+    return _time_step(springs, omega2, c, environment_damping_per_s, integrator), modes
+
+
+def _time_step(springs: SpringNetwork, omega2: float, c: float, environment_damping_per_s: float,
+               integrator: str) -> float:
+    """The integrator's stable step (s) for largest ω² and damping rate c (see stable_time_step)."""
     if omega2 <= 0.0:
         return math.inf
     if integrator == "explicit_euler":
@@ -115,3 +153,39 @@ def _largest_eigenvalue(springs: SpringNetwork, unit: np.ndarray, coefficient: n
     start = np.random.default_rng(0).standard_normal(size)
     return float(scipy.sparse.linalg.eigsh(scaled, k=1, which="LA", v0=start,
                                            return_eigenvectors=False, tol=1e-4)[0])
+
+
+@numba.njit(cache=True)
+def _apply_scaled(node_i, node_j, unit, coefficient, scale, v, out):
+    """out = M^-1/2·A·M^-1/2·v for A = Σ coefficient·(e_i − e_j)(e_i − e_j)ᵀ ⊗ u·uᵀ."""
+    out[:] = 0.0
+    for s in range(len(node_i)):
+        i, j = node_i[s], node_j[s]
+        d = 0.0
+        for a in range(3):
+            d += (scale[i] * v[i, a] - scale[j] * v[j, a]) * unit[s, a]
+        t = coefficient[s] * d
+        for a in range(3):
+            out[i, a] += scale[i] * t * unit[s, a]
+            out[j, a] -= scale[j] * t * unit[s, a]
+
+
+@numba.njit(cache=True)
+def _power_iteration(node_i, node_j, unit, coefficient, scale, v, max_iterations, tolerance):
+    """Power iteration on M^-1/2·A·M^-1/2 from v (overwritten by the mode); returns ρ + residual."""
+    y = np.empty_like(v)
+    flat_v, flat_y = v.reshape(-1), y.reshape(-1)
+    flat_v /= max(math.sqrt(np.dot(flat_v, flat_v)), 1e-300)
+    bound = 0.0
+    for _ in range(max_iterations):
+        _apply_scaled(node_i, node_j, unit, coefficient, scale, v, y)
+        rho = np.dot(flat_v, flat_y)
+        norm2 = np.dot(flat_y, flat_y)
+        if norm2 == 0.0:
+            return 0.0
+        residual = math.sqrt(max(norm2 - rho * rho, 0.0))
+        bound = rho + residual
+        flat_v[:] = flat_y / math.sqrt(norm2)
+        if residual <= tolerance * rho:
+            break
+    return bound

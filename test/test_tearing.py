@@ -1,0 +1,338 @@
+"""P13: tearing (paper §2.6) by face separation and node duplication, and topology changes of the model."""
+import math
+
+import numpy as np
+import pytest
+import scipy.sparse
+import scipy.sparse.csgraph
+
+from liver_sim.mesh.liver_shape import default_liver
+from liver_sim.mesh.tetmesh import TET_FACES, TetMesh, signed_volumes
+from liver_sim.physics.contact import ToolPose
+from liver_sim.physics.model import LiverModel
+from liver_sim.physics.params import ModelParams
+from liver_sim.physics.topology import TearDetector, duplication_change, separate_faces, tear_faces
+from liver_sim.scenarios import press_anchor
+
+from meshes import box_mesh
+
+SPACING_M = 0.02
+NX, NY, NZ = 10, 3, 3
+
+
+def face_keys(faces):
+    return {tuple(sorted(f)) for f in np.asarray(faces).tolist()}
+
+
+def interior_faces(tets):
+    faces = np.sort(tets[:, TET_FACES].reshape(-1, 3), axis=1)
+    unique, counts = np.unique(faces, axis=0, return_counts=True)
+    return unique[counts == 2]
+
+
+def opened_faces(old_tets, new_tets, parent):
+    """Old interior faces whose two tets no longer share them after the change."""
+    still = face_keys(parent[interior_faces(new_tets)])
+    return [f for f in face_keys(interior_faces(old_tets)) if f not in still]
+
+
+def components(tets, count):
+    """Label of each node's connected component (nodes joined by tets)."""
+    rows = np.repeat(tets[:, 0], 3)
+    cols = tets[:, 1:].ravel()
+    graph = scipy.sparse.coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(count, count))
+    return scipy.sparse.csgraph.connected_components(graph, directed=False)[1]
+
+
+def assert_sound(mesh):
+    """Watertight, outward-oriented skin on every component; no inverted tet, no orphan node."""
+    assert np.array_equal(np.unique(mesh.tets), np.arange(len(mesh.points)))
+    assert (signed_volumes(mesh.points, mesh.tets) > 0).all()
+    labels = components(mesh.tets, len(mesh.points))
+    for label in np.unique(labels):
+        piece = mesh.tets[labels[mesh.tets[:, 0]] == label]
+        sub = TetMesh.from_arrays(mesh.points, piece)
+        assert sub.watertight
+        skin = sub.points[sub.skin]
+        enclosed = np.einsum("ij,ij->i", skin[:, 0], np.cross(skin[:, 1], skin[:, 2])).sum() / 6.0
+        assert enclosed == pytest.approx(sub.volume, rel=1e-9)
+
+
+def bar_params(**changes):
+    bar = box_mesh(NX, NY, NZ, SPACING_M)
+    fixed = tuple(np.flatnonzero(bar.points[:, 0] < 1e-9).tolist())
+    params = ModelParams(fixed_nodes=fixed, **changes)
+    stable = LiverModel(bar, params).stable_dt_s
+    return bar, params.with_changes(substeps=math.ceil(1.0 / (params.frame_rate_hz * 0.6 * stable)))
+
+
+def pulled_bar(force_n, **changes):
+    """The bar, left end fixed, its last layer of cubes pulled along +x (force ∝ node mass)."""
+    bar, params = bar_params(**changes)
+    model = LiverModel(bar, params)
+    pulled = model.masses_kg * (bar.points[:, 0] > (NX - 1) * SPACING_M - 1e-9)
+    model.external_forces_n[:, 0] = force_n * pulled / pulled.sum()
+    return model
+
+
+def record_changes(model):
+    """Wrap model.apply_topology to keep (old mesh, positions, capsule, change) of every change."""
+    records = []
+    apply = model.apply_topology
+
+    def spy(change):
+        records.append((model.mesh, model.positions.copy(), model.capsule_triangles.copy(), change))
+        apply(change)
+
+    model.apply_topology = spy
+    return records
+
+
+# --- separate_faces -----------------------------------------------------------------------------
+
+def test_one_face_cut_between_two_tets():
+    points = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [0.3, 0.3, -1.0]])
+    mesh = TetMesh.from_arrays(points, [[0, 1, 2, 3], [0, 2, 1, 4]])
+    tets, parent = separate_faces(mesh.tets, [[2, 0, 1]])
+    assert np.array_equal(parent[:5], np.arange(5))
+    assert sorted(parent[5:].tolist()) == [0, 1, 2]
+    assert not set(tets[0].tolist()) & set(tets[1].tolist())
+    torn = TetMesh.from_arrays(mesh.points[parent], tets)
+    assert len(torn.points) == len(parent) and len(torn.skin) == 8
+    assert_sound(torn)
+
+
+def test_non_interior_faces_are_ignored():
+    mesh = box_mesh(2, 2, 2, 0.01)
+    tets, parent = separate_faces(mesh.tets, mesh.skin[:5])
+    assert np.array_equal(tets, mesh.tets) and np.array_equal(parent, np.arange(len(mesh.points)))
+
+
+def test_crack_ending_inside_keeps_the_skin_manifold():
+    mesh = box_mesh(4, 4, 4, 0.01)
+    faces = mesh.tets[:, TET_FACES].reshape(-1, 3)
+    corners = mesh.points[faces]
+    on_plane = np.isclose(corners[:, :, 0], 0.02).all(axis=1)
+    crack = faces[on_plane & (corners[:, :, 1] <= 0.02 + 1e-9).all(axis=1)]  # half the plane
+    tets, parent = separate_faces(mesh.tets, crack)
+    torn = TetMesh.from_arrays(mesh.points[parent], tets)
+    assert len(torn.points) > len(mesh.points)
+    assert opened_faces(mesh.tets, tets, parent)
+    assert len(np.unique(components(tets, len(parent)))) == 1  # still one piece
+    assert_sound(torn)
+
+
+def test_random_cuts_keep_every_skin_edge_on_two_triangles():
+    mesh = default_liver()
+    faces = interior_faces(mesh.tets)
+    rng = np.random.default_rng(3)
+    for fraction in (0.05, 0.2, 0.5):
+        cut = faces[rng.random(len(faces)) < fraction]
+        tets, parent = separate_faces(mesh.tets, cut)
+        opened = opened_faces(mesh.tets, tets, parent)
+        assert face_keys(opened) <= face_keys(cut)
+        assert_sound(TetMesh.from_arrays(mesh.points[parent], tets))
+
+
+# --- stretch ------------------------------------------------------------------------------------
+
+def test_tear_faces_selects_exactly_the_faces_stretched_beyond_their_threshold():
+    mesh = box_mesh(6, 3, 3, 0.01)
+    slab = (0.02, 0.04)
+    positions = mesh.points.copy()
+    positions[:, 0] += 0.7 * np.clip(mesh.points[:, 0] - slab[0], 0.0, slab[1] - slab[0])  # x strain 0.7 in the slab
+    torn = face_keys(tear_faces(mesh.points, mesh.tets, positions, mesh.skin, 0.4, 0.5))
+    # Independent expectation: F = diag(1.7, 1, 1) in the slab's tets, identity elsewhere.
+    cap_edges = {tuple(sorted(e)) for t in mesh.skin.tolist() for e in ((t[0], t[1]), (t[1], t[2]), (t[2], t[0]))}
+    centroid_x = mesh.points[mesh.tets].mean(axis=1)[:, 0]
+    in_slab = (centroid_x > slab[0]) & (centroid_x < slab[1])
+    owners = {}
+    for t, tet in enumerate(mesh.tets.tolist()):
+        for f in TET_FACES.tolist():
+            owners.setdefault(tuple(sorted(tet[i] for i in f)), []).append(t)
+    expected = set()
+    for face, tets in owners.items():
+        if len(tets) != 2:
+            continue
+        a, b, c = mesh.points[list(face)]
+        n = np.cross(b - a, c - a)
+        n /= np.linalg.norm(n)
+        stretched = math.sqrt((1.7 * n[0]) ** 2 + n[1] ** 2 + n[2] ** 2) - 1.0
+        stretch = np.mean([stretched if in_slab[t] else 0.0 for t in tets])
+        capsule = any(tuple(sorted(e)) in cap_edges for e in ((face[0], face[1]), (face[1], face[2]),
+                                                              (face[0], face[2])))
+        if stretch > (0.5 if capsule else 0.4):
+            expected.add(face)
+    assert expected and torn == expected
+
+
+def test_stretch_is_zero_under_rigid_motion():
+    mesh = default_liver()
+    rotation = np.linalg.qr(np.random.default_rng(0).standard_normal((3, 3)))[0]
+    detector = TearDetector(mesh.points, mesh.tets, mesh.skin, 0.4, 0.5)
+    assert np.abs(detector.stretches(mesh.points @ rotation.T + 0.1)).max() < 1e-9
+
+
+# --- the model ----------------------------------------------------------------------------------
+
+def test_tearing_parameters_are_validated():
+    for name in ("tear_strain_parenchyma", "tear_strain_capsule"):
+        for bad in (0.0, -1.0, math.nan, math.inf):
+            with pytest.raises(ValueError, match=name):
+                ModelParams(**{name: bad}).validate()
+    with pytest.raises(ValueError, match="tearing"):
+        ModelParams(tearing=1).validate()
+
+
+@pytest.fixture(scope="module")
+def torn_bar():
+    model = pulled_bar(16.0, tearing=True, tear_strain_parenchyma=0.15, tear_strain_capsule=0.2)
+    records = record_changes(model)
+    initial_mass = model.masses_kg.sum()
+    results = [model.step_frame() for _ in range(300)]
+    return model, records, initial_mass, results
+
+
+def test_a_pulled_bar_tears_where_and_only_where_the_threshold_is_exceeded(torn_bar):
+    model, records, _, results = torn_bar
+    assert records and model.topology_version == len(records) == sum(r.topology_changed for r in results)
+    for old_mesh, positions, capsule, change in records:
+        detector = TearDetector(old_mesh.points, old_mesh.tets, capsule, 0.15, 0.2)
+        stretch = dict(zip(map(tuple, np.sort(detector.faces, axis=1).tolist()),
+                           detector.stretches(positions) - detector.thresholds))
+        opened = opened_faces(old_mesh.tets, change.tets, change.node_sources[:, 0])
+        assert len(opened) == change.separated_faces > 0
+        assert all(stretch[f] > 0.0 for f in opened)
+
+
+def test_an_unstressed_bar_never_tears():
+    model = pulled_bar(16.0, tearing=True, tear_strain_parenchyma=0.15, tear_strain_capsule=0.2)
+    model.external_forces_n[:] = 0.0
+    assert not any(model.step_frame().topology_changed for _ in range(30))
+    assert model.topology_version == 0
+
+
+def test_torn_bar_is_sound_and_conserves_mass(torn_bar):
+    model, records, initial_mass, results = torn_bar
+    assert model.masses_kg.sum() == pytest.approx(initial_mass, rel=1e-12)
+    assert_sound(model.mesh)
+    assert not any(r.divergence for r in results)
+    assert np.isfinite(model.positions).all()
+    assert len(model.positions) == len(model.mesh.points) == len(model.inv_mass) == len(model.external_forces_n)
+
+
+def test_opened_faces_carry_no_capsule_springs(torn_bar):
+    model, records, _, _ = torn_bar
+    original_skin = face_keys(records[0][0].skin)
+    parent = np.arange(len(model.positions))
+    for _, _, _, change in reversed(records):  # compose new → original node maps
+        parent = change.node_sources[parent, 0]
+    capsule = face_keys(model.capsule_triangles)
+    wounds = [f for f in model.mesh.skin.tolist() if tuple(sorted(f)) not in capsule]
+    assert wounds
+    assert face_keys(parent[model.capsule_triangles]) <= original_skin
+    assert not face_keys(parent[np.array(wounds)]) & original_skin
+    cap_edges = {tuple(sorted(e)) for t in model.capsule_triangles.tolist()
+                 for e in ((t[0], t[1]), (t[1], t[2]), (t[2], t[0]))}
+    springs = model.springs
+    on_capsule = np.array([(i, j) in cap_edges for i, j in zip(springs.node_i.tolist(), springs.node_j.tolist())])
+    par = model.params.parenchyma.lambda2_n
+    assert np.allclose(springs.lambda2_n[~on_capsule], par)
+    assert np.allclose(springs.lambda2_n[on_capsule], par + model.params.capsule.lambda2_n)
+    wound_only = {tuple(sorted(e)) for t in wounds for e in ((t[0], t[1]), (t[1], t[2]), (t[2], t[0]))} - cap_edges
+    assert wound_only
+
+
+def test_momentum_and_mass_carry_over_a_duplication():
+    model = pulled_bar(16.0)
+    for _ in range(5):
+        model.step_frame()
+    model.velocities += np.random.default_rng(1).normal(0.0, 0.01, model.velocities.shape)
+    model.velocities[model.fixed_nodes] = 0.0
+    mesh = model.mesh
+    faces = mesh.tets[:, TET_FACES].reshape(-1, 3)
+    plane = np.isclose(mesh.points[faces][:, :, 0], 5 * SPACING_M).all(axis=1)
+    change = duplication_change(mesh.points, mesh.tets, model.capsule_triangles, faces[plane])
+    momentum = (model.masses_kg[:, None] * model.velocities).sum(axis=0)
+    old_masses = model.masses_kg.copy()
+    mass, force = old_masses.sum(), model.external_forces_n.sum(axis=0)
+    positions = model.positions.copy()
+    model.apply_topology(change)
+    assert len(np.unique(components(model.mesh.tets, len(model.positions)))) == 2
+    assert model.masses_kg.sum() == pytest.approx(mass, rel=1e-12)
+    assert np.allclose((model.masses_kg[:, None] * model.velocities).sum(axis=0), momentum, rtol=1e-12, atol=1e-15)
+    assert np.allclose(model.external_forces_n.sum(axis=0), force, rtol=1e-12)
+    assert np.array_equal(model.positions, positions[change.node_sources[:, 0]])
+    source = change.node_sources[:, 0]
+    copies = np.bincount(source)[source]
+    floor = 0.5 * np.minimum(model.params.min_node_mass_fraction * old_masses.mean(), old_masses[source] / copies)
+    assert (model.masses_kg >= floor * (1 - 1e-12)).all()
+    assert model.topology_version == 1
+    assert_sound(model.mesh)
+    model.reset()
+    assert np.array_equal(model.positions, model.mesh.points)
+    for _ in range(100):
+        assert model.step_frame().divergence is None
+
+
+def test_copies_of_fixed_nodes_stay_fixed():
+    mesh = box_mesh(2, 2, 2, 0.02)
+    centre = int(np.argmin(np.linalg.norm(mesh.points - 0.02, axis=1)))
+    model = LiverModel(mesh, ModelParams(fixed_nodes=(centre,)))
+    faces = mesh.tets[:, TET_FACES].reshape(-1, 3)
+    plane = np.isclose(mesh.points[faces][:, :, 0], 0.02).all(axis=1)
+    change = duplication_change(mesh.points, mesh.tets, model.capsule_triangles, faces[plane])
+    model.apply_topology(change)
+    copies = np.flatnonzero(change.node_sources[:, 0] == centre)
+    assert len(copies) == 2
+    assert np.array_equal(model.fixed_nodes, copies) and (model.inv_mass[copies] == 0.0).all()
+
+
+def test_default_liver_tears_under_a_strong_pull_and_keeps_a_manifold_skin():
+    liver = default_liver()
+    model = LiverModel(liver, ModelParams(tearing=True))
+    mass = model.masses_kg.sum()
+    group = np.argsort(-liver.points[:, 0])[:15]
+    model.external_forces_n[group, 0] = 60.0 / len(group)
+    results = [model.step_frame() for _ in range(60)]
+    assert any(r.topology_changed for r in results) and model.topology_version > 0
+    assert not any(r.divergence for r in results)
+    assert len(model.positions) > len(liver.points)
+    assert model.masses_kg.sum() == pytest.approx(mass, rel=1e-12)
+    assert_sound(model.mesh)
+
+
+def pull_the_dome(tearing):
+    """The default liver grasped at its dome and pulled 8 cm up over 400 frames; (model, results, tool tips)."""
+    liver = default_liver()
+    model = LiverModel(liver, ModelParams(tearing=tearing))
+    dome = press_anchor(liver)
+    start = dome + [0.0, 0.0, model.tool.radius_m - 0.004]
+    assert model.grasp(ToolPose(start), 0.005) > 0
+    tips = [start + [0.0, 0.0, 0.08 * min(1.0, k / 400)] for k in range(450)]
+    return model, [model.step_frame(ToolPose(tip)) for tip in tips], tips
+
+
+def test_grasped_nodes_follow_the_tool_and_pull_it_back_towards_the_liver():
+    model, results, tips = pull_the_dome(tearing=False)
+    held = model.grasped_nodes
+    offsets = model.positions[held] - tips[-1]
+    np.testing.assert_allclose(offsets, model.mesh.points[held] - tips[0], atol=1e-12)  # carried rigidly
+    assert not any(r.divergence or r.topology_changed for r in results)
+    assert results[-1].tool_force_n[2] < -1.0       # the tissue pulls the tool back down
+    assert not any(r.local_model.valid for r in results)  # nothing to push on while holding
+    model.release()
+    assert model.grasped_nodes.size == 0 and (model.inv_mass[held] > 0).all()
+    for _ in range(150):
+        model.step_frame()
+    assert model.positions[held, 2].max() < tips[-1][2] - 0.03  # let go, the dome falls back
+
+
+def test_a_grasped_and_pulled_liver_tears_and_stays_sound():
+    model, results, _ = pull_the_dome(tearing=True)
+    mass = default_liver().lumped_masses(ModelParams().density_kg_m3).sum()
+    assert model.topology_version > 0 and len(model.positions) > len(default_liver().points)
+    assert not any(r.divergence for r in results)
+    assert model.params.dt_s <= model.stable_dt_s   # substeps raised where the tear made it stiffer
+    assert model.masses_kg.sum() == pytest.approx(mass, rel=1e-9)
+    assert_sound(model.mesh)
