@@ -1,0 +1,226 @@
+"""Cutting along the tool path (paper §3.5, P14, R5): the cut follows the path, the mesh stays sound."""
+import numpy as np
+import pytest
+import scipy.sparse
+import scipy.sparse.csgraph
+from meshes import box_mesh
+
+from liver_sim.mesh import TetMesh
+from liver_sim.mesh.liver_shape import default_liver
+from liver_sim.mesh.tetmesh import signed_volumes
+from liver_sim.physics.cutting import SNAP_FRACTION, Ribbon, cut_along_path, default_blade_direction
+from liver_sim.physics.model import LiverModel
+from liver_sim.physics.params import ModelParams
+
+DOWN = np.array([0.0, 0.0, -1.0])
+SLAB_SPACING_M = 0.01
+SLAB_TOP_M = 0.03
+
+
+@pytest.fixture(scope="module")
+def slab():
+    return box_mesh(6, 4, 3, SLAB_SPACING_M)  # 6 × 4 × 3 cm, top at z = 3 cm
+
+
+@pytest.fixture(scope="module")
+def liver():
+    return default_liver()
+
+
+def mean_edge_m(mesh):
+    ends = mesh.points[mesh.edges]
+    return float(np.linalg.norm(ends[:, 1] - ends[:, 0], axis=1).mean())
+
+
+def snap_tolerance_m(mesh, snap_fraction=SNAP_FRACTION):
+    """How far a cut may stray from its path: a node snapped onto the cut lies within snap_fraction of its edge."""
+    return snap_fraction * longest_edge_m(mesh)
+
+
+def components(tets, n):
+    """(count, label per node) of the node graph joined through tet edges."""
+    e = tets[:, [0, 1, 0, 2, 0, 3]].reshape(-1, 2)
+    graph = scipy.sparse.coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n))
+    return scipy.sparse.csgraph.connected_components(graph, directed=False)
+
+
+def area_m2(points, triangles):
+    p = points[triangles]
+    return 0.5 * float(np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1).sum())
+
+
+def longest_edge_m(mesh):
+    ends = mesh.points[mesh.edges]
+    return float(np.linalg.norm(ends[:, 1] - ends[:, 0], axis=1).max())
+
+
+def on_the_cut(points, path, direction, mesh, tol):
+    """The points lie on the path's ribbon (within tol of it) and less than an element beyond its ends."""
+    ribbon = Ribbon(path, direction)
+    phi, along, _ = ribbon.locate(points)
+    reach = longest_edge_m(mesh)
+    return bool((np.abs(phi) <= tol).all() and (along >= -reach).all() and (along <= ribbon.length_m + reach).all())
+
+
+def opened_triangles(change):
+    """The new mesh's skin triangles that are not capsule: the faces the cut opened."""
+    skin = TetMesh(change.rest_points, change.tets).skin
+    capsule = {tuple(sorted(t)) for t in change.capsule_triangles.tolist()}
+    return skin[[tuple(sorted(t)) not in capsule for t in skin.tolist()]]
+
+
+def capsule_border_nodes(change):
+    """Nodes of the edges where the capsule meets an opened face: the cut's line on the skin."""
+    def edges(triangles):
+        return {tuple(sorted(e)) for t in triangles.tolist() for e in ((t[0], t[1]), (t[1], t[2]), (t[2], t[0]))}
+
+    return np.unique(np.array(sorted(edges(opened_triangles(change)) & edges(change.capsule_triangles))))
+
+
+def check_sound(mesh, change):
+    """Valid, positively oriented, no orphan nodes, volume kept, every component watertight and
+    outward, capsule area kept, opened faces not capsule, state sources consistent with rest points."""
+    new = TetMesh.from_arrays(change.rest_points, change.tets)
+    assert len(new.points) == len(change.rest_points)  # no orphan node
+    volumes = signed_volumes(change.rest_points, change.tets)
+    assert volumes.min() >= SNAP_FRACTION ** 3 * mesh.volumes.min() * (1 - 1e-9)
+    assert volumes.sum() == pytest.approx(mesh.volume, rel=1e-12)
+    assert new.lumped_masses(1000.0).sum() == pytest.approx(mesh.lumped_masses(1000.0).sum(), rel=1e-12)
+    count, label = components(change.tets, len(change.rest_points))
+    for c in range(count):
+        part = TetMesh.from_arrays(change.rest_points, change.tets[label[change.tets[:, 0]] == c])
+        assert part.watertight
+        p = part.points[part.skin]
+        enclosed = np.einsum("ij,ij->i", p[:, 0], np.cross(p[:, 1], p[:, 2])).sum() / 6.0
+        assert enclosed == pytest.approx(part.volume, rel=1e-9)  # skin outward
+    skin_keys = {tuple(sorted(t)) for t in new.skin.tolist()}
+    assert all(tuple(sorted(t)) in skin_keys for t in change.capsule_triangles.tolist())
+    assert area_m2(change.rest_points, change.capsule_triangles) == pytest.approx(area_m2(mesh.points, mesh.skin))
+    assert len(opened_triangles(change)) > 0
+    assert change.separated_faces > 0
+    weights = change.node_weights
+    assert np.allclose(weights.sum(axis=1), 1.0) and (weights >= 0).all()
+    interpolated = (weights[:, :, None] * mesh.points[change.node_sources]).sum(axis=1)
+    assert np.allclose(interpolated, change.rest_points, atol=1e-12)
+    return count
+
+
+def slab_path(points_xy):
+    return np.column_stack([points_xy, np.full(len(points_xy), SLAB_TOP_M)])
+
+
+def test_shallow_slab_cut_follows_an_oblique_path_and_opens_only_the_membrane(slab):
+    path = slab_path(np.array([[0.012, 0.013], [0.048, 0.027]]))
+    change = cut_along_path(slab.points, slab.tets, slab.points, slab.skin, path, 0.012, DOWN, snap_fraction=0.1)
+    assert check_sound(slab, change) == 1
+    tol = snap_tolerance_m(slab, 0.1)
+    border = capsule_border_nodes(change)
+    assert len(border) >= 4
+    assert on_the_cut(change.rest_points[border], path, DOWN, slab, tol)
+    # the crossed skin triangles were split: most of the cut's skin line runs through new nodes on edges
+    on_edges = (change.node_weights[border] > 0).sum(axis=1) == 2
+    assert on_edges.sum() > len(border) / 2
+    # the opened faces lie on the ribbon: the vertical plane through the path, about its length and depth
+    corners = change.rest_points[np.unique(opened_triangles(change))]
+    assert on_the_cut(corners, path, DOWN, slab, tol)
+    assert corners[:, 2].min() >= SLAB_TOP_M - 0.012 - 1.01 * np.sqrt(3) * SLAB_SPACING_M
+    assert corners[:, 2].min() < SLAB_TOP_M - SLAB_SPACING_M / 2
+
+
+def test_cut_through_the_whole_slab_separates_it_in_two(slab):
+    path = slab_path(np.array([[-0.01, 0.0155], [0.03, 0.021], [0.07, 0.0245]]))  # bends, ends outside
+    change = cut_along_path(slab.points, slab.tets, slab.points, slab.skin, path, 0.05, DOWN)
+    assert check_sound(slab, change) == 2
+    count, label = components(change.tets, len(change.rest_points))
+    tol = snap_tolerance_m(slab)
+    for c in range(count):
+        part = change.tets[label[change.tets[:, 0]] == c]
+        assert signed_volumes(change.rest_points, part).sum() == pytest.approx(slab.volume / 2, rel=0.1)
+    corners = change.rest_points[np.unique(opened_triangles(change))]
+    assert on_the_cut(corners, path, DOWN, slab, tol)
+
+
+def test_shallow_cut_across_the_slab_keeps_it_in_one_piece(slab):
+    path = slab_path(np.array([[-0.01, 0.0155], [0.07, 0.0245]]))
+    change = cut_along_path(slab.points, slab.tets, slab.points, slab.skin, path, 0.01, DOWN)
+    assert check_sound(slab, change) == 1
+
+
+def test_path_missing_the_mesh_changes_nothing(slab, liver):
+    above = slab_path(np.array([[0.01, 0.01], [0.05, 0.03]])) + [0.0, 0.0, 0.05]
+    assert cut_along_path(slab.points, slab.tets, slab.points, slab.skin, above, 0.01, DOWN) is None
+    beside = np.array([[0.3, 0.0, 0.0], [0.35, 0.0, 0.0]])
+    assert cut_along_path(liver.points, liver.tets, liver.points, liver.skin, beside, 0.02) is None
+    assert cut_along_path(slab.points, slab.tets, slab.points, slab.skin, above[:1], 0.01, DOWN) is None
+
+
+def test_cut_is_placed_in_the_deformed_frame(slab):
+    shift = np.array([0.2, -0.1, 0.05])
+    path = slab_path(np.array([[0.012, 0.013], [0.048, 0.027]]))
+    at_rest = cut_along_path(slab.points, slab.tets, slab.points, slab.skin, path, 0.012, DOWN)
+    moved = cut_along_path(slab.points, slab.tets, slab.points + shift, slab.skin, path + shift, 0.012, DOWN)
+    assert np.array_equal(at_rest.tets, moved.tets)
+    assert np.allclose(at_rest.rest_points, moved.rest_points)
+
+
+def liver_top_path(liver, length_m, points=11):
+    """A path on the liver's upper skin along x, found by casting vertical rays onto the skin."""
+    skin = liver.points[liver.skin]
+    xs = np.linspace(-0.06, -0.06 + length_m, points)
+    path = []
+    for x in xs:
+        q = np.array([x, 0.0])
+        a, b, c = skin[:, 0, :2], skin[:, 1, :2], skin[:, 2, :2]
+        det = (b - a)[:, 0] * (c - a)[:, 1] - (b - a)[:, 1] * (c - a)[:, 0]
+        u = ((q - a)[:, 0] * (c - a)[:, 1] - (q - a)[:, 1] * (c - a)[:, 0]) / det
+        v = ((b - a)[:, 0] * (q - a)[:, 1] - (b - a)[:, 1] * (q - a)[:, 0]) / det
+        hit = (u >= 0) & (v >= 0) & (u + v <= 1)
+        z = ((1 - u - v) * skin[:, 0, 2] + u * skin[:, 1, 2] + v * skin[:, 2, 2])[hit]
+        path.append([x, 0.0, z.max()])
+    return np.array(path)
+
+
+@pytest.mark.parametrize("depth_layers", [1.0, 2.0])
+def test_liver_cut_follows_the_path_on_the_skin(liver, depth_layers):
+    edge = mean_edge_m(liver)
+    path = liver_top_path(liver, 0.08)
+    change = cut_along_path(liver.points, liver.tets, liver.points, liver.skin, path, depth_layers * edge)
+    check_sound(liver, change)
+    tol = snap_tolerance_m(liver)
+    border = capsule_border_nodes(change)
+    assert len(border) >= 3
+    # the cut's line on the skin and every opened corner lie on the ribbon: the path swept along the blade
+    d = default_blade_direction(liver.points, liver.tets, path)
+    assert on_the_cut(change.rest_points[border], path, d, liver, tol)
+    corners = change.rest_points[np.unique(opened_triangles(change))]
+    assert on_the_cut(corners, path, d, liver, tol)
+    depth = (corners - path.mean(axis=0)) @ d
+    assert depth.max() <= depth_layers * edge + 2 * edge
+
+
+def test_deeper_liver_cut_opens_more(liver):
+    edge = mean_edge_m(liver)
+    path = liver_top_path(liver, 0.08)
+    shallow = cut_along_path(liver.points, liver.tets, liver.points, liver.skin, path, edge)
+    deep = cut_along_path(liver.points, liver.tets, liver.points, liver.skin, path, 3 * edge)
+    d = default_blade_direction(liver.points, liver.tets, path)
+    reach = [(c.rest_points[np.unique(opened_triangles(c))] @ d).max() for c in (shallow, deep)]
+    assert deep.separated_faces > shallow.separated_faces
+    assert reach[1] > reach[0] + edge / 2
+    assert components(deep.tets, len(deep.rest_points))[0] == 1
+
+
+def test_cut_liver_model_keeps_its_mass_and_simulates_stably(liver):
+    # a cut makes shorter springs, so the stability bound drops: the model raises its substeps to stay below it
+    model = LiverModel(liver, ModelParams())
+    edge = mean_edge_m(liver)
+    mass_kg = model.masses_kg.sum()
+    substeps = model.params.substeps
+    assert model.cut(liver_top_path(liver, 0.08), 2 * edge)
+    assert model.topology_version == 1
+    assert model.masses_kg.sum() == pytest.approx(mass_kg, rel=1e-12)
+    assert np.allclose(model.positions, model.mesh.points)
+    assert model.params.dt_s <= model.stable_dt_s and model.params.substeps >= substeps
+    model.velocities += np.random.default_rng(0).normal(scale=0.05, size=model.velocities.shape)
+    assert all(model.step_frame().divergence is None for _ in range(30))
+    assert model.kinetic_energy_j() < 0.5 * float((model.masses_kg * 0.05 ** 2 * 3).sum())
