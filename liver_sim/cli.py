@@ -138,6 +138,13 @@ def add_bench_command(commands) -> None:
     loop.add_argument("--duration", type=float, default=30.0, help="seconds of closed loop (default: 30)")
     loop.add_argument("--out", type=Path, default=Path("out/bench_loop"), help="folder for the nodes' logs")
     loop.set_defaults(handler=bench_loop)
+    topology = kinds.add_parser("topology", help="time of a tear and of a cut for the default liver and a "
+                                                  "~10k-tet liver (target: one 150 Hz frame for the default liver)")
+    topology.add_argument("--json", action="store_true", help="print one JSON object")
+    topology.add_argument("--sizes", type=positive_int, nargs="*", default=None, metavar="TETS",
+                          help="target tet counts of the larger livers (default: 10000)")
+    topology.add_argument("--repeats", type=positive_int, default=5, help="timed repetitions (default: 5)")
+    topology.set_defaults(handler=bench_topology)
     add_bench_record_parser(kinds)
 
 
@@ -162,6 +169,24 @@ def bench_physics(args) -> int:
     return 0
 
 
+def bench_topology(args) -> int:
+    from liver_sim.bench import run_topology_bench
+
+    report = run_topology_bench((10_000,) if args.sizes is None else tuple(args.sizes), args.repeats,
+                                None if args.json else (lambda line: print(line, flush=True)))
+    if args.json:
+        print(json.dumps(report))
+        return 0
+    print(f"machine: {report['machine']['cpu']}, {report['machine']['cores']} cores")
+    print(f"{'mesh':<20}{'tets':>8}{'detect/frame':>14}{'tear':>10}{'faces':>7}{'cut':>10}")
+    for r in report["results"]:
+        print(f"{r['mesh']:<20}{r['tetrahedra']:>8}{r['tear_detection_per_frame_s'] * 1e3:>12.3f}ms"
+              f"{r['tear_s'] * 1e3:>8.1f}ms{r['tear_faces_opened']:>7}{r['cut_s'] * 1e3:>8.1f}ms")
+    for target, met in report["met"].items():
+        print(f"target {target} = {report['targets'][target]:.4g}: {'met' if met else 'NOT met'}")
+    return 0
+
+
 def bench_loop(args) -> int:
     from liver_sim.bench import run_loop_bench
 
@@ -176,11 +201,16 @@ def bench_loop(args) -> int:
 
 
 def add_demo_command(commands) -> None:
-    """``liver-sim demo [--duration S] [--out DIR] [--offline] [--record [--storage …]]``: the closed-loop demo."""
+    """``liver-sim demo [--scenario press|tear|cut] [--duration S] [--out DIR] [--offline] [--record [--storage …]]``:
+    the closed-loop demo."""
     parser = commands.add_parser("demo", help="the four nodes in closed loop with a simulated PHANToM "
                                               "pressing the default liver (--offline: the model alone, no ROS)")
+    parser.add_argument("--scenario", choices=("press", "tear", "cut"), default="press",
+                        help="press: press, slide and release (default); tear: grasp and pull until the liver "
+                             "tears; cut: cut the liver along the tool path; tear and cut draw it before and after")
     parser.add_argument("--duration", type=float, default=None,
-                        help="seconds to run (default: 14 s; offline: the script's 4.85 s)")
+                        help="seconds to run (default: 14 s for press, 12 s for tear and cut; offline: the "
+                             "script's 4.85 s)")
     parser.add_argument("--out", type=Path, default=Path("out/demo"), help="output folder (default: %(default)s)")
     parser.add_argument("--offline", action="store_true", help="scripted press-and-release in this process, no ROS")
     parser.add_argument("--record", action="store_true", help="record the run with `liver-sim record` into OUT/session")
@@ -193,12 +223,12 @@ def demo(args) -> int:
 
     progress = lambda line: print(line, flush=True)  # noqa: E731
     if args.offline:
-        if args.record:
-            raise ValueError("--record records the node network; --offline runs without ROS")
+        if args.record or args.scenario != "press":
+            raise ValueError("--record and --scenario run the node network; --offline is the press without ROS")
         run_offline_demo(args.out, args.duration, progress)
     else:
-        run_demo(args.out, 14.0 if args.duration is None else args.duration, progress,
-                 record_storage=args.storage if args.record else None)
+        run_demo(args.out, args.duration, progress, record_storage=args.storage if args.record else None,
+                 scenario=args.scenario)
     return 0
 
 

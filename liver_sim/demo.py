@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import json
 import time
-from dataclasses import asdict, replace
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -114,8 +114,9 @@ def _plot_force(data: dict, script: ScriptSettings, path: Path) -> None:
 
 
 def plot_liver(rest_m: np.ndarray, skin: np.ndarray, positions_m: np.ndarray, tool_tip_m, tool_radius_m: float,
-               title: str, path: Path) -> None:
-    """A 3D picture of the deformed skin coloured by displacement, with the tool sphere in red."""
+               title: str, path: Path, wounds: np.ndarray | None = None) -> None:
+    """A 3D picture of the deformed skin coloured by displacement, with the tool sphere in red, and the lips
+    of the skin triangles marked in `wounds` (opened by a tear or a cut) as red lines."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -126,6 +127,14 @@ def plot_liver(rest_m: np.ndarray, skin: np.ndarray, positions_m: np.ndarray, to
     ax = fig.add_subplot(projection="3d")
     colours = plt.get_cmap("viridis")(displacement[skin].mean(axis=1) / max(displacement.max(), 1e-9))
     ax.add_collection3d(Poly3DCollection(positions_m[skin], facecolors=colours, edgecolors="0.3", linewidths=0.2))
+    if wounds is not None and wounds.any():
+        from mpl_toolkits.mplot3d.art3d import Line3DCollection
+
+        def edges(triangles):
+            return {tuple(sorted(e)) for t in triangles.tolist() for e in ((t[0], t[1]), (t[1], t[2]), (t[2], t[0]))}
+        lips = np.array(sorted(edges(skin[wounds]) & edges(skin[~wounds]))).reshape(-1, 2)
+        ax.computed_zorder = False  # the wound's lips are drawn over the skin, where a cut lies closed
+        ax.add_collection3d(Line3DCollection(positions_m[lips], colors="red", linewidths=2.0, zorder=10))
     if tool_tip_m is not None:
         u, v = np.mgrid[0:2 * np.pi:16j, 0:np.pi:8j]
         tip, r = np.asarray(tool_tip_m), tool_radius_m
@@ -144,19 +153,51 @@ def plot_liver(rest_m: np.ndarray, skin: np.ndarray, positions_m: np.ndarray, to
     plt.close(fig)
 
 
-def run_demo(out_dir: Path, duration_s: float = 14.0, progress=print, record_storage: str | None = None) -> dict:
-    """The main job: the four nodes in closed loop with the simulated PHANToM pressing, sliding and
-    releasing; writes summary.json/.md, force.png and liver_press.png, and the nodes' logs in logs/.
-    With `record_storage` (mcap or sqlite3), `liver-sim record` records the run into out_dir/session."""
+@dataclass(frozen=True)
+class Scenario:
+    """A closed-loop demo: what it shows, the physics and simulated-hand overrides, its default length (s)."""
+
+    title: str
+    physics: dict = field(default_factory=dict)
+    hand: dict = field(default_factory=dict)
+    duration_s: float = 14.0
+
+
+#: `liver-sim demo --scenario NAME`: press (the main job), tear (P13) and cut (P14, Fig. 9).
+SCENARIOS = {
+    "press": Scenario("Press, slide and release with the simulated PHANToM", hand={"rest_s": 6.0}),
+    "tear": Scenario("Grasp and pull until the liver tears (P13)", physics={"tearing": True, "tool_mode": "grasp"},
+                     hand={"script": "pull", "depth_m": 0.004, "pull_m": 0.08, "slide_s": 3.0, "rest_s": 4.0},
+                     duration_s=12.0),
+    "cut": Scenario("Cut along the tool path (P14, Fig. 9)", physics={"tool_mode": "cut", "cut_depth_m": 0.008},
+                    hand={"script": "press_slide_release", "depth_m": 0.012, "slide_m": 0.06, "slide_s": 3.0,
+                          "rest_s": 4.0}, duration_s=12.0),
+}
+#: What a topology scenario draws: the liver before and after (Fig. 9).
+TOPOLOGY_FIGURES = ("force.png", "before.png", "after.png")
+
+
+def run_demo(out_dir: Path, duration_s: float | None = None, progress=print, record_storage: str | None = None,
+             scenario: str = "press") -> dict:
+    """The main job: the four nodes in closed loop with the simulated PHANToM playing `scenario`.
+
+    Writes summary.json/.md, force.png, and liver_press.png (press) or before.png and after.png (tear,
+    cut), and the nodes' logs in logs/. With `record_storage` (mcap or sqlite3), `liver-sim record`
+    records the run into out_dir/session.
+    """
     from liver_sim.analysis import largest_force_jump_n, rate_figures
     from liver_sim.network import closed_loop_plan, run_network
     from liver_sim.sessions.bench import recorder_command
 
+    if scenario not in SCENARIOS:
+        raise ValueError(f"--scenario must be one of {', '.join(SCENARIOS)}, got {scenario!r}")
+    spec = SCENARIOS[scenario]
+    duration_s = spec.duration_s if duration_s is None else duration_s
     mesh = default_liver()
-    plan = closed_loop_plan(extra={"phantom_sim": {"rest_s": 6.0}})
+    plan = closed_loop_plan(extra={"liver_physics": spec.physics, "phantom_sim": spec.hand})
     if record_storage:
         plan.observers["recorder"] = recorder_command(out_dir / "session", record_storage)
-    progress("starting the node network (the same command lines work in four terminals):")
+    progress(f"{spec.title}: starting the node network (the same command lines work in four terminals):")
     snapshot = run_network(plan, duration_s, out_dir / "logs", progress)
     arrival, haptic_force = snapshot["forces"]["local_model"]
     wrench = snapshot["wrench_n"]
@@ -164,37 +205,80 @@ def run_demo(out_dir: Path, duration_s: float = 14.0, progress=print, record_sto
     last_nodes = snapshot["last_nodes"] if snapshot["last_nodes"] is not None else mesh.points
     haptic_norm = np.linalg.norm(haptic_force, axis=1)
     summary = {
+        "scenario": scenario,
         "duration_s": duration_s,
         "physics": rate_figures(snapshot["nodes_arrival_s"], 150.0),
         "haptic": rate_figures(arrival, 1000.0),
         "peak_haptic_force_n": float(haptic_norm.max()) if haptic_norm.size else 0.0,
         "peak_physics_force_n": float(np.linalg.norm(wrench, axis=1).max()) if len(wrench) else 0.0,
         "largest_force_jump_n": largest_force_jump_n(haptic_force),
-        "peak_displacement_m": float(np.linalg.norm(peak_nodes - mesh.points, axis=1).max()),
-        "final_displacement_m": float(np.linalg.norm(last_nodes - mesh.points, axis=1).max()),
+        "topology_changes": max(0, snapshot["surface_messages"] - 1),
+        "nodes": [len(n) if n is not None else 0 for n in (snapshot["initial_nodes"], snapshot["last_nodes"])],
+        "skin_triangles": [len(s[0]) if s is not None else 0
+                           for s in (snapshot["initial_surface"], snapshot["surface"])],
+        "surface_nodes": [len(s[1]) if s is not None else 0
+                          for s in (snapshot["initial_surface"], snapshot["surface"])],
         "diagnostics": snapshot["diagnostics"],
     }
+    if len(last_nodes) == len(mesh.points):
+        summary["peak_displacement_m"] = float(np.linalg.norm(peak_nodes - mesh.points, axis=1).max())
+        summary["final_displacement_m"] = float(np.linalg.norm(last_nodes - mesh.points, axis=1).max())
     out_dir.mkdir(parents=True, exist_ok=True)
     (out_dir / "summary.json").write_text(json.dumps(summary, indent=2, default=float) + "\n")
-    (out_dir / "summary.md").write_text(_network_markdown(summary))
-    _plot_network_forces(snapshot, out_dir / "force.png")
-    plot_liver(mesh.points, mesh.skin, peak_nodes, None, 0.0,
-               f"Default liver at peak press ({summary['peak_physics_force_n']:.2f} N)", out_dir / "liver_press.png")
+    (out_dir / "summary.md").write_text(_network_markdown(summary, spec.title))
+    _plot_network_forces(snapshot, spec.title, out_dir / "force.png")
+    if scenario == "press":
+        figures = PLOTTED_FIGURES
+        plot_liver(mesh.points, mesh.skin, peak_nodes, None, 0.0,
+                   f"Default liver at peak press ({summary['peak_physics_force_n']:.2f} N)",
+                   out_dir / "liver_press.png")
+    else:
+        figures = TOPOLOGY_FIGURES
+        _plot_topology(snapshot, spec.title, summary, out_dir)
     progress(f"physics {summary['physics']['rate_hz']:.1f} Hz, haptic {summary['haptic']['rate_hz']:.1f} Hz "
              f"(period error p99 {1e3 * (summary['haptic']['period_error_p99_s'] or 0):.2f} ms), peak force "
-             f"{summary['peak_haptic_force_n']:.2f} N, residual displacement "
-             f"{summary['final_displacement_m'] * 1e3:.2f} mm")
-    progress(f"wrote {out_dir}/summary.json, summary.md, {', '.join(PLOTTED_FIGURES)} and logs/"
+             f"{summary['peak_haptic_force_n']:.2f} N"
+             + (f", residual displacement {summary['final_displacement_m'] * 1e3:.2f} mm"
+                if "final_displacement_m" in summary else "")
+             + (f"; {summary['topology_changes']} topology change(s): {summary['nodes'][0]} → "
+                f"{summary['nodes'][1]} nodes" if scenario != "press" else ""))
+    progress(f"wrote {out_dir}/summary.json, summary.md, {', '.join(figures)} and logs/"
              + (f"; the recorded session is {out_dir / 'session'} (liver-sim report {out_dir / 'session'})"
                 if record_storage else ""))
     return summary
 
 
-def _network_markdown(summary: dict) -> str:
+def _plot_topology(snapshot: dict, title: str, summary: dict, out_dir: Path) -> None:
+    """before.png and after.png: the skin first received and the newest skin on the last nodes received."""
+    mesh = default_liver()
+    first = snapshot["initial_surface"] or (mesh.skin, mesh.points)
+    last = snapshot["surface"] or first
+    for name, (skin, rest), nodes, when in (("before.png", first, snapshot["initial_nodes"], "before"),
+                                            ("after.png", last, snapshot["last_nodes"], "after")):
+        positions = nodes if nodes is not None and len(nodes) == len(rest) else rest
+        wounds = opened_triangles(rest, skin)
+        plot_liver(rest, skin, positions, None, 0.0, f"{title}: {when} ({len(rest)} nodes, {len(skin)} skin "
+                   f"triangles, {int(wounds.sum())} opened: red lips)", out_dir / name, wounds)
+
+
+def opened_triangles(rest_m: np.ndarray, skin: np.ndarray) -> np.ndarray:
+    """Mask of the skin triangles opened by a tear or a cut: the two lips of an opening lie on each other at
+    rest (a separation duplicates nodes in place), so such a triangle has a twin with the same rest corners."""
+    corners = np.round(rest_m[skin] * 1e7).astype(np.int64)  # 0.1 µm
+    keys = [tuple(sorted(map(tuple, c))) for c in corners]
+    counts = {}
+    for key in keys:
+        counts[key] = counts.get(key, 0) + 1
+    return np.array([counts[key] > 1 for key in keys], dtype=bool)
+
+
+def _network_markdown(summary: dict, title: str) -> str:
     physics, haptic = summary["physics"], summary["haptic"]
     ms = lambda value: f"{value * 1e3:.2f} ms" if value is not None else "n/a"  # noqa: E731
+    displacement = ([f"- peak displacement {summary['peak_displacement_m'] * 1e3:.1f} mm; residual at the end "
+                     f"{summary['final_displacement_m'] * 1e3:.2f} mm"] if "final_displacement_m" in summary else [])
     return "\n".join([
-        "# Closed-loop demo: physics, haptic bridge, tool and simulated PHANToM",
+        f"# Closed-loop demo: {title}",
         "",
         f"- physics: {physics['rate_hz']:.1f} Hz ({physics['samples']} frames), period error p99 "
         f"{ms(physics['period_error_p99_s'])}",
@@ -205,13 +289,14 @@ def _network_markdown(summary: dict) -> str:
         f"{summary['peak_physics_force_n']:.3f} N",
         f"- largest force change between consecutive 1 ms commands in contact: "
         f"{summary['largest_force_jump_n']:.4f} N",
-        f"- peak displacement {summary['peak_displacement_m'] * 1e3:.1f} mm; residual at the end "
-        f"{summary['final_displacement_m'] * 1e3:.2f} mm",
+        *displacement,
+        f"- topology changes: {summary['topology_changes']} (nodes {summary['nodes'][0]} → {summary['nodes'][1]}, "
+        f"skin triangles {summary['skin_triangles'][0]} → {summary['skin_triangles'][1]})",
         "",
     ])
 
 
-def _plot_network_forces(snapshot: dict, path: Path) -> None:
+def _plot_network_forces(snapshot: dict, title: str, path: Path) -> None:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -226,7 +311,7 @@ def _plot_network_forces(snapshot: dict, path: Path) -> None:
                 color="tab:blue", markersize=2, label="physics contact force, 150 Hz")
     ax.set_xlabel("time (s)")
     ax.set_ylabel("force (N)")
-    ax.set_title("Press, slide and release with the simulated PHANToM")
+    ax.set_title(title)
     ax.legend(loc="upper right", fontsize=8)
     fig.tight_layout()
     fig.savefig(path)

@@ -11,6 +11,7 @@ from liver_sim.mesh.tetmesh import signed_volumes
 from liver_sim.physics.cutting import SNAP_FRACTION, Ribbon, cut_along_path, default_blade_direction
 from liver_sim.physics.model import LiverModel
 from liver_sim.physics.params import ModelParams
+from liver_sim.scenarios import upper_skin_path
 
 DOWN = np.array([0.0, 0.0, -1.0])
 SLAB_SPACING_M = 0.01
@@ -164,20 +165,8 @@ def test_cut_is_placed_in_the_deformed_frame(slab):
 
 
 def liver_top_path(liver, length_m, points=11):
-    """A path on the liver's upper skin along x, found by casting vertical rays onto the skin."""
-    skin = liver.points[liver.skin]
-    xs = np.linspace(-0.06, -0.06 + length_m, points)
-    path = []
-    for x in xs:
-        q = np.array([x, 0.0])
-        a, b, c = skin[:, 0, :2], skin[:, 1, :2], skin[:, 2, :2]
-        det = (b - a)[:, 0] * (c - a)[:, 1] - (b - a)[:, 1] * (c - a)[:, 0]
-        u = ((q - a)[:, 0] * (c - a)[:, 1] - (q - a)[:, 1] * (c - a)[:, 0]) / det
-        v = ((b - a)[:, 0] * (q - a)[:, 1] - (b - a)[:, 1] * (q - a)[:, 0]) / det
-        hit = (u >= 0) & (v >= 0) & (u + v <= 1)
-        z = ((1 - u - v) * skin[:, 0, 2] + u * skin[:, 1, 2] + v * skin[:, 2, 2])[hit]
-        path.append([x, 0.0, z.max()])
-    return np.array(path)
+    """A path on the liver's upper skin along x."""
+    return upper_skin_path(liver, (-0.06, 0.0), (-0.06 + length_m, 0.0), points)
 
 
 @pytest.mark.parametrize("depth_layers", [1.0, 2.0])

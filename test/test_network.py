@@ -135,6 +135,8 @@ def test_bad_input_does_not_crash_the_network_nor_reach_the_device(network):
     ("liver_physics", "rate_hz", 5000.0),
     ("liver_physics", "integrator", "runge_kutta"),
     ("haptic_bridge", "max_force_n", 5.0),
+    ("liver_physics", "tool_mode", "scalpel"),
+    ("liver_physics", "tear_strain_capsule", 0.0),
 ])
 def test_out_of_range_parameter_is_refused_by_name(ros_env, executable, parameter, value):
     result = subprocess.run(command_line(executable, {parameter: value}), env=ros_env, capture_output=True,
@@ -155,6 +157,53 @@ def test_demo_runs_the_network_and_writes_its_report(ros_domain_id, tmp_path):
         summary["diagnostics"])
     logs = {p.name for p in (tmp_path / "logs").iterdir()}
     assert {"liver_physics.log", "haptic_bridge.log", "liver_tool.log", "phantom_sim.log"} <= logs
+
+
+@pytest.mark.parametrize("scenario", ["tear", "cut"])
+def test_tearing_and_cutting_change_the_mesh_and_every_subscriber_follows(ros_domain_id, tmp_path, scenario):
+    from liver_sim.demo import TOPOLOGY_FIGURES, run_demo
+
+    summary = run_demo(tmp_path, progress=lambda line: None, scenario=scenario)
+    assert summary["topology_changes"] >= 1
+    before, after = summary["nodes"]
+    assert after > before                             # the node cloud grew with the duplicated nodes
+    assert summary["surface_nodes"] == [before, after]  # and the republished surface indexes it
+    assert summary["skin_triangles"][1] > summary["skin_triangles"][0]
+    physics = summary["diagnostics"]["liver_physics: loop"]
+    assert int(physics["topology_changes"]) >= 1 and int(physics["divergences"]) == 0
+    assert "haptic_bridge: loop" in summary["diagnostics"]  # the bridge ran on, without a restart
+    assert summary["peak_haptic_force_n"] <= MAX_FORCE_N
+    for name in TOPOLOGY_FIGURES + ("summary.json", "summary.md"):
+        assert (tmp_path / name).stat().st_size > 0
+
+
+def test_physics_tool_mode_changes_at_run_time_and_nothing_else_does(network):
+    from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
+    from rcl_interfaces.srv import SetParameters
+    from rclpy.executors import SingleThreadedExecutor
+
+    network.processes.start("liver_physics", command_line("liver_physics"))
+    node = rclpy.create_node("set_parameters", context=network.context)
+    client = node.create_client(SetParameters, "/liver_physics/set_parameters")
+    assert client.wait_for_service(timeout_sec=60.0)
+
+    def set_parameter(name, value):
+        kind = ParameterType.PARAMETER_STRING if isinstance(value, str) else ParameterType.PARAMETER_DOUBLE
+        field = "string_value" if isinstance(value, str) else "double_value"
+        request = SetParameters.Request(parameters=[Parameter(name=name, value=ParameterValue(type=kind,
+                                                                                             **{field: value}))])
+        future = client.call_async(request)
+        rclpy.spin_until_future_complete(node, future, executor=SingleThreadedExecutor(context=network.context),
+                                         timeout_sec=30.0)
+        assert future.done(), f"no answer to setting {name}"
+        return future.result().results[0]
+
+    assert set_parameter("tool_mode", "cut").successful
+    refused = set_parameter("tool_mode", "scalpel")
+    assert not refused.successful and "tool_mode" in refused.reason
+    refused = set_parameter("rate_hz", 100.0)
+    assert not refused.successful and "rate_hz" in refused.reason
+    node.destroy_node()
 
 
 def test_sigterm_to_the_demo_stops_the_nodes_it_started(ros_env, tmp_path):

@@ -26,7 +26,9 @@ class NetworkListener(Node):
     loop (cheaper than a callback each) and timed by DDS: `*_arrival_s` is when the message reached
     this process (the rmw's receive time, on the time.monotonic() scale). Messages are decoded in
     `snapshot()`, only those not decoded by an earlier call. `peak_nodes` are the node positions
-    farthest (largest coordinate change) from the first ones received.
+    farthest (largest coordinate change) from the first ones received with the same node count;
+    `initial_nodes` and `initial_surface` the first ones received, `surface` the newest (a tear or a
+    cut changes it, and the node count with it).
     """
 
     def __init__(self, force_topics: dict[str, tuple[str, str]], name: str = "liver_sim_listener", context=None):
@@ -39,8 +41,9 @@ class NetworkListener(Node):
         self._decoded = {key: [] for key in self._received}
         self.wrenches = []
         self.diagnostics: dict[str, dict] = {}
-        self.surface = None
-        self.first_nodes = self.peak_nodes = self.last_nodes = None
+        self.initial_surface = self.surface = None
+        self.surface_messages = 0
+        self.initial_nodes = self.first_nodes = self.peak_nodes = self.last_nodes = None
         self._peak_displacement = -1.0
         self._polled = LoopInputs(self)
         for label, (topic, fmt) in force_topics.items():
@@ -113,6 +116,8 @@ class NetworkListener(Node):
             except ValueError as exc:
                 self.get_logger().warning(f"ignored /liver/nodes message: {exc}", throttle_duration_sec=1.0)
                 continue
+            if self.initial_nodes is None:
+                self.initial_nodes = positions
             if self.first_nodes is None or len(self.first_nodes) != len(positions):
                 self.first_nodes, self._peak_displacement = positions, -1.0
             self.last_nodes = positions
@@ -128,8 +133,15 @@ class NetworkListener(Node):
                                   np.array([f.x, f.y, f.z])))
 
     def _on_surface(self, message) -> None:
+        try:
+            surface = conversions.mesh_msg_to_arrays(message)
+        except ValueError as exc:
+            self.get_logger().warning(f"ignored /liver/surface message: {exc}")
+            return
         with self._lock:
-            self.surface = conversions.mesh_msg_to_arrays(message)
+            self.surface = surface
+            self.initial_surface = surface if self.initial_surface is None else self.initial_surface
+            self.surface_messages += 1
 
     def _on_diagnostics(self, message) -> None:
         with self._lock:
@@ -164,6 +176,9 @@ class NetworkListener(Node):
                 "nodes_stamp_s": nodes_stamp,
                 "diagnostics": {k: dict(v) for k, v in self.diagnostics.items()},
                 "surface": self.surface,
+                "initial_surface": self.initial_surface,
+                "surface_messages": self.surface_messages,
+                "initial_nodes": self.initial_nodes,
                 "peak_nodes": self.peak_nodes,
                 "last_nodes": self.last_nodes,
             }

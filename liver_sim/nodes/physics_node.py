@@ -1,6 +1,7 @@
 """`liver_physics`: steps the liver model at 150 Hz in its own thread and publishes its state.
 
-Publishes /liver/nodes (PointCloud2), /liver/surface (shape_msgs/Mesh, transient local, on start),
+Publishes /liver/nodes (PointCloud2), /liver/surface (shape_msgs/Mesh, transient local, on start and
+on every tear or cut, when /liver/nodes changes its node count too),
 /liver/marker (TRIANGLE_LIST at marker_rate_hz), /liver/contact_plane (the local model) and
 /liver/tool_wrench (force on the tool); takes the tool tip from /tool/pose.  Stamps are the
 simulation time of the state, counted from the node's start on the ROS clock.
@@ -11,12 +12,14 @@ import threading
 import time
 
 import numpy as np
+from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 
 from liver_sim.mesh.io import load_mesh
 from liver_sim.mesh.liver_shape import default_liver
-from liver_sim.nodes.common import (Latest, LoopInputs, Param, RateLoop, apply_realtime_priority, declare_parameters,
-                                    diagnostic_status, publish_diagnostics, realtime_priority_parameter, run_node)
+from liver_sim.nodes.common import (Latest, LoopInputs, Param, RateLoop, apply_realtime_priority, check_parameter,
+                                    declare_parameters, diagnostic_status, publish_diagnostics,
+                                    realtime_priority_parameter, run_node)
 from liver_sim.physics.contact import ToolPose, ToolShape
 from liver_sim.physics.model import LiverModel
 from liver_sim.physics.params import INTEGRATORS, ModelParams, SpringLaw
@@ -24,6 +27,9 @@ from msg_defs import conversions
 from msg_defs.topics import TOPICS
 
 DEFAULTS = ModelParams()
+TOOL_MODES = ("press", "grasp", "cut")
+#: cut: a blade point is added to the stroke's path when this far (m) from the last one.
+CUT_PATH_STEP_M = 0.002
 PARAMETERS = {
     "mesh_path": Param("", "volume or closed-surface mesh file (metres); empty: the embedded default liver"),
     "target_tets": Param(1150, "tetrahedra to aim for when mesh_path is a surface", 50, 2_000_000),
@@ -49,6 +55,20 @@ PARAMETERS = {
     "tool_radius_m": Param(ToolShape().radius_m, "sphere/capsule radius (m)", 1e-4, 0.2),
     "tool_length_m": Param(ToolShape().length_m, "capsule shaft length along the tool +z (m)", 0.0, 1.0),
     "tool_half_extents_m": Param(list(ToolShape().half_extents_m), "box half extents (m)"),
+    "tearing": Param(DEFAULTS.tearing, "separate tetrahedra stretched beyond the tearing strains (paper §2.6); "
+                     "the torn mesh is republished on surface_topic"),
+    "tear_strain_parenchyma": Param(DEFAULTS.tear_strain_parenchyma, "stretch across a face between two tets "
+                                    "(mean normal strain, dimensionless) above which they separate", 0.01, 10.0),
+    "tear_strain_capsule": Param(DEFAULTS.tear_strain_capsule, "the same for a face with an edge on the capsule "
+                                 "(dimensionless)", 0.01, 10.0),
+    "tool_mode": Param("press", "press: the tool pushes the surface (Eq. 3); grasp: the skin nodes it touches "
+                       "follow it until tool_mode changes; cut: each stroke in contact cuts the skin (and cut_depth_m "
+                       "of tissue under it) along the tool path when the tool leaves the surface (§3.5). May be "
+                       "changed at run time", choices=TOOL_MODES),
+    "grasp_margin_m": Param(0.005, "grasp: skin nodes this close to the tool's bounding ball are held (m)",
+                            0.0, 0.05),
+    "cut_depth_m": Param(0.005, "cut: depth of the cut below the tool path (m); under one element layer cuts "
+                         "the capsule (membrane) only", 0.0005, 0.2),
     "local_model": Param("plane", "local model published for the haptic loop", choices=("plane", "sphere")),
     "local_model_reach_m": Param(0.02, "publish a local model while the tool is this close to the skin (m)",
                                  0.0, 1.0),
@@ -77,7 +97,9 @@ def model_params(values: dict) -> ModelParams:
         gravity_m_s2=tuple(values["gravity_m_s2"]), integrator=values["integrator"],
         frame_rate_hz=values["rate_hz"], substeps=values["substeps"], fixed_nodes=fixed,
         contact_stiffness_n_per_m=values["contact_stiffness_n_per_m"],
-        contact_damping_ns_per_m=values["contact_damping_ns_per_m"]).validate()
+        contact_damping_ns_per_m=values["contact_damping_ns_per_m"], tearing=values["tearing"],
+        tear_strain_parenchyma=values["tear_strain_parenchyma"],
+        tear_strain_capsule=values["tear_strain_capsule"]).validate()
 
 
 def build_model(values: dict) -> LiverModel:
@@ -118,6 +140,10 @@ class PhysicsNode(Node):
                                self._pose.set, raw=True)
         self._last_pose_bytes, self._last_pose = None, None
         self._clock_origin_s = self.get_clock().now().nanoseconds * 1e-9
+        self._tool_mode = p["tool_mode"]  # the one parameter that may change at run time
+        self._in_contact = False
+        self._cut_path: list[np.ndarray] = []
+        self.add_on_set_parameters_callback(self._on_set_parameters)
         self.publish_surface()
         self.create_timer(1.0, self._publish_diagnostics)
         self._loop = RateLoop(p["rate_hz"], self._step, "liver_physics")
@@ -126,7 +152,8 @@ class PhysicsNode(Node):
             f"{len(mesh.skin)} skin triangles), {p['rate_hz']:g} Hz × {p['substeps']} substeps "
             f"(dt {self.model.params.dt_s * 1e6:.0f} us, stable below {self.model.stable_dt_s * 1e6:.0f} us); "
             f"in: {p['tool_pose_topic']}; out: {p['nodes_topic']}, {p['surface_topic']}, {p['marker_topic']} "
-            f"({p['marker_rate_hz']:g} Hz), {p['contact_plane_topic']} ({p['local_model']}), {p['tool_wrench_topic']}")
+            f"({p['marker_rate_hz']:g} Hz), {p['contact_plane_topic']} ({p['local_model']}), {p['tool_wrench_topic']}; "
+            f"tool {p['tool_shape']} in mode {p['tool_mode']}, tearing {'on' if p['tearing'] else 'off'}")
         apply_realtime_priority(self, p["realtime_priority"])  # before the loop starts: it inherits it
         self._loop.start()
 
@@ -137,6 +164,55 @@ class PhysicsNode(Node):
     def publish_surface(self) -> None:
         """Skin triangles and rest positions: on start and on every topology change."""
         self._outputs["surface"].publish(conversions.skin_mesh_msg(self.model.mesh.skin, self.model.mesh.points))
+
+    def _on_set_parameters(self, parameters) -> SetParametersResult:
+        """Accept a new tool_mode (press, grasp, cut) at run time; every other parameter is read at start."""
+        for parameter in parameters:
+            if parameter.name != "tool_mode":
+                return SetParametersResult(successful=False, reason=f"{parameter.name} is read at start: restart "
+                                           "liver_physics to change it (only tool_mode changes at run time)")
+            try:
+                check_parameter("tool_mode", PARAMETERS["tool_mode"], parameter.value)
+            except ValueError as exc:
+                return SetParametersResult(successful=False, reason=str(exc))
+        for parameter in parameters:
+            self._tool_mode = parameter.value
+            self.get_logger().info(f"tool_mode: {parameter.value}")
+        return SetParametersResult(successful=True)
+
+    def _use_tool(self, pose: ToolPose | None) -> None:
+        """Before a frame: grasp what the tool touches in grasp mode, let go in any other mode."""
+        grasping = self.model.grasped_nodes.size > 0
+        if self._tool_mode == "grasp" and not grasping and pose is not None and self._in_contact:
+            held = self.model.grasp(pose, self.p["grasp_margin_m"])
+            self.get_logger().info(f"grasped {held} skin node(s)")
+        elif self._tool_mode != "grasp" and grasping:
+            self.model.release()
+            self.get_logger().info("released the grasped nodes")
+
+    def _cut_stroke(self, local_model) -> bool:
+        """After a frame in cut mode: extend the stroke's path with the contact point; when the tool leaves
+        the surface, cut along it (§3.5).  True when the mesh changed."""
+        if self._tool_mode == "cut" and local_model.in_contact:
+            if not self._cut_path or np.linalg.norm(local_model.point - self._cut_path[-1]) >= CUT_PATH_STEP_M:
+                self._cut_path.append(local_model.point.copy())
+            return False
+        path, self._cut_path = self._cut_path, []
+        if len(path) < 2:
+            return False
+        try:
+            return self.model.cut(np.array(path), self.p["cut_depth_m"])
+        except ValueError as exc:  # e.g. a path along which no blade direction can be found
+            self.get_logger().warning(f"cut along {len(path)} points refused: {exc}")
+            return False
+
+    def _topology_changed(self, cause: str) -> None:
+        mesh = self.model.mesh
+        self.publish_surface()
+        self.get_logger().info(
+            f"{cause}: {len(mesh.points)} nodes, {len(mesh.tets)} tets, {len(mesh.skin)} skin triangles; "
+            f"{self.model.params.substeps} substeps per frame (stable below {self.model.stable_dt_s * 1e6:.0f} us)",
+            throttle_duration_sec=0.5)
 
     def _tool_pose(self, now: float) -> ToolPose | None:
         """The newest valid tool pose, None when it is older than tool_pose_timeout_s or refused."""
@@ -168,9 +244,16 @@ class PhysicsNode(Node):
     def _step(self, now: float) -> None:
         started = time.perf_counter()
         self._inputs.poll()
-        result = self.model.step_frame(self._tool_pose(now))
+        pose = self._tool_pose(now)
+        self._use_tool(pose)
+        result = self.model.step_frame(pose)
         if result.divergence:
             self.get_logger().error(result.divergence, throttle_duration_sec=1.0)
+        self._in_contact = result.local_model.in_contact
+        if result.topology_changed:
+            self._topology_changed("torn")
+        if self._cut_stroke(result.local_model):
+            self._topology_changed("cut")
         stamp = self._stamp()
         frame = self.p["frame_id"]
         self._outputs["nodes"].publish(conversions.nodes_to_pointcloud2(self.model.positions, stamp, frame))
@@ -191,6 +274,8 @@ class PhysicsNode(Node):
         _, received = self._pose.get()
         extra = {"frame_compute_p99_s": float(np.percentile(compute, 99)) if compute.size else 0.0,
                  "divergences": self.model.divergences, "bad_tool_poses": self._bad_poses,
+                 "tool_mode": self._tool_mode, "topology_changes": self.model.topology_version,
+                 "nodes": len(self.model.positions), "substeps": self.model.params.substeps,
                  "tool_pose_age_s": float(time.monotonic() - received), "simulated_s": self.model.time_s}
         ok = stats["rate_hz"] > 0.98 * self.p["rate_hz"]
         status = diagnostic_status(f"{self.get_name()}: loop", stats, ok,
