@@ -266,10 +266,17 @@ def bench_topology_mesh(name: str, mesh, repeats: int = 5) -> dict:
     top = mesh.points[mesh.skin_nodes][np.argmax(mesh.points[mesh.skin_nodes, 2])]
     path = upper_skin_path(mesh, (top[0] - 0.04, top[1]), (top[0] + 0.04, top[1]))
     models = [fresh(mesh.points) for _ in range(repeats)]
-    cut_s = _median_s(lambda: models.pop().cut(path, depth), repeats)
+    cut_nodes = []
+
+    def cut_once():
+        model = models.pop()
+        model.cut(path, depth)
+        cut_nodes.append(len(model.positions) - len(mesh.points))
+
+    cut_s = _median_s(cut_once, repeats)
     return {"mesh": name, "tetrahedra": int(len(mesh.tets)), "nodes": int(len(mesh.points)),
             "tear_detection_per_frame_s": detect_s, "tear_s": tear_s, "tear_faces_opened": int(np.median(faces)),
-            "cut_s": cut_s, "cut_depth_m": depth}
+            "cut_s": cut_s, "cut_depth_m": depth, "cut_new_nodes": int(np.median(cut_nodes))}
 
 
 def run_topology_bench(sizes=(10_000,), repeats: int = 5, progress=None) -> dict:

@@ -3,7 +3,7 @@ import json
 
 import pytest
 
-from liver_sim.bench import run_physics_bench
+from liver_sim.bench import TOPOLOGY_TARGETS, run_physics_bench, run_topology_bench
 from liver_sim.demo import PLOTTED_FIGURES, run_offline_demo
 
 PNG = b"\x89PNG\r\n\x1a\n"
@@ -21,6 +21,17 @@ def test_physics_bench_reports_the_default_liver_first_and_agrees_with_numpy():
         assert result["max_abs_diff_vs_numpy_m"] < 1e-9
         assert result["us_per_step_1thread"] > 0 and result["realtime_factor_150hz"] > 0
     json.dumps(report)
+
+
+def test_topology_bench_tears_and_cuts_each_mesh_and_reports_its_target():
+    report = json.loads(json.dumps(run_topology_bench(sizes=(2000,), repeats=1)))
+    assert report["machine"]["cores"] and set(report["met"]) == set(TOPOLOGY_TARGETS)
+    default, larger = report["results"]
+    assert default["mesh"] == "default liver" and larger["tetrahedra"] > default["tetrahedra"]
+    for result in (default, larger):
+        assert result["tear_faces_opened"] > 0
+        assert 0.0 < result["tear_detection_per_frame_s"] < result["tear_s"]
+        assert result["cut_s"] > 0.0 and result["cut_new_nodes"] > 0
 
 
 def test_offline_demo_writes_summary_and_pictures(tmp_path):
