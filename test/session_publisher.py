@@ -9,7 +9,6 @@ import json
 import sys
 import time
 
-import numpy as np
 import rclpy
 
 from liver_sim.mesh.liver_shape import default_liver

@@ -23,13 +23,11 @@ from liver_sim.nodes.common import (Latest, LoopInputs, Param, RateLoop, apply_r
 from liver_sim.physics.contact import ToolPose, ToolShape
 from liver_sim.physics.model import LiverModel
 from liver_sim.physics.params import INTEGRATORS, ModelParams, SpringLaw
+from liver_sim.physics.tool_use import TOOL_MODES, ToolUse
 from msg_defs import conversions
 from msg_defs.topics import TOPICS
 
 DEFAULTS = ModelParams()
-TOOL_MODES = ("press", "grasp", "cut")
-#: cut: a blade point is added to the stroke's path when this far (m) from the last one.
-CUT_PATH_STEP_M = 0.002
 PARAMETERS = {
     "mesh_path": Param("", "volume or closed-surface mesh file (metres); empty: the embedded default liver"),
     "target_tets": Param(1150, "tetrahedra to aim for when mesh_path is a surface", 50, 2_000_000),
@@ -140,9 +138,7 @@ class PhysicsNode(Node):
                                self._pose.set, raw=True)
         self._last_pose_bytes, self._last_pose = None, None
         self._clock_origin_s = self.get_clock().now().nanoseconds * 1e-9
-        self._tool_mode = p["tool_mode"]  # the one parameter that may change at run time
-        self._in_contact = False
-        self._cut_path: list[np.ndarray] = []
+        self._tool_use = ToolUse(self.model, p["tool_mode"], p["grasp_margin_m"], p["cut_depth_m"])
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.publish_surface()
         self.create_timer(1.0, self._publish_diagnostics)
@@ -176,35 +172,9 @@ class PhysicsNode(Node):
             except ValueError as exc:
                 return SetParametersResult(successful=False, reason=str(exc))
         for parameter in parameters:
-            self._tool_mode = parameter.value
+            self._tool_use.mode = parameter.value  # read by the loop at its next frame
             self.get_logger().info(f"tool_mode: {parameter.value}")
         return SetParametersResult(successful=True)
-
-    def _use_tool(self, pose: ToolPose | None) -> None:
-        """Before a frame: grasp what the tool touches in grasp mode, let go in any other mode."""
-        grasping = self.model.grasped_nodes.size > 0
-        if self._tool_mode == "grasp" and not grasping and pose is not None and self._in_contact:
-            held = self.model.grasp(pose, self.p["grasp_margin_m"])
-            self.get_logger().info(f"grasped {held} skin node(s)")
-        elif self._tool_mode != "grasp" and grasping:
-            self.model.release()
-            self.get_logger().info("released the grasped nodes")
-
-    def _cut_stroke(self, local_model) -> bool:
-        """After a frame in cut mode: extend the stroke's path with the contact point; when the tool leaves
-        the surface, cut along it (§3.5).  True when the mesh changed."""
-        if self._tool_mode == "cut" and local_model.in_contact:
-            if not self._cut_path or np.linalg.norm(local_model.point - self._cut_path[-1]) >= CUT_PATH_STEP_M:
-                self._cut_path.append(local_model.point.copy())
-            return False
-        path, self._cut_path = self._cut_path, []
-        if len(path) < 2:
-            return False
-        try:
-            return self.model.cut(np.array(path), self.p["cut_depth_m"])
-        except ValueError as exc:  # e.g. a path along which no blade direction can be found
-            self.get_logger().warning(f"cut along {len(path)} points refused: {exc}")
-            return False
 
     def _topology_changed(self, cause: str) -> None:
         mesh = self.model.mesh
@@ -245,15 +215,16 @@ class PhysicsNode(Node):
         started = time.perf_counter()
         self._inputs.poll()
         pose = self._tool_pose(now)
-        self._use_tool(pose)
+        self._tool_use.before_frame(pose)
         result = self.model.step_frame(pose)
         if result.divergence:
             self.get_logger().error(result.divergence, throttle_duration_sec=1.0)
-        self._in_contact = result.local_model.in_contact
         if result.topology_changed:
             self._topology_changed("torn")
-        if self._cut_stroke(result.local_model):
+        if self._tool_use.after_frame(result.local_model):
             self._topology_changed("cut")
+        while self._tool_use.events:
+            self.get_logger().info(self._tool_use.events.pop(0))
         stamp = self._stamp()
         frame = self.p["frame_id"]
         self._outputs["nodes"].publish(conversions.nodes_to_pointcloud2(self.model.positions, stamp, frame))
@@ -274,7 +245,7 @@ class PhysicsNode(Node):
         _, received = self._pose.get()
         extra = {"frame_compute_p99_s": float(np.percentile(compute, 99)) if compute.size else 0.0,
                  "divergences": self.model.divergences, "bad_tool_poses": self._bad_poses,
-                 "tool_mode": self._tool_mode, "topology_changes": self.model.topology_version,
+                 "tool_mode": self._tool_use.mode, "topology_changes": self.model.topology_version,
                  "nodes": len(self.model.positions), "substeps": self.model.params.substeps,
                  "tool_pose_age_s": float(time.monotonic() - received), "simulated_s": self.model.time_s}
         ok = stats["rate_hz"] > 0.98 * self.p["rate_hz"]

@@ -37,9 +37,11 @@ class _Session:
     def __init__(self, physics: dict, bridge: dict, emit, progress, compare: bool = False):
         from haptic_bridge.tick import BridgeTick
         from liver_sim.nodes.physics_node import build_model
+        from liver_sim.physics.tool_use import ToolUse
 
         self.p, self.b = physics, bridge
         self.model = build_model(physics)
+        self.tool_use = ToolUse(self.model, physics["tool_mode"], physics["grasp_margin_m"], physics["cut_depth_m"])
         self.tick = BridgeTick(bridge)
         #: the Fig. 8 baseline: a second bridge holding the physics wrench (local_model: none)
         self.baseline = BridgeTick({**bridge, "local_model": "none"}) if compare and bridge["local_model"] != "none" \
@@ -70,7 +72,9 @@ class _Session:
 
         from msg_defs import conversions
 
+        self.tool_use.before_frame(pose)
         result = self.model.step_frame(pose)
+        changed = self.tool_use.after_frame(result.local_model) or result.topology_changed
         t = t0 + self.model.time_s
         stamp, frame_id = conversions.stamp_from_seconds(t), self.p["frame_id"]
         marker = conversions.local_model_marker(result.local_model, stamp, frame_id, self.p["local_model_lifetime_s"])
@@ -79,6 +83,9 @@ class _Session:
                      serialize_message(conversions.nodes_to_pointcloud2(self.model.positions, stamp, frame_id))),
                     (self.p["contact_plane_topic"], "contact_plane", serialize_message(marker)),
                     (self.p["tool_wrench_topic"], "tool_wrench", serialize_message(wrench))]
+        if changed:  # a tear or a cut: the new surface before the node cloud that indexes it
+            messages.insert(0, (self.p["surface_topic"], "surface", serialize_message(
+                conversions.skin_mesh_msg(self.model.mesh.skin, self.model.mesh.points))))
         if self.frames % self.marker_every == 0:
             messages.append((self.p["marker_topic"], "marker", conversions.skin_marker_serialized(
                 self.model.positions, self.model.mesh.skin, stamp, frame_id)))
