@@ -123,17 +123,21 @@ def bench_mesh(name: str, mesh, min_seconds: float = 1.0) -> dict:
     }
 
 
-def run_physics_bench(sizes=LARGER_LIVERS, min_seconds: float = 1.0, progress=None) -> dict:
-    """The benchmark's JSON object: machine, results (default liver first) and targets met."""
-    meshes = [("default liver", default_liver)] + [(f"liver ~{n} tets", lambda n=n: build_liver(n)) for n in sizes]
-    results = []
-    for name, make in meshes:
+def livers(sizes, progress=None, doing: str = "timing"):
+    """(name, mesh) of the default liver, then of livers of about `sizes` tets, meshed one at a time."""
+    for name, make in [("default liver", default_liver)] + [(f"liver ~{n} tets", lambda n=n: build_liver(n))
+                                                             for n in sizes]:
         if progress:
             progress(f"meshing {name}")
         mesh = make()
         if progress:
-            progress(f"timing {name}: {len(mesh.tets)} tets")
-        results.append(bench_mesh(name, mesh, min_seconds))
+            progress(f"{doing} {name}: {len(mesh.tets)} tets")
+        yield name, mesh
+
+
+def run_physics_bench(sizes=LARGER_LIVERS, min_seconds: float = 1.0, progress=None) -> dict:
+    """The benchmark's JSON object: machine, results (default liver first) and targets met."""
+    results = [bench_mesh(name, mesh, min_seconds) for name, mesh in livers(sizes, progress)]
     default = results[0]
     met = {
         "default_us_per_step_1thread_max": default["us_per_step_1thread"] <= TARGETS["default_us_per_step_1thread_max"],
@@ -281,15 +285,8 @@ def bench_topology_mesh(name: str, mesh, repeats: int = 5) -> dict:
 
 def run_topology_bench(sizes=(10_000,), repeats: int = 5, progress=None) -> dict:
     """The topology benchmark's JSON object: machine, results (default liver first), targets met."""
-    meshes = [("default liver", default_liver)] + [(f"liver ~{n} tets", lambda n=n: build_liver(n)) for n in sizes]
-    results = []
-    for name, make in meshes:
-        if progress:
-            progress(f"meshing {name}")
-        mesh = make()
-        if progress:
-            progress(f"tearing and cutting {name}: {len(mesh.tets)} tets")
-        results.append(bench_topology_mesh(name, mesh, repeats))
+    results = [bench_topology_mesh(name, mesh, repeats)
+               for name, mesh in livers(sizes, progress, "tearing and cutting")]
     slowest = max(results[0]["tear_s"], results[0]["cut_s"])
     met = {"default_topology_change_s_max": slowest <= TOPOLOGY_TARGETS["default_topology_change_s_max"]}
     return {"benchmark": "topology", "machine": machine(), "results": results, "targets": TOPOLOGY_TARGETS,
