@@ -96,10 +96,10 @@ def test_a_recording_stopped_mid_stream_by_sigterm_is_a_complete_sqlite3_bag(ros
         assert {c.topic: c.msgcount for c in reader.connections} == written  # metadata.yaml agrees
 
 
-def pose_bag(path, duration_s=1.6, depth_m=0.01, storage="mcap"):
+def pose_bag(path, duration_s=1.6, depth_m=0.01, storage="mcap", script_name="press_release", slide_m=0.03):
     """A bag of /tool/pose at 1 kHz pressing the default liver (press and release)."""
-    script = make_script("press_release", ScriptSettings(depth_m=depth_m, approach_s=0.3, press_s=0.5, hold_s=0.3,
-                                                          withdraw_s=0.2, rest_s=0.2))
+    script = make_script(script_name, ScriptSettings(depth_m=depth_m, approach_s=0.3, press_s=0.5, hold_s=0.3,
+                                                      withdraw_s=0.2, rest_s=0.2, slide_m=slide_m, slide_s=2.0))
     with BagWriter(path, storage) as writer:
         for k in range(int(duration_s * 1000)):
             t = 50.0 + k * 1e-3
@@ -135,6 +135,17 @@ def test_resimulation_is_deterministic_and_follows_changed_parameters(tmp_path):
     stamps = [m.header.stamp.sec + m.header.stamp.nanosec * 1e-9 for _, _, m in read["/liver/tool_wrench"]]
     np.testing.assert_allclose(np.diff(stamps), 1 / 150, atol=1e-8)  # simulation time at the frame rate
     assert stiffer["overrides"] == ["contact_stiffness_n_per_m:=900"]
+
+
+def test_resimulation_cuts_in_cut_mode_and_records_the_new_surface(tmp_path):
+    source = pose_bag(tmp_path / "poses", duration_s=4.0, depth_m=0.012, script_name="press_slide_release",
+                      slide_m=0.06)
+    resimulate(source, tmp_path / "cut", ["tool_mode:=cut", "cut_depth_m:=0.008"], progress=lambda line: None)
+    read = rosbags_read(tmp_path / "cut")
+    surfaces = [m for _, _, m in read["/liver/surface"]]
+    assert len(surfaces) == 2 and len(surfaces[1].vertices) > len(surfaces[0].vertices)
+    widths = [m.width for _, _, m in read["/liver/nodes"]]
+    assert widths[0] == len(surfaces[0].vertices) and widths[-1] == len(surfaces[1].vertices)
 
 
 def test_parameter_overrides_are_checked_as_the_nodes_check_them():
