@@ -54,16 +54,48 @@ def dihedral_angles_deg(points: np.ndarray, tets: np.ndarray) -> np.ndarray:
 
 def unique_edges(cells: np.ndarray, local_edges: np.ndarray) -> np.ndarray:
     """Sorted unique undirected edges (E, 2) of the given cells, in lexicographic order."""
-    edges = np.sort(cells[:, local_edges].reshape(-1, 2), axis=1)
-    n = int(edges.max()) + 1 if len(edges) else 1
-    keys = np.unique(edges[:, 0] * n + edges[:, 1])  # integer keys: far faster than np.unique(axis=0)
+    ends = cells[:, local_edges]
+    n = int(cells.max()) + 1 if cells.size else 1
+    keys = np.minimum(ends[..., 0], ends[..., 1]) * n + np.maximum(ends[..., 0], ends[..., 1])
+    keys = sorted_unique(keys.ravel())  # integer keys: far faster than np.unique(axis=0)
     return np.stack([keys // n, keys % n], axis=1)
 
 
 def face_keys(faces: np.ndarray, node_count: int) -> np.ndarray:
     """One int64 key per unordered node triple (F, 3), increasing with the sorted triple (nodes < node_count)."""
-    s = np.sort(faces, axis=1)
-    return (s[:, 0] * node_count + s[:, 1]) * node_count + s[:, 2]
+    a, b, c = faces[:, 0], faces[:, 1], faces[:, 2]
+    low = np.minimum(np.minimum(a, b), c)
+    high = np.maximum(np.maximum(a, b), c)
+    return (low * node_count + (a + b + c - low - high)) * node_count + high
+
+
+def sorted_unique(keys: np.ndarray) -> np.ndarray:
+    """np.unique of an int array (sorted distinct values), by a stable sort (faster on int64)."""
+    ordered = np.sort(keys, kind="stable")
+    return ordered[np.concatenate([[True], ordered[1:] != ordered[:-1]])] if len(ordered) else ordered
+
+
+def key_groups(keys: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(order, start, count): order = stable argsort of keys; the g-th distinct key (increasing) is held
+    by the entries order[start[g] : start[g] + count[g]], in index order."""
+    order = np.argsort(keys, kind="stable")
+    ordered = keys[order]
+    start = np.flatnonzero(np.concatenate([[True], ordered[1:] != ordered[:-1]])) if len(keys) else order
+    return order, start, np.diff(np.append(start, len(keys)))
+
+
+def skin_slots(tets: np.ndarray, node_count: int) -> np.ndarray:
+    """Slots (4·tet + local face, TET_FACES order) of the faces on exactly one tet, by increasing face key."""
+    order, start, count = key_groups(face_keys(tets[:, TET_FACES].reshape(-1, 3), node_count))
+    return order[start[count == 1]]
+
+
+def isin_keys(keys: np.ndarray, table: np.ndarray) -> np.ndarray:
+    """np.isin(keys, table) for int arrays, by binary search in the sorted table."""
+    table = np.sort(table, kind="stable")
+    if not len(table):
+        return np.zeros(keys.shape, dtype=bool)
+    return table[np.minimum(np.searchsorted(table, keys), len(table) - 1)] == keys
 
 
 @dataclass(frozen=True, eq=False)
@@ -94,7 +126,7 @@ class TetMesh:
             raise MeshError(source, f"tetrahedron array has shape {tets.shape}, expected (M, 4)")
         if tets.min() < 0 or tets.max() >= len(points):
             raise MeshError(source, f"tetrahedron indices out of range 0..{len(points) - 1}")
-        used = np.unique(tets)
+        used = np.flatnonzero(np.bincount(tets.ravel(), minlength=len(points)))
         bad_nodes = ~np.isfinite(points[used]).all(axis=1)
         if bad_nodes.any():
             raise MeshError(source, f"{int(bad_nodes.sum())} node(s) with NaN or infinite coordinates, "
@@ -103,13 +135,13 @@ class TetMesh:
             remap = np.full(len(points), -1, dtype=np.int64)
             remap[used] = np.arange(len(used))
             points, tets = points[used], remap[tets]
-        repeated = (np.sort(tets, axis=1)[:, 1:] == np.sort(tets, axis=1)[:, :-1]).any(axis=1)
+        repeated = (tets[:, TET_EDGES[:, 0]] == tets[:, TET_EDGES[:, 1]]).any(axis=1)
         if repeated.any():
             raise MeshError(source, f"{int(repeated.sum())} degenerate tetrahedra with a repeated node, "
                                     f"first is tet {int(np.argmax(repeated))}")
         volumes = signed_volumes(points, tets)
         edge_vec = points[tets[:, TET_EDGES[:, 1]]] - points[tets[:, TET_EDGES[:, 0]]]
-        scale = float(np.linalg.norm(edge_vec, axis=2).mean())
+        scale = float(np.sqrt(edge_vec[..., 0] ** 2 + edge_vec[..., 1] ** 2 + edge_vec[..., 2] ** 2).mean())
         flat = np.abs(volumes) <= DEGENERATE_RELATIVE_VOLUME * scale ** 3
         if flat.any():
             raise MeshError(source, f"{int(flat.sum())} degenerate (zero-volume) tetrahedra, "
@@ -119,23 +151,28 @@ class TetMesh:
             tets = tets.copy()
             tets[inverted] = tets[inverted][:, [0, 1, 3, 2]]
         mesh = cls(points, tets, source)
+        mesh.__dict__["volumes"] = np.abs(volumes)  # the cached property: re-oriented tets' volumes flip sign exactly
         mesh._check_face_pairing()
         return mesh
 
+    @cached_property
+    def _face_groups(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(faces, order, start, count): the tets' faces (4·M, 3), TET_FACES order, grouped by node triple
+        (key_groups of their face_keys)."""
+        faces = self.tets[:, TET_FACES].reshape(-1, 3)
+        return (faces, *key_groups(face_keys(faces, len(self.points))))
+
     def _check_face_pairing(self) -> None:
         """Every face is on one tet (skin) or two tets lying on opposite sides of it."""
-        faces = self.tets[:, TET_FACES].reshape(-1, 3)
-        _, inverse, counts = np.unique(face_keys(faces, len(self.points)), return_inverse=True, return_counts=True)
-        if (counts > 2).any():
-            raise MeshError(self.source, f"{int((counts > 2).sum())} faces shared by more than two "
+        faces, order, start, count = self._face_groups
+        if (count > 2).any():
+            raise MeshError(self.source, f"{int((count > 2).sum())} faces shared by more than two "
                                          "tetrahedra (overlapping or non-manifold elements)")
         # Two positively oriented tets on opposite sides list a shared face with opposite
         # orientation, i.e. as an odd permutation of each other.
         parity = _permutation_parity(faces)
-        shared = counts[inverse] == 2
-        order = np.argsort(inverse[shared], kind="stable")
-        pair_parity = parity[shared][order].reshape(-1, 2)
-        same_side = pair_parity[:, 0] == pair_parity[:, 1]
+        first = start[count == 2]
+        same_side = parity[order[first]] == parity[order[first + 1]]
         if same_side.any():
             raise MeshError(self.source, f"{int(same_side.sum())} interior faces with both tetrahedra on "
                                          "the same side: inverted or folded elements beyond repair")
@@ -143,11 +180,8 @@ class TetMesh:
     @cached_property
     def skin(self) -> np.ndarray:
         """Boundary triangles (K, 3), outward oriented, sorted by their sorted node triple for determinism."""
-        faces = self.tets[:, TET_FACES].reshape(-1, 3)
-        keys = face_keys(faces, len(self.points))
-        _, inverse, counts = np.unique(keys, return_inverse=True, return_counts=True)
-        on_skin = counts[inverse] == 1
-        return faces[on_skin][np.argsort(keys[on_skin], kind="stable")]
+        faces, order, start, count = self._face_groups
+        return faces[order[start[count == 1]]]
 
     @cached_property
     def volumes(self) -> np.ndarray:
@@ -172,7 +206,7 @@ class TetMesh:
     @cached_property
     def skin_nodes(self) -> np.ndarray:
         """Sorted indices of the nodes on the skin."""
-        return np.unique(self.skin)
+        return np.flatnonzero(np.bincount(self.skin.ravel(), minlength=len(self.points)))
 
     @cached_property
     def dihedral_angles_deg(self) -> np.ndarray:
@@ -203,9 +237,7 @@ class TetMesh:
 
     def lumped_masses(self, density_kg_m3: float) -> np.ndarray:
         """Node masses (N,) in kg: each tet's volume × density shared equally by its 4 nodes (P2)."""
-        masses = np.zeros(len(self.points))
-        np.add.at(masses, self.tets.ravel(), np.repeat(self.volumes * density_kg_m3 / 4.0, 4))
-        return masses
+        return np.bincount(self.tets.ravel(), np.repeat(self.volumes * density_kg_m3 / 4.0, 4), len(self.points))
 
     def summary(self) -> dict:
         """The figures `liver-sim mesh info` prints."""

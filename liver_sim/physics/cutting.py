@@ -26,8 +26,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from liver_sim.mesh.tetmesh import TET_EDGES, TET_FACES, face_keys
-from liver_sim.physics.topology import TopologyChange, interior_face_count, separate_faces
+from liver_sim.mesh.tetmesh import TET_EDGES, TET_FACES, face_keys, isin_keys, skin_slots
+from liver_sim.physics.topology import TopologyChange, interior_face_pairs, separate_pairs, split_skin_slots
 
 #: A crossing closer than this fraction of its edge to an end node is moved onto that node: no piece of a
 #: split tet is thinner than this, so no new spring is much shorter (stiffer) than the old ones.
@@ -127,8 +127,10 @@ def cut_along_path(rest_points: np.ndarray, tets: np.ndarray, positions: np.ndar
     if len(path_m) < 2 or not np.isfinite(path_m).all() or depth_m <= 0:
         return None
     corners = positions[tets]
+    box_low = np.minimum(np.minimum(corners[:, 0], corners[:, 1]), np.minimum(corners[:, 2], corners[:, 3]))
+    box_high = np.maximum(np.maximum(corners[:, 0], corners[:, 1]), np.maximum(corners[:, 2], corners[:, 3]))
     low, high = path_m.min(axis=0) - depth_m, path_m.max(axis=0) + depth_m
-    if not ((corners.min(axis=1) <= high) & (corners.max(axis=1) >= low)).all(axis=1).any():
+    if not ((box_low <= high) & (box_high >= low)).all(axis=1).any():
         return None
     direction = (default_blade_direction(positions, tets, path_m) if blade_direction is None
                  else np.asarray(blade_direction, dtype=np.float64))
@@ -141,7 +143,7 @@ def cut_along_path(rest_points: np.ndarray, tets: np.ndarray, positions: np.ndar
     # φ on the outer tets' nodes, so that every tet holding an edge of an inner tet sees true signs.
     reach = np.abs(ribbon.direction) * depth_m
     low, high = path_m.min(axis=0) - reach, path_m.max(axis=0) + reach
-    inner = ((corners.min(axis=1) <= high) & (corners.max(axis=1) >= low)).all(axis=1)
+    inner = ((box_low <= high) & (box_high >= low)).all(axis=1)
     if not inner.any():
         return None
     touched = np.zeros(n, dtype=bool)
@@ -191,21 +193,19 @@ def cut_along_path(rest_points: np.ndarray, tets: np.ndarray, positions: np.ndar
     sign = np.sign(phi_all[pieces])
     side = np.where((sign >= 0).all(axis=1), 1, 0) - np.where((sign <= 0).all(axis=1), 1, 0)
     faces = pieces[:, TET_FACES].reshape(-1, 3)
-    keys = face_keys(faces, total)
-    order = np.argsort(keys, kind="stable")
-    pair = np.flatnonzero(keys[order][1:] == keys[order][:-1])
-    slot_a, slot_b = order[pair], order[pair + 1]
-    opposite = side[slot_a // 4] * side[slot_b // 4] == -1
-    candidate = faces[slot_a[opposite]]
+    slot_a, slot_b, _ = interior_face_pairs(pieces, total)
+    candidate = faces[slot_a]
     fs, fh = s_all[candidate], h_all[candidate]
-    inside = ((fh >= -depth_m).all(axis=1) & (fh.min(axis=1) <= depth_m)
-              & (fs.max(axis=1) >= 0) & (fs.min(axis=1) <= ribbon.length_m))
-    cut_faces = candidate[inside]
-    if not len(cut_faces):
+    fh_min = np.minimum(np.minimum(fh[:, 0], fh[:, 1]), fh[:, 2])
+    fs_min = np.minimum(np.minimum(fs[:, 0], fs[:, 1]), fs[:, 2])
+    fs_max = np.maximum(np.maximum(fs[:, 0], fs[:, 1]), fs[:, 2])
+    cut = ((side[slot_a // 4] * side[slot_b // 4] == -1) & (fh_min >= -depth_m) & (fh_min <= depth_m)
+           & (fs_max >= 0) & (fs_min <= ribbon.length_m))
+    if not cut.any():
         return None
 
-    new_tets, parent = separate_faces(pieces, cut_faces)
-    opened = len(pair) - interior_face_count(new_tets, len(parent))
+    new_tets, parent, shared = separate_pairs(pieces, total, slot_a, slot_b, cut)
+    opened = int((~shared).sum())
     if opened == 0:
         return None
     sources = np.concatenate([np.stack([np.arange(n), np.zeros(n, np.int64)], axis=1), split_edges])
@@ -217,7 +217,8 @@ def cut_along_path(rest_points: np.ndarray, tets: np.ndarray, positions: np.ndar
     return TopologyChange(
         rest_points=rest_new,
         tets=new_tets,
-        capsule_triangles=_capsule_pieces(_skin(new_tets, len(parent)), sources, weights, capsule_triangles, n),
+        capsule_triangles=_capsule_pieces(new_tets[:, TET_FACES].reshape(-1, 3)[
+            split_skin_slots(len(pieces), slot_a, slot_b, shared)], sources, weights, capsule_triangles, n),
         node_sources=sources,
         node_weights=weights,
         separated_faces=int(opened),
@@ -271,14 +272,7 @@ def _bisect(tets: np.ndarray, split_edges: np.ndarray, n: int) -> np.ndarray:
 
 def _skin(tets: np.ndarray, n: int) -> np.ndarray:
     """The faces (K, 3) on exactly one tet, outward, in tet order (as TetMesh.skin, unsorted)."""
-    faces = tets[:, TET_FACES].reshape(-1, 3)
-    keys = face_keys(faces, n)
-    order = np.argsort(keys, kind="stable")
-    ordered = keys[order]
-    single = np.ones(len(keys), dtype=bool)
-    single[1:] &= ordered[1:] != ordered[:-1]
-    single[:-1] &= ordered[:-1] != ordered[1:]
-    return faces[np.sort(order[single])]
+    return tets[:, TET_FACES].reshape(-1, 3)[np.sort(skin_slots(tets, n))]
 
 
 def _capsule_pieces(skin: np.ndarray, sources: np.ndarray, weights: np.ndarray,
@@ -293,7 +287,7 @@ def _capsule_pieces(skin: np.ndarray, sources: np.ndarray, weights: np.ndarray,
     three = fresh.sum(axis=1) == 3
     nodes = support[three][fresh[three]].reshape(-1, 3)
     keep = np.zeros(len(skin), dtype=bool)
-    keep[three] = np.isin(face_keys(nodes, n), face_keys(capsule_triangles, n))
+    keep[three] = isin_keys(face_keys(nodes, n), face_keys(capsule_triangles, n))
     return skin[keep]
 
 

@@ -15,7 +15,7 @@ import numpy as np
 import scipy.sparse
 import scipy.sparse.linalg
 
-from liver_sim.mesh.tetmesh import TetMesh, unique_edges
+from liver_sim.mesh.tetmesh import TetMesh, isin_keys, unique_edges
 from liver_sim.physics.params import ModelParams
 
 
@@ -78,7 +78,7 @@ def _rows_in(rows: np.ndarray, table: np.ndarray) -> np.ndarray:
     """Boolean mask: which rows of `rows` (sorted pairs) appear in `table` (sorted pairs)."""
     n = int(max(rows.max(), table.max())) + 1
     keys = rows[:, 0] * n + rows[:, 1]
-    return np.isin(keys, table[:, 0] * n + table[:, 1])
+    return isin_keys(keys, table[:, 0] * n + table[:, 1])
 
 
 def stable_time_step(springs: SpringNetwork, masses_kg: np.ndarray, environment_damping_per_s: float,
@@ -100,24 +100,27 @@ def stable_time_step(springs: SpringNetwork, masses_kg: np.ndarray, environment_
 
 
 def estimate_stable_time_step(springs: SpringNetwork, masses_kg: np.ndarray, environment_damping_per_s: float,
-                              integrator: str, positions: np.ndarray, start: np.ndarray | None = None,
-                              max_iterations: int = 400, tolerance: float = 1e-2) -> tuple[float, np.ndarray]:
-    """stable_time_step's bound with λmax from a matrix-free power iteration (fast; for topology changes).
+                              integrator: str, positions: np.ndarray, max_iterations: int = 400,
+                              tolerance: float = 1e-2) -> float:
+    """stable_time_step's bound (s) with λmax from a matrix-free power iteration (fast; for topology changes).
 
-    λmax is taken as ρ + ‖A·v − ρ·v‖ (Rayleigh quotient plus residual: an upper bound of the eigenvalue
-    the iterate approaches, which is the largest once converged).  `start` (2, N, 3), e.g. the previous
-    stiffness and damping modes carried to the new nodes, speeds convergence.  Returns (time step s,
-    the two modes found (2, N, 3)).
+    λmax is the larger of ρ + ‖A·v − ρ·v‖ (Rayleigh quotient plus residual of the iterate, started from a
+    fixed random vector: within that of an eigenvalue, the largest once converged) and the stiffest
+    two-node spring, coefficient·(1/m_i + 1/m_j) (a lower bound of λmax that catches a short spring a
+    cut or a tear just made before the iteration has found its mode).
     """
     axis = positions[springs.node_j] - positions[springs.node_i]
     unit = np.ascontiguousarray(axis / np.linalg.norm(axis, axis=1)[:, None])
     scale = 1.0 / np.sqrt(masses_kg)
-    modes = np.random.default_rng(0).standard_normal((2, len(masses_kg), 3)) if start is None else start.copy()
-    omega2 = _power_iteration(springs.node_i, springs.node_j, unit, springs.lambda2_n / springs.rest_length_m,
-                              scale, modes[0], max_iterations, tolerance)
-    c = _power_iteration(springs.node_i, springs.node_j, unit, springs.mu_ns_per_m, scale, modes[1],
-                         max_iterations, tolerance) + environment_damping_per_s
-    return _time_step(springs, omega2, c, environment_damping_per_s, integrator), modes
+    pair = 1.0 / masses_kg[springs.node_i] + 1.0 / masses_kg[springs.node_j]
+    modes = np.random.default_rng(0).standard_normal((2, len(masses_kg), 3))
+    estimates = []
+    for coefficient, mode in ((springs.lambda2_n / springs.rest_length_m, modes[0]), (springs.mu_ns_per_m, modes[1])):
+        iterated = _power_iteration(springs.node_i, springs.node_j, unit, coefficient, scale, mode, max_iterations,
+                                    tolerance)
+        estimates.append(max(iterated, float((coefficient * pair).max()) if len(pair) else 0.0))
+    omega2, c = estimates
+    return _time_step(springs, omega2, c + environment_damping_per_s, environment_damping_per_s, integrator)
 
 
 def _time_step(springs: SpringNetwork, omega2: float, c: float, environment_damping_per_s: float,
@@ -161,13 +164,15 @@ def _apply_scaled(node_i, node_j, unit, coefficient, scale, v, out):
     out[:] = 0.0
     for s in range(len(node_i)):
         i, j = node_i[s], node_j[s]
+        si, sj = scale[i], scale[j]
         d = 0.0
         for a in range(3):
-            d += (scale[i] * v[i, a] - scale[j] * v[j, a]) * unit[s, a]
+            d += (si * v[i, a] - sj * v[j, a]) * unit[s, a]
         t = coefficient[s] * d
+        ti, tj = si * t, sj * t
         for a in range(3):
-            out[i, a] += scale[i] * t * unit[s, a]
-            out[j, a] -= scale[j] * t * unit[s, a]
+            out[i, a] += ti * unit[s, a]
+            out[j, a] -= tj * unit[s, a]
 
 
 @numba.njit(cache=True)

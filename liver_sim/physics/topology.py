@@ -13,10 +13,8 @@ from dataclasses import dataclass
 
 import numba
 import numpy as np
-import scipy.sparse
-import scipy.sparse.csgraph
 
-from liver_sim.mesh.tetmesh import TET_FACES, face_keys
+from liver_sim.mesh.tetmesh import TET_FACES, face_keys, isin_keys, key_groups
 
 
 @dataclass(frozen=True, eq=False)
@@ -37,7 +35,7 @@ class TopologyChange:
     separated_faces: int
 
 
-def _interior_face_pairs(tets: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def interior_face_pairs(tets: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Interior faces as (slot_a, slot_b, key): slot = 4·tet + local face (TET_FACES), slot_a < slot_b."""
     keys = face_keys(tets[:, TET_FACES].reshape(-1, 3), n)
     order = np.argsort(keys, kind="stable")
@@ -46,49 +44,88 @@ def _interior_face_pairs(tets: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarr
     return order[first], order[first + 1], sorted_keys[first]
 
 
-def interior_face_count(tets: np.ndarray, n: int) -> int:
-    """How many faces two tets share (nodes < n)."""
-    return len(_interior_face_pairs(tets, n)[0])
-
-
 def _split_nodes(tets: np.ndarray, n: int, slot_a: np.ndarray, slot_b: np.ndarray,
                  joined: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """New tets and parents when only the face pairs marked `joined` connect their tets' corners."""
-    m = len(tets)
-    ta, tb = slot_a[joined] // 4, slot_b[joined] // 4
-    local_a = TET_FACES[slot_a[joined] % 4]  # (P, 3) local corners of the face in tet a
-    local_b = TET_FACES[slot_b[joined] % 4]
-    nodes_a = np.take_along_axis(tets[ta], local_a, axis=1)
-    nodes_b = np.take_along_axis(tets[tb], local_b, axis=1)
-    match = np.argmax(nodes_a[:, :, None] == nodes_b[:, None, :], axis=2)
-    corner_a = (4 * ta[:, None] + local_a).ravel()
-    corner_b = (4 * tb[:, None] + np.take_along_axis(local_b, match, axis=1)).ravel()
-    graph = scipy.sparse.coo_matrix((np.ones(len(corner_a)), (corner_a, corner_b)), shape=(4 * m, 4 * m))
-    count, labels = scipy.sparse.csgraph.connected_components(graph, directed=False)
+    return _renumber_corners(tets, slot_a[joined], slot_b[joined], n)
+
+
+@numba.njit(cache=True)
+def _find(root, c):
+    """The root of corner c in the union-find forest `root` (path halving)."""
+    while root[c] != c:
+        root[c] = root[root[c]]
+        c = root[c]
+    return c
+
+
+@numba.njit(cache=True)
+def _renumber_corners(tets, slot_a, slot_b, n):
+    """(new tets, parent (N',)) when the corners (4·tet + local index) on each face pair slot_a[k], slot_b[k]
+    are joined to the corners of the other tet holding the same nodes.
+
+    Corners joined (transitively) form a component; the component holding a node's lowest corner keeps
+    the node, each other one gets a new node n, n + 1, … in order of (old node, lowest corner)."""
     corner_node = tets.ravel()
-    _, first_corner = np.unique(labels, return_index=True)
-    component_node = corner_node[first_corner]
-    order = np.lexsort((first_corner, component_node))
-    keeps = np.ones(count, dtype=bool)
-    keeps[order[1:]] = component_node[order[1:]] != component_node[order[:-1]]
-    new_id = np.empty(count, dtype=np.int64)
-    new_id[order[keeps[order]]] = component_node[order[keeps[order]]]
-    copies = order[~keeps[order]]
-    new_id[copies] = n + np.arange(len(copies))
-    parent = np.concatenate([np.arange(n, dtype=np.int64), component_node[copies]])
-    return new_id[labels].reshape(m, 4), parent
+    root = np.arange(len(corner_node))
+    for k in range(len(slot_a)):  # union by lowest corner: a root is its component's lowest corner
+        ta, tb = slot_a[k] // 4, slot_b[k] // 4
+        for local in TET_FACES[slot_a[k] % 4]:
+            ca = 4 * ta + local
+            cb = 4 * tb
+            while corner_node[cb] != corner_node[ca]:
+                cb += 1
+            ra, rb = _find(root, ca), _find(root, cb)
+            if ra < rb:
+                root[rb] = ra
+            elif rb < ra:
+                root[ra] = rb
+    copies = np.zeros(n, dtype=np.int64)  # components per node beyond the first
+    for c in range(len(root)):
+        if root[c] == c:
+            copies[corner_node[c]] += 1
+    copies = np.maximum(copies - 1, 0)
+    next_id = n + np.cumsum(copies) - copies
+    parent = np.concatenate((np.arange(n), np.empty(copies.sum(), dtype=np.int64)))
+    new_id = np.empty(len(root), dtype=np.int64)
+    kept = np.zeros(n, dtype=np.bool_)
+    for c in range(len(root)):
+        node = corner_node[c]
+        if root[c] != c:  # root[c] < c lies in the same component: its new node is known
+            new_id[c] = new_id[root[c]]
+        elif not kept[node]:
+            kept[node] = True
+            new_id[c] = node
+        else:
+            new_id[c] = next_id[node]
+            parent[next_id[node]] = node
+            next_id[node] += 1
+    return new_id.reshape(-1, 4), parent
 
 
-def _overshared_edges(tets: np.ndarray) -> np.ndarray:
-    """Skin edges (E, 2), sorted pairs, that lie on more than two skin triangles."""
-    n = int(tets.max()) + 1
-    faces = tets[:, TET_FACES].reshape(-1, 3)
-    _, inverse, counts = np.unique(face_keys(faces, n), return_inverse=True, return_counts=True)
-    skin = faces[counts[inverse] == 1]
-    edges = np.sort(skin[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
-    keys, counts = np.unique(edges[:, 0] * n + edges[:, 1], return_counts=True)
-    bad = keys[counts > 2]
+def _overshared_edges(skin: np.ndarray) -> np.ndarray:
+    """Edges (E, 2), sorted pairs, that lie on more than two of the triangles `skin` (K, 3)."""
+    n = int(skin.max()) + 1 if len(skin) else 1
+    ends = skin[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
+    keys = np.minimum(ends[:, 0], ends[:, 1]) * n + np.maximum(ends[:, 0], ends[:, 1])
+    order, start, count = key_groups(keys)
+    bad = keys[order[start[count > 2]]]
     return np.stack([bad // n, bad % n], axis=1)
+
+
+def _still_shared(new_tets: np.ndarray, node_count: int, slot_a: np.ndarray, slot_b: np.ndarray) -> np.ndarray:
+    """Mask over the face pairs (slot_a, slot_b) of the old tets: the two faces are still one in `new_tets`."""
+    faces = new_tets[:, TET_FACES].reshape(-1, 3)
+    return face_keys(faces[slot_a], node_count) == face_keys(faces[slot_b], node_count)
+
+
+def split_skin_slots(tet_count: int, slot_a: np.ndarray, slot_b: np.ndarray, shared: np.ndarray) -> np.ndarray:
+    """The skin's face slots, increasing, when of the interior face pairs (slot_a, slot_b) of the old tets
+    those marked `shared` still are (all other faces of the tets lie on the skin)."""
+    on_skin = np.ones(4 * tet_count, dtype=bool)
+    on_skin[slot_a[shared]] = False
+    on_skin[slot_b[shared]] = False
+    return np.flatnonzero(on_skin)
 
 
 def separate_faces(tets: np.ndarray, cut_faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -108,19 +145,34 @@ def separate_faces(tets: np.ndarray, cut_faces: np.ndarray) -> tuple[np.ndarray,
     """
     tets = np.asarray(tets, dtype=np.int64)
     n = int(tets.max()) + 1
-    slot_a, slot_b, keys = _interior_face_pairs(tets, n)
+    slot_a, slot_b, keys = interior_face_pairs(tets, n)
+    new_tets, parent, _ = separate_pairs(tets, n, slot_a, slot_b, _cut_mask(keys, cut_faces, n))
+    return new_tets, parent
+
+
+def _cut_mask(keys: np.ndarray, cut_faces: np.ndarray, n: int) -> np.ndarray:
+    """Mask over the face keys `keys`: the face is one of cut_faces (F, 3) (node triples, nodes < n)."""
     cut_faces = np.asarray(cut_faces, dtype=np.int64).reshape(-1, 3)
-    cut = np.zeros(len(keys), dtype=bool)
-    if len(cut_faces):
-        valid = (cut_faces.min(axis=1) >= 0) & (cut_faces.max(axis=1) < n)
-        cut = np.isin(keys, face_keys(cut_faces[valid], n))
+    if not len(cut_faces):
+        return np.zeros(len(keys), dtype=bool)
+    valid = (cut_faces.min(axis=1) >= 0) & (cut_faces.max(axis=1) < n)
+    return isin_keys(keys, face_keys(cut_faces[valid], n))
+
+
+def separate_pairs(tets: np.ndarray, n: int, slot_a: np.ndarray, slot_b: np.ndarray,
+                   cut: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """separate_faces on the interior face pairs of `tets` (all of them: interior_face_pairs) whose
+    mask `cut` is set (changed in place where the manifold fix closes faces); returns (new_tets, parent,
+    mask over the pairs: still sharing their face)."""
     while True:
         new_tets, parent = _split_nodes(tets, n, slot_a, slot_b, ~cut)
         if not cut.any():
-            return new_tets, parent
-        bad = np.sort(parent[_overshared_edges(new_tets)], axis=1)
+            return new_tets, parent, np.ones(len(cut), dtype=bool)
+        shared = _still_shared(new_tets, len(parent), slot_a, slot_b)
+        skin = new_tets[:, TET_FACES].reshape(-1, 3)[split_skin_slots(len(tets), slot_a, slot_b, shared)]
+        bad = np.sort(parent[_overshared_edges(skin)], axis=1)
         if not len(bad):
-            return new_tets, parent
+            return new_tets, parent, shared
         open_ids = np.flatnonzero(cut)
         face_nodes = np.sort(np.take_along_axis(tets[slot_a[open_ids] // 4], TET_FACES[slot_a[open_ids] % 4],
                                                 axis=1), axis=1)
@@ -172,7 +224,7 @@ class TearDetector:
         rest_points = np.asarray(rest_points, dtype=np.float64)
         tets = np.asarray(tets, dtype=np.int64)
         n = max(int(tets.max()) + 1, len(rest_points))
-        slot_a, slot_b, _ = _interior_face_pairs(tets, n)
+        slot_a, slot_b, _ = interior_face_pairs(tets, n)
         self.faces = np.take_along_axis(tets[slot_a // 4], TET_FACES[slot_a % 4], axis=1)
         a, b, c = (rest_points[self.faces[:, k]] for k in range(3))
         normal = np.cross(b - a, c - a)
@@ -224,9 +276,10 @@ def duplication_change(rest_points: np.ndarray, tets: np.ndarray, capsule_triang
                        cut_faces: np.ndarray) -> TopologyChange | None:
     """The change that opens `cut_faces` by duplicating nodes (separate_faces); None if nothing opens."""
     tets = np.asarray(tets, dtype=np.int64)
-    new_tets, parent = separate_faces(tets, cut_faces)
     n = int(tets.max()) + 1
-    opened = interior_face_count(tets, n) - interior_face_count(new_tets, len(parent))
+    slot_a, slot_b, keys = interior_face_pairs(tets, n)
+    new_tets, parent, shared = separate_pairs(tets, n, slot_a, slot_b, _cut_mask(keys, cut_faces, n))
+    opened = int((~shared).sum())
     if opened == 0:
         return None
     return TopologyChange(
