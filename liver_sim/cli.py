@@ -143,7 +143,7 @@ def add_bench_command(commands) -> None:
     topology.add_argument("--json", action="store_true", help="print one JSON object")
     topology.add_argument("--sizes", type=positive_int, nargs="*", default=None, metavar="TETS",
                           help="target tet counts of the larger livers (default: 10000)")
-    topology.add_argument("--repeats", type=positive_int, default=5, help="timed repetitions (default: 5)")
+    topology.add_argument("--repeats", type=positive_int, default=9, help="timed repetitions (default: 9)")
     topology.set_defaults(handler=bench_topology)
     add_bench_record_parser(kinds)
 

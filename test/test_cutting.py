@@ -11,6 +11,7 @@ from liver_sim.mesh.tetmesh import signed_volumes
 from liver_sim.physics.cutting import SNAP_FRACTION, Ribbon, cut_along_path, default_blade_direction
 from liver_sim.physics.model import LiverModel
 from liver_sim.physics.params import ModelParams
+from liver_sim.physics.springs import stable_time_step
 from liver_sim.scenarios import upper_skin_path
 
 DOWN = np.array([0.0, 0.0, -1.0])
@@ -213,3 +214,17 @@ def test_cut_liver_model_keeps_its_mass_and_simulates_stably(liver):
     model.velocities += np.random.default_rng(0).normal(scale=0.05, size=model.velocities.shape)
     assert all(model.step_frame().divergence is None for _ in range(30))
     assert model.kinetic_energy_j() < 0.5 * float((model.masses_kg * 0.05 ** 2 * 3).sum())
+
+
+def test_the_stability_estimate_after_each_cut_is_not_above_the_exact_bound(liver):
+    model = LiverModel(liver, ModelParams())
+    edge = mean_edge_m(liver)
+    for path in (liver_top_path(liver, 0.08), upper_skin_path(liver, (-0.03, -0.04), (-0.03, 0.04))):
+        assert model.cut(path, 2 * edge)
+        p = model.params
+        exact = stable_time_step(model.springs, model.masses_kg, p.environment_damping_per_s, p.integrator,
+                                 model.mesh.points)
+        assert model.stable_dt_s <= 1.02 * exact
+        assert p.dt_s <= exact
+    model.velocities += np.random.default_rng(1).normal(scale=0.05, size=model.velocities.shape)
+    assert all(model.step_frame().divergence is None for _ in range(30))

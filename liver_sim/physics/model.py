@@ -90,7 +90,6 @@ class LiverModel:
         self._set_mesh_arrays()
         self.external_forces_n = np.zeros_like(mesh.points)
         self._gravity = np.asarray(self.params.gravity_m_s2, dtype=np.float64)
-        self._stability_modes: np.ndarray | None = None
         self._tear_detector: tuple[tuple, TearDetector] | None = None
         self.topology_version = 0
         self.divergences = 0
@@ -146,9 +145,8 @@ class LiverModel:
         self.fixed_nodes = np.flatnonzero(fixed)
         self._refresh_inverse_masses()
         self._set_mesh_arrays()
-        start = None if self._stability_modes is None else self._stability_modes[:, sources[:, 0]]
-        self.stable_dt_s, self._stability_modes = estimate_stable_time_step(
-            self.springs, masses, self.params.environment_damping_per_s, self.params.integrator, mesh.points, start)
+        self.stable_dt_s = estimate_stable_time_step(self.springs, masses, self.params.environment_damping_per_s,
+                                                     self.params.integrator, mesh.points)
         if self.params.dt_s > STABILITY_MARGIN * self.stable_dt_s:  # new short springs or light nodes
             needed = math.ceil(self.frame_period_s / (STABILITY_MARGIN * self.stable_dt_s))
             self.params = self.params.with_changes(substeps=min(needed, 10_000))
