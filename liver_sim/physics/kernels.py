@@ -109,33 +109,47 @@ def closest_point_on_segment(p, a, b):
 
 
 @numba.njit(cache=True)
-def round_tool_contacts(x, v, candidates, core_a, core_b, radius, inward_point, tool_velocity,
+def round_tool_contacts(x, v, candidates, core_a, core_b, shift, radius, inward_point, tool_velocity,
                         stiffness, damping, f):
-    """Eq. 3 between a sphere (core_a == core_b) or capsule (segment core_a–core_b) and skin nodes.
+    """Eq. 3 between a sphere (core_a == core_b) or capsule (segment core_a–core_b) moved by `shift`, and
+    skin nodes.
 
     A candidate node closer than `radius` to the core has penetration δ = radius − distance and
     gets F = max(0, λ·δ + μ·δ̇)·k, k the unit vector from the core to the node (into the liver;
     toward `inward_point` if the node sits on the core).  Returns the total force on the liver
-    (the tool feels its opposite).
+    (the tool feels its opposite).  Scalar arithmetic: no array is allocated per node or step.
     """
-    total = np.zeros(3)
+    ax, ay, az = core_a[0] + shift[0], core_a[1] + shift[1], core_a[2] + shift[2]
+    ex, ey, ez = core_b[0] - core_a[0], core_b[1] - core_a[1], core_b[2] - core_a[2]
+    length2 = ex * ex + ey * ey + ez * ez
+    tx, ty, tz = 0.0, 0.0, 0.0
     for c in range(candidates.shape[0]):
         n = candidates[c]
-        delta = x[n] - closest_point_on_segment(x[n], core_a, core_b)
-        dist = math.sqrt(delta @ delta)
+        px, py, pz = x[n, 0] - ax, x[n, 1] - ay, x[n, 2] - az
+        t = 0.0
+        if length2 > 0.0:
+            t = min(1.0, max(0.0, (px * ex + py * ey + pz * ez) / length2))
+        dx, dy, dz = px - t * ex, py - t * ey, pz - t * ez
+        dist = math.sqrt(dx * dx + dy * dy + dz * dz)
         depth = radius - dist
         if depth <= 0.0:
             continue
         if dist > 1e-12:
-            k = delta / dist
+            kx, ky, kz = dx / dist, dy / dist, dz / dist
         else:
-            k = inward_point - x[n]
-            k = k / math.sqrt(k @ k)
-        depth_rate = -(k @ (v[n] - tool_velocity))
-        force = max(0.0, stiffness * depth + damping * depth_rate) * k
-        f[n] += force
-        total += force
-    return total
+            kx, ky, kz = inward_point[0] - x[n, 0], inward_point[1] - x[n, 1], inward_point[2] - x[n, 2]
+            norm = math.sqrt(kx * kx + ky * ky + kz * kz)
+            kx, ky, kz = kx / norm, ky / norm, kz / norm
+        depth_rate = -(kx * (v[n, 0] - tool_velocity[0]) + ky * (v[n, 1] - tool_velocity[1])
+                       + kz * (v[n, 2] - tool_velocity[2]))
+        magnitude = max(0.0, stiffness * depth + damping * depth_rate)
+        f[n, 0] += magnitude * kx
+        f[n, 1] += magnitude * ky
+        f[n, 2] += magnitude * kz
+        tx += magnitude * kx
+        ty += magnitude * ky
+        tz += magnitude * kz
+    return np.array([tx, ty, tz])
 
 
 @numba.njit(cache=True)
@@ -207,18 +221,20 @@ def run_frame(x, v, inv_mass, node_i, node_j, rest, lambda1, lambda2, mu, partia
     gap/point/direction.
     """
     contact = np.zeros(3)
+    shift = np.zeros(3)
     for step in range(substeps):
         f[:] = external_force
         if use_parallel:
             spring_forces_parallel(x, v, node_i, node_j, rest, lambda1, lambda2, mu, partial, f)
         else:
             spring_forces_serial(x, v, node_i, node_j, rest, lambda1, lambda2, mu, f)
-        shift = tool_velocity * ((step + 1) * dt)
+        for k in range(3):
+            shift[k] = tool_velocity[k] * ((step + 1) * dt)
         if tool_kind == TOOL_BOX:
             contact = box_tool_contacts(x, v, candidates, core_a + shift, axes, half_extents, tool_velocity,
                                         stiffness, damping, f, gap, point, direction)
         elif tool_kind != TOOL_NONE:
-            contact = round_tool_contacts(x, v, candidates, core_a + shift, core_b + shift, radius, inward_point,
+            contact = round_tool_contacts(x, v, candidates, core_a, core_b, shift, radius, inward_point,
                                           tool_velocity, stiffness, damping, f)
         integrate(x, v, f, inv_mass, dt, environment_damping, gravity, symplectic)
     return contact
