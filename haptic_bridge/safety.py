@@ -17,6 +17,9 @@ PHANTOM_MAX_FORCE_N = 3.3
 DEFAULT_MAX_FORCE_N = 2.0
 #: Gains within this of 0 or 1 are snapped there, so ramps end exactly.
 _GAIN_SNAP = 1e-9
+#: A clamped force is scaled to this fraction below the clamp, so that no rounding of its norm, here or
+#: at the device, exceeds the clamp.
+_CLAMP_MARGIN = 1e-12
 
 
 def _positive(value: float, name: str) -> float:
@@ -28,13 +31,14 @@ def _positive(value: float, name: str) -> float:
 
 
 def clamp_norm(force: np.ndarray, max_force: float) -> np.ndarray:
-    """F·min(1, max_force/|F|) as a new (3,) array in N; any non-finite component → the zero vector."""
+    """F·min(1, max_force/|F|) as a new (3,) array in N, its norm never above max_force however it is
+    rounded; any non-finite component → the zero vector."""
     force = np.array(force, dtype=np.float64)
     if not np.isfinite(force).all():
         return np.zeros(3)
     norm = math.hypot(*force)  # no overflow for components near the float limit
     if norm > max_force:
-        force *= max_force / norm
+        force *= max_force / norm * (1.0 - _CLAMP_MARGIN)
     return force
 
 

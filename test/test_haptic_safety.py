@@ -1,4 +1,6 @@
 """The haptic safety stage: norm clamp, rate limit, watchdog ramp and their composition."""
+import math
+
 import numpy as np
 import pytest
 
@@ -22,6 +24,14 @@ def test_clamp_keeps_direction_and_limits_the_norm():
     np.testing.assert_allclose(clamp_norm(np.array([0.3, -0.4, 0.0]), 2.0), [0.3, -0.4, 0.0])
     huge = clamp_norm(np.array([1e308, -1e308, 0.0]), 2.0)  # |F| overflows a naive norm
     np.testing.assert_allclose(huge, [np.sqrt(2.0), -np.sqrt(2.0), 0.0])
+
+
+def test_a_clamped_force_is_never_above_the_clamp_however_its_norm_is_rounded():
+    forces = np.random.default_rng(0).normal(scale=5.0, size=(20000, 3))
+    clamped = np.array([clamp_norm(f, 2.0) for f in forces])
+    assert np.linalg.norm(clamped, axis=1).max() <= 2.0
+    assert max(math.hypot(*f) for f in clamped) <= 2.0
+    assert np.linalg.norm(clamped, axis=1).max() == pytest.approx(2.0, abs=1e-9)
 
 
 @pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
