@@ -8,6 +8,7 @@ import scipy.sparse.csgraph
 
 from liver_sim.mesh.liver_shape import default_liver
 from liver_sim.mesh.tetmesh import TET_FACES, TetMesh, signed_volumes
+from haptic_bridge.local_model import PlaneModel, penetration
 from liver_sim.physics.contact import ToolPose
 from liver_sim.physics.model import LiverModel
 from liver_sim.physics.params import ModelParams
@@ -320,7 +321,11 @@ def test_grasped_nodes_follow_the_tool_and_pull_it_back_towards_the_liver():
     np.testing.assert_allclose(offsets, model.mesh.points[held] - tips[0], atol=1e-12)  # carried rigidly
     assert not any(r.divergence or r.topology_changed for r in results)
     assert results[-1].tool_force_n[2] < -1.0       # the tissue pulls the tool back down
-    assert not any(r.local_model.valid for r in results)  # nothing to push on while holding
+    # the local model renders the pull: the bridge's λ·depth·n for the tool sphere is the tissue's force
+    last = results[-1].local_model
+    depth, direction = penetration(PlaneModel(last.point, last.normal), tips[-1], model.tool.radius_m)
+    np.testing.assert_allclose(model.params.contact_stiffness_n_per_m * depth * direction,
+                               results[-1].tool_force_n, rtol=1e-9)
     model.release()
     assert model.grasped_nodes.size == 0 and (model.inv_mass[held] > 0).all()
     for _ in range(150):

@@ -231,8 +231,8 @@ class LiverModel:
         """Advance one frame with the tool at `pose` (None: no tool). Resets and reports on divergence.
 
         With `params.tearing`, faces stretched beyond their threshold then open (`tear`).  While nodes
-        are grasped the tool holds them instead of pushing (no contact, no local model): the force on
-        the tool is the tissue's pull on them.
+        are grasped the tool holds them instead of pushing (no contact): the force on the tool is the
+        tissue's pull on them, and the local model is `_grasp_local_model`'s.
         """
         grasping = pose is not None and self.grasped_nodes.size > 0
         if grasping:
@@ -247,8 +247,27 @@ class LiverModel:
             self.reset()
             return FrameResult(self.time_s, np.zeros(3), LocalModel.invalid(), divergence)
         torn = self.params.tearing and self._tear()
-        local_model = LocalModel.invalid() if pose is None or grasping else self._fit_local_model(pose, box_gaps)
+        if pose is None:
+            local_model = LocalModel.invalid()
+        elif grasping:
+            local_model = self._grasp_local_model(pose, -liver_force)
+        else:
+            local_model = self._fit_local_model(pose, box_gaps)
         return FrameResult(self.time_s, -liver_force, local_model, None, torn)
+
+    def _grasp_local_model(self, pose: ToolPose, pull_n: np.ndarray) -> LocalModel:
+        """The local model of a grasp: a plane with normal n = pull/|pull| that the tool sphere (radius r)
+        penetrates by |pull|/λ (λ: contact_stiffness_n_per_m), so that a haptic loop rendering λ·depth·n
+        feels the tissue's pull now, and a spring of stiffness λ as the tool moves before the next frame
+        (paper §2.5, applied to the pull).  Invalid when the tissue does not pull."""
+        magnitude = float(np.linalg.norm(pull_n))
+        stiffness = self.params.contact_stiffness_n_per_m
+        if not (magnitude > 0.0 and stiffness > 0.0):
+            return LocalModel.invalid()
+        normal = pull_n / magnitude
+        depth = magnitude / stiffness
+        point = np.asarray(pose.position) - (self.tool.radius_m - depth) * normal
+        return LocalModel("plane", True, point, normal, point, 0.0, depth, True)
 
     def _detector(self) -> TearDetector:
         """The TearDetector of the current mesh and thresholds (rebuilt when either changes)."""
