@@ -234,7 +234,7 @@ def run_demo(out_dir: Path, duration_s: float | None = None, progress=print, rec
                    out_dir / "liver_press.png")
     else:
         figures = TOPOLOGY_FIGURES
-        _plot_topology(snapshot, spec.title, summary, out_dir)
+        _plot_topology(snapshot, spec.title, mesh, out_dir)
     progress(f"physics {summary['physics']['rate_hz']:.1f} Hz, haptic {summary['haptic']['rate_hz']:.1f} Hz "
              f"(period error p99 {1e3 * (summary['haptic']['period_error_p99_s'] or 0):.2f} ms), peak force "
              f"{summary['peak_haptic_force_n']:.2f} N"
@@ -248,9 +248,9 @@ def run_demo(out_dir: Path, duration_s: float | None = None, progress=print, rec
     return summary
 
 
-def _plot_topology(snapshot: dict, title: str, summary: dict, out_dir: Path) -> None:
-    """before.png and after.png: the skin first received and the newest skin on the last nodes received."""
-    mesh = default_liver()
+def _plot_topology(snapshot: dict, title: str, mesh, out_dir: Path) -> None:
+    """before.png and after.png: the skin first received (else `mesh`'s) and the newest skin on the last
+    nodes received."""
     first = snapshot["initial_surface"] or (mesh.skin, mesh.points)
     last = snapshot["surface"] or first
     for name, (skin, rest), nodes, when in (("before.png", first, snapshot["initial_nodes"], "before"),

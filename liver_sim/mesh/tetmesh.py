@@ -16,6 +16,7 @@ import numpy as np
 # right-hand normal points away from the opposite vertex.
 TET_FACES = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]], dtype=np.int64)
 TET_EDGES = np.array([[0, 1], [0, 2], [0, 3], [1, 2], [1, 3], [2, 3]], dtype=np.int64)
+TRIANGLE_EDGES = np.array([[0, 1], [1, 2], [2, 0]], dtype=np.int64)
 
 #: A tet whose volume is below this fraction of (mean edge length)^3 is degenerate.
 DEGENERATE_RELATIVE_VOLUME = 1e-9
@@ -52,12 +53,15 @@ def dihedral_angles_deg(points: np.ndarray, tets: np.ndarray) -> np.ndarray:
     return 180.0 - np.degrees(np.arccos(np.clip(cosines, -1.0, 1.0)))
 
 
+def edge_keys(ends: np.ndarray, node_count: int) -> np.ndarray:
+    """One int64 key per undirected edge (..., 2), increasing with its sorted pair (nodes < node_count)."""
+    return np.minimum(ends[..., 0], ends[..., 1]) * node_count + np.maximum(ends[..., 0], ends[..., 1])
+
+
 def unique_edges(cells: np.ndarray, local_edges: np.ndarray) -> np.ndarray:
     """Sorted unique undirected edges (E, 2) of the given cells, in lexicographic order."""
-    ends = cells[:, local_edges]
     n = int(cells.max()) + 1 if cells.size else 1
-    keys = np.minimum(ends[..., 0], ends[..., 1]) * n + np.maximum(ends[..., 0], ends[..., 1])
-    keys = sorted_unique(keys.ravel())  # integer keys: far faster than np.unique(axis=0)
+    keys = sorted_unique(edge_keys(cells[:, local_edges], n).ravel())  # far faster than np.unique(axis=0)
     return np.stack([keys // n, keys % n], axis=1)
 
 
@@ -201,7 +205,7 @@ class TetMesh:
     @cached_property
     def skin_edges(self) -> np.ndarray:
         """Unique skin-triangle edges: the capsule springs' node pairs."""
-        return unique_edges(self.skin, np.array([[0, 1], [1, 2], [2, 0]]))
+        return unique_edges(self.skin, TRIANGLE_EDGES)
 
     @cached_property
     def skin_nodes(self) -> np.ndarray:

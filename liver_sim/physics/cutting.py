@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from liver_sim.mesh.tetmesh import TET_EDGES, TET_FACES, face_keys, isin_keys, skin_slots
+from liver_sim.mesh.tetmesh import TET_EDGES, TET_FACES, face_keys, isin_keys, skin_slots, unique_edges
 from liver_sim.physics.topology import TopologyChange, interior_face_pairs, separate_pairs, split_skin_slots
 
 #: A crossing closer than this fraction of its edge to an end node is moved onto that node: no piece of a
@@ -155,9 +155,7 @@ def cut_along_path(rest_points: np.ndarray, tets: np.ndarray, positions: np.ndar
     node_h = np.full(n, np.nan)
     phi[nodes], node_s[nodes], node_h[nodes] = ribbon.locate(positions[nodes])
 
-    ends = np.sort(outer[:, TET_EDGES].reshape(-1, 2), axis=1)
-    edge_ids = np.unique(ends[:, 0] * n + ends[:, 1])
-    edges = np.stack([edge_ids // n, edge_ids % n], axis=1)
+    edges = unique_edges(outer, TET_EDGES)
     crossing, t = _snap(phi, edges, snap_fraction)
     if not crossing.any() and not (phi[nodes] == 0).any():
         return None

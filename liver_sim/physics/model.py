@@ -150,8 +150,7 @@ class LiverModel:
         if self.params.dt_s > STABILITY_MARGIN * self.stable_dt_s:  # new short springs or light nodes
             needed = math.ceil(self.frame_period_s / (STABILITY_MARGIN * self.stable_dt_s))
             self.params = self.params.with_changes(substeps=min(needed, 10_000))
-        self._tear_detector = None
-        self.topology_version += 1
+        self.topology_version += 1  # the tear detector is keyed by it
 
     def cut(self, path_m: np.ndarray, depth_m: float) -> bool:
         """Cut along the blade's path (P, 3) m, deformed frame, down to `depth_m` under it (P14, §3.5;

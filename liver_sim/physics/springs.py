@@ -15,7 +15,7 @@ import numpy as np
 import scipy.sparse
 import scipy.sparse.linalg
 
-from liver_sim.mesh.tetmesh import TetMesh, isin_keys, unique_edges
+from liver_sim.mesh.tetmesh import TRIANGLE_EDGES, TetMesh, isin_keys, unique_edges
 from liver_sim.physics.params import ModelParams
 
 
@@ -55,8 +55,7 @@ def build_springs(mesh: TetMesh, params: ModelParams, rest_points: np.ndarray | 
     if capsule_triangles is None:
         capsule_edges = mesh.skin_edges
     else:
-        capsule_edges = unique_edges(np.asarray(capsule_triangles, dtype=np.int64).reshape(-1, 3),
-                                     np.array([[0, 1], [1, 2], [2, 0]]))
+        capsule_edges = unique_edges(np.asarray(capsule_triangles, dtype=np.int64).reshape(-1, 3), TRIANGLE_EDGES)
     on_skin = _rows_in(edges, capsule_edges) if len(capsule_edges) else np.zeros(len(edges), dtype=bool)
     par, cap = params.parenchyma, params.capsule
     node_i = np.ascontiguousarray(edges[:, 0])

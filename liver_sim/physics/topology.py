@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from liver_sim.mesh.tetmesh import TET_FACES, face_keys, isin_keys, key_groups
+from liver_sim.mesh.tetmesh import TET_FACES, TRIANGLE_EDGES, edge_keys, face_keys, isin_keys, key_groups, unique_edges
 
 
 @dataclass(frozen=True, eq=False)
@@ -38,16 +38,9 @@ class TopologyChange:
 def interior_face_pairs(tets: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Interior faces as (slot_a, slot_b, key): slot = 4·tet + local face (TET_FACES), slot_a < slot_b."""
     keys = face_keys(tets[:, TET_FACES].reshape(-1, 3), n)
-    order = np.argsort(keys, kind="stable")
-    sorted_keys = keys[order]
-    first = np.flatnonzero(sorted_keys[1:] == sorted_keys[:-1])
-    return order[first], order[first + 1], sorted_keys[first]
-
-
-def _split_nodes(tets: np.ndarray, n: int, slot_a: np.ndarray, slot_b: np.ndarray,
-                 joined: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """New tets and parents when only the face pairs marked `joined` connect their tets' corners."""
-    return _renumber_corners(tets, slot_a[joined], slot_b[joined], n)
+    order, start, count = key_groups(keys)
+    first = start[count == 2]
+    return order[first], order[first + 1], keys[order[first]]
 
 
 @numba.njit(cache=True)
@@ -106,8 +99,7 @@ def _renumber_corners(tets, slot_a, slot_b, n):
 def _overshared_edges(skin: np.ndarray) -> np.ndarray:
     """Edges (E, 2), sorted pairs, that lie on more than two of the triangles `skin` (K, 3)."""
     n = int(skin.max()) + 1 if len(skin) else 1
-    ends = skin[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
-    keys = np.minimum(ends[:, 0], ends[:, 1]) * n + np.maximum(ends[:, 0], ends[:, 1])
+    keys = edge_keys(skin[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), n)
     order, start, count = key_groups(keys)
     bad = keys[order[start[count > 2]]]
     return np.stack([bad // n, bad % n], axis=1)
@@ -165,7 +157,7 @@ def separate_pairs(tets: np.ndarray, n: int, slot_a: np.ndarray, slot_b: np.ndar
     mask `cut` is set (changed in place where the manifold fix closes faces); returns (new_tets, parent,
     mask over the pairs: still sharing their face)."""
     while True:
-        new_tets, parent = _split_nodes(tets, n, slot_a, slot_b, ~cut)
+        new_tets, parent = _renumber_corners(tets, slot_a[~cut], slot_b[~cut], n)
         if not cut.any():
             return new_tets, parent, np.ones(len(cut), dtype=bool)
         shared = _still_shared(new_tets, len(parent), slot_a, slot_b)
@@ -174,16 +166,13 @@ def separate_pairs(tets: np.ndarray, n: int, slot_a: np.ndarray, slot_b: np.ndar
         if not len(bad):
             return new_tets, parent, shared
         open_ids = np.flatnonzero(cut)
-        face_nodes = np.sort(np.take_along_axis(tets[slot_a[open_ids] // 4], TET_FACES[slot_a[open_ids] % 4],
-                                                axis=1), axis=1)
-        edge_pairs = face_nodes[:, [0, 1, 1, 2, 0, 2]].reshape(-1, 3, 2)
-        edge_keys = edge_pairs[:, :, 0] * n + edge_pairs[:, :, 1]  # (F, 3) sorted edges of each cut face
-        bad_keys = np.unique(bad[:, 0] * n + bad[:, 1])
-        on_bad = np.isin(edge_keys, bad_keys)
-        touches = on_bad.sum(axis=1)
+        face_nodes = np.take_along_axis(tets[slot_a[open_ids] // 4], TET_FACES[slot_a[open_ids] % 4], axis=1)
+        face_edges = edge_keys(face_nodes[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 3, 2), n)  # (F, 3) per cut face
+        bad_keys = np.unique(edge_keys(bad, n))
+        touches = isin_keys(face_edges, bad_keys).sum(axis=1)
         closed = False
         for key in bad_keys:
-            around = np.flatnonzero((edge_keys == key).any(axis=1))
+            around = np.flatnonzero((face_edges == key).any(axis=1))
             if len(around) and cut[open_ids[around]].all():
                 choice = around[np.lexsort((slot_a[open_ids[around]], -touches[around]))[0]]
                 cut[open_ids[choice]] = False
@@ -238,11 +227,9 @@ class TearDetector:
         self.corners = np.ascontiguousarray(corners)
         self.weights = np.ascontiguousarray(np.concatenate([-g.sum(axis=2, keepdims=True), g], axis=2))
         capsule = np.asarray(capsule_triangles, dtype=np.int64).reshape(-1, 3)
-        cap_edges = np.sort(capsule[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
-        face_sorted = np.sort(self.faces, axis=1)
-        face_edges = face_sorted[:, [0, 1, 1, 2, 0, 2]].reshape(-1, 3, 2)
-        on_capsule = np.isin(face_edges[:, :, 0] * n + face_edges[:, :, 1],
-                             cap_edges[:, 0] * n + cap_edges[:, 1]).any(axis=1)
+        capsule_edges = edge_keys(unique_edges(capsule, TRIANGLE_EDGES), n) if len(capsule) else np.zeros(0, int)
+        face_edges = edge_keys(self.faces[:, TRIANGLE_EDGES], n)
+        on_capsule = isin_keys(face_edges, capsule_edges).any(axis=1)
         self.thresholds = np.where(on_capsule, float(capsule_threshold), float(parenchyma_threshold))
         self._stretch = np.zeros(len(self.faces))
         self._futile: np.ndarray | None = None
