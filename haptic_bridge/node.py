@@ -16,8 +16,9 @@ from rclpy.node import Node
 
 from haptic_bridge.safety import DEFAULT_MAX_FORCE_N, PHANTOM_MAX_FORCE_N
 from haptic_bridge.tick import BridgeTick
-from liver_sim.nodes.common import (Latest, LoopInputs, Param, RateLoop, apply_realtime_priority, declare_parameters,
-                                    diagnostic_status, publish_diagnostics, realtime_priority_parameter, run_node)
+from liver_sim.nodes.common import (Latest, LoopInputs, RateLoop, apply_realtime_priority, declare_parameters,
+                                    diagnostic_status, publish_diagnostics, run_node)
+from liver_sim.parameters import Param, realtime_priority_parameter
 from msg_defs import conversions
 from msg_defs.topics import TOPICS
 

@@ -12,7 +12,6 @@ import threading
 import time
 import traceback
 from collections import deque
-from dataclasses import dataclass
 
 import numpy as np
 import rclpy
@@ -21,6 +20,8 @@ from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescri
 from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException
 from rclpy.experimental import EventsExecutor
+
+from liver_sim.parameters import Param, check_parameter
 
 #: Seconds before a deadline at which a loop stops sleeping and spins.
 SPIN_MARGIN_S = 0.0001
@@ -188,25 +189,6 @@ class LoopInputs:
         self._node.destroy_node()
 
 
-@dataclass(frozen=True)
-class Param:
-    """A declared parameter: default, description (with its unit) and optional range or choices."""
-
-    default: object
-    description: str
-    low: float | None = None
-    high: float | None = None
-    choices: tuple | None = None
-
-
-def realtime_priority_parameter(default: int) -> Param:
-    """The `realtime_priority` parameter of a node whose loop keeps a rate."""
-    return Param(default, "SCHED_FIFO priority (1-99) of the node's threads (its rate loop and the DDS threads "
-                 "that feed it), as haptic and control loops run; 0 = normal scheduling. Needs CAP_SYS_NICE or "
-                 "an rtprio limit (limits.conf); without it the node warns and runs with normal scheduling",
-                 0, 99)
-
-
 def apply_realtime_priority(node, priority: int) -> None:
     """set_realtime_priority, with a refusal logged as the node's warning."""
     refused = set_realtime_priority(priority)
@@ -236,15 +218,6 @@ def declare_parameters(node, params: dict[str, Param]) -> dict:
             raise ValueError(f"parameter {name}: {exc}") from None
         values[name] = check_parameter(name, spec, value)
     return values
-
-
-def check_parameter(name: str, spec: Param, value):
-    """`value` if it lies in the range and choices of `spec`, else ValueError naming the parameter."""
-    if spec.low is not None and not (spec.low <= value <= spec.high):
-        raise ValueError(f"parameter {name}={value!r} is outside [{spec.low}, {spec.high}]")
-    if spec.choices and value not in spec.choices:
-        raise ValueError(f"parameter {name}={value!r} must be one of {spec.choices}")
-    return value
 
 
 def diagnostic_status(name: str, stats: dict, level_ok: bool, message: str,

@@ -13,8 +13,9 @@ import time
 import numpy as np
 from rclpy.node import Node
 
-from liver_sim.nodes.common import (Latest, LoopInputs, Param, RateLoop, apply_realtime_priority, declare_parameters,
-                                    publish_diagnostics, realtime_priority_parameter, run_node)
+from liver_sim.nodes.common import (Latest, LoopInputs, RateLoop, apply_realtime_priority, declare_parameters,
+                                    publish_diagnostics, run_node)
+from liver_sim.parameters import Param, realtime_priority_parameter
 from liver_sim.nodes.tool_node import (DEVICE_MAP_PARAMETERS, IDENTITY_XYZW, SCRIPT_PARAMETERS, frame_map_from,
                                        loop_status, script_from)
 from liver_sim.phantom import PhantomSim, StylusParams

@@ -17,9 +17,9 @@ from rclpy.node import Node
 
 from liver_sim.mesh.io import load_mesh
 from liver_sim.mesh.liver_shape import default_liver
-from liver_sim.nodes.common import (Latest, LoopInputs, Param, RateLoop, apply_realtime_priority, check_parameter,
-                                    declare_parameters, diagnostic_status, publish_diagnostics,
-                                    realtime_priority_parameter, run_node)
+from liver_sim.nodes.common import (Latest, LoopInputs, RateLoop, apply_realtime_priority, declare_parameters,
+                                    diagnostic_status, publish_diagnostics, run_node)
+from liver_sim.parameters import Param, check_parameter, realtime_priority_parameter
 from liver_sim.physics.contact import ToolPose, ToolShape
 from liver_sim.physics.model import LiverModel
 from liver_sim.physics.params import INTEGRATORS, ModelParams, SpringLaw

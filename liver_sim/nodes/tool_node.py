@@ -17,8 +17,9 @@ import numpy as np
 from rclpy.node import Node
 
 from haptic_bridge.local_model import FrameMap
-from liver_sim.nodes.common import (LoopStats, Param, RateLoop, apply_realtime_priority, declare_parameters,
-                                    diagnostic_status, publish_diagnostics, realtime_priority_parameter, run_node)
+from liver_sim.nodes.common import (LoopStats, RateLoop, apply_realtime_priority, declare_parameters,
+                                    diagnostic_status, publish_diagnostics, run_node)
+from liver_sim.parameters import Param, realtime_priority_parameter
 from liver_sim.phantom import DeviceToLiver
 from liver_sim.tool_scripts import SCRIPT_NAMES, ScriptedTrajectory, ScriptSettings, make_script
 from msg_defs import conversions

@@ -70,7 +70,7 @@ def parse_override(text: str) -> tuple[str | None, str, object]:
 
 def node_parameters(overrides=()) -> dict[str, dict]:
     """{node: {name: value}} for liver_physics and haptic_bridge: defaults, config file, overrides; checked."""
-    from liver_sim.nodes.common import check_parameter
+    from liver_sim.parameters import check_parameter
 
     declared = declarations()
     values = {node: {name: spec.default for name, spec in declared[node].items()} for node in NODES}
