@@ -6,10 +6,10 @@ publishers and its subscribers.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, WrenchStamped
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import PointCloud2
 from shape_msgs.msg import Mesh
 from visualization_msgs.msg import Marker
@@ -17,32 +17,38 @@ from visualization_msgs.msg import Marker
 
 @dataclass(frozen=True)
 class Topic:
-    """A topic's default name, message class and QoS. `type` is None where a parameter chooses it
-    (servo_cf: `force_output`, see msg_defs.conversions.force_message_type)."""
+    """A topic's default name, message class and QoS: keep-last `depth`, reliable or best effort,
+    transient local or volatile. `type` is None where a parameter chooses it (servo_cf: `force_output`,
+    see msg_defs.conversions.force_message_type)."""
 
     name: str
     type: type | None
-    qos: QoSProfile
+    depth: int
+    reliable: bool = True
+    transient_local: bool = False
 
+    @cached_property
+    def qos(self):
+        """The rclpy QoSProfile (rclpy is imported here, so that the names and types need no rclpy)."""
+        from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-def _qos(depth: int, reliable: bool = True, transient_local: bool = False) -> QoSProfile:
-    """Keep-last `depth`, reliable or best effort, transient local or volatile."""
-    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth,
-                      reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
-                      durability=DurabilityPolicy.TRANSIENT_LOCAL if transient_local else DurabilityPolicy.VOLATILE)
+        return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=self.depth,
+                          reliability=ReliabilityPolicy.RELIABLE if self.reliable else ReliabilityPolicy.BEST_EFFORT,
+                          durability=(DurabilityPolicy.TRANSIENT_LOCAL if self.transient_local
+                                      else DurabilityPolicy.VOLATILE))
 
 
 TOPICS = {
-    "nodes": Topic("/liver/nodes", PointCloud2, _qos(1)),
-    "surface": Topic("/liver/surface", Mesh, _qos(1, transient_local=True)),
-    "marker": Topic("/liver/marker", Marker, _qos(1)),
-    "contact_plane": Topic("/liver/contact_plane", Marker, _qos(1)),
-    "tool_wrench": Topic("/liver/tool_wrench", WrenchStamped, _qos(10)),
-    "tool_pose": Topic("/tool/pose", PoseStamped, _qos(1, reliable=False)),
-    "measured_cp": Topic("/phantom/measured_cp", PoseStamped, _qos(1, reliable=False)),
-    "servo_cf": Topic("/phantom/servo_cf", None, _qos(1)),
+    "nodes": Topic("/liver/nodes", PointCloud2, 1),
+    "surface": Topic("/liver/surface", Mesh, 1, transient_local=True),
+    "marker": Topic("/liver/marker", Marker, 1),
+    "contact_plane": Topic("/liver/contact_plane", Marker, 1),
+    "tool_wrench": Topic("/liver/tool_wrench", WrenchStamped, 10),
+    "tool_pose": Topic("/tool/pose", PoseStamped, 1, reliable=False),
+    "measured_cp": Topic("/phantom/measured_cp", PoseStamped, 1, reliable=False),
+    "servo_cf": Topic("/phantom/servo_cf", None, 1),
     # "default" in the table: rclpy's usual keep-last 10, reliable, volatile.
-    "diagnostics": Topic("/diagnostics", DiagnosticArray, _qos(10)),
+    "diagnostics": Topic("/diagnostics", DiagnosticArray, 10),
 }
 
 #: Force topic of a baseline bridge (`local_model: none`) beside the normal one: the Fig. 8 comparison
@@ -50,8 +56,7 @@ TOPICS = {
 BASELINE_FORCE_TOPIC = "/phantom/servo_cf_without_local_model"
 
 
-def batch_qos(topic: Topic, depth: int = 1000) -> QoSProfile:
-    """`topic`'s reliability and durability with a keep-last `depth` history: for a subscriber that
-    takes messages in batches (a listener or recorder polling every few ms) and must keep them all."""
-    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth, reliability=topic.qos.reliability,
-                      durability=topic.qos.durability)
+def batch_qos(topic: Topic, depth: int = 1000):
+    """`topic`'s reliability and durability with a keep-last `depth` history (a QoSProfile): for a subscriber
+    that takes messages in batches (a listener or recorder polling every few ms) and must keep them all."""
+    return Topic(topic.name, topic.type, depth, topic.reliable, topic.transient_local).qos
