@@ -19,7 +19,7 @@ package_name = 'liver_sim'
 CONSOLE_SCRIPTS = [
     'liver-sim = liver_sim.cli:main',
     'liver_physics = liver_sim.nodes.physics_node:main',
-    'haptic_bridge = haptic_bridge.node:main',
+    'haptic_bridge = liver_sim.nodes.bridge_node:main',
     'liver_tool = liver_sim.nodes.tool_node:main',
     'phantom_sim = liver_sim.nodes.phantom_node:main',
 ]

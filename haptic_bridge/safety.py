@@ -11,6 +11,8 @@ import math
 
 import numpy as np
 
+from liver_sim.checks import positive
+
 #: The PHANToM's peak force (N); no configuration may exceed it.
 PHANTOM_MAX_FORCE_N = 3.3
 #: DESIGN default for the force clamp (N).
@@ -20,14 +22,6 @@ _GAIN_SNAP = 1e-9
 #: A clamped force is scaled to this fraction below the clamp, so that no rounding of its norm, here or
 #: at the device, exceeds the clamp.
 _CLAMP_MARGIN = 1e-12
-
-
-def _positive(value: float, name: str) -> float:
-    """`value` as a float if finite and > 0, else ValueError naming `name`."""
-    value = float(value)
-    if not (math.isfinite(value) and value > 0.0):
-        raise ValueError(f"{name} must be finite and > 0, got {value!r}")
-    return value
 
 
 def clamp_norm(force: np.ndarray, max_force: float) -> np.ndarray:
@@ -49,8 +43,8 @@ class RateLimiter:
     """
 
     def __init__(self, max_rate_n_per_s: float, period_s: float):
-        self.max_step_n = (_positive(max_rate_n_per_s, "max_rate_n_per_s")
-                           * _positive(period_s, "period_s"))
+        self.max_step_n = (positive(max_rate_n_per_s, "max_rate_n_per_s")
+                           * positive(period_s, "period_s"))
         self.last = np.zeros(3)
 
     def reset(self, force: np.ndarray | None = None) -> None:
@@ -81,9 +75,9 @@ class Watchdog:
     """
 
     def __init__(self, lifetime_s: float = 0.05, ramp_time_s: float = 0.01, period_s: float = 0.001):
-        self.lifetime_s = _positive(lifetime_s, "lifetime_s")
-        self.ramp_time_s = _positive(ramp_time_s, "ramp_time_s")
-        self._step = _positive(period_s, "period_s") / self.ramp_time_s
+        self.lifetime_s = positive(lifetime_s, "lifetime_s")
+        self.ramp_time_s = positive(ramp_time_s, "ramp_time_s")
+        self._step = positive(period_s, "period_s") / self.ramp_time_s
         self.gain = 0.0
         self.state = "stale"
 
@@ -117,7 +111,7 @@ class SafeForceOutput:
 
     def __init__(self, max_force: float = DEFAULT_MAX_FORCE_N, max_rate_n_per_s: float = 400.0,
                  period_s: float = 0.001, lifetime_s: float = 0.05, ramp_time_s: float = 0.01):
-        self.max_force = _positive(max_force, "max_force")
+        self.max_force = positive(max_force, "max_force")
         if self.max_force > PHANTOM_MAX_FORCE_N:
             raise ValueError(f"max_force must be <= {PHANTOM_MAX_FORCE_N} N (PHANToM limit), got {max_force!r}")
         self.watchdog = Watchdog(lifetime_s, ramp_time_s, period_s)

@@ -2,7 +2,7 @@
 safe force command for the device (paper §2.5, P11; DESIGN "Haptic safety").
 
 The `haptic_bridge` node runs a BridgeTick at rate_hz on live messages; `liver-sim resimulate`
-runs the same BridgeTick on recorded tool poses.  Parameters are the node's (haptic_bridge.node.PARAMETERS).
+runs the same BridgeTick on recorded tool poses.  Parameters: haptic_bridge.parameters.PARAMETERS.
 """
 from __future__ import annotations
 
@@ -10,8 +10,10 @@ import math
 
 import numpy as np
 
-from haptic_bridge.local_model import FrameMap, ModelGlide, contact_force, max_passive_stiffness, penetration
+from haptic_bridge.rendering import ModelGlide, contact_force, max_passive_stiffness
 from haptic_bridge.safety import SafeForceOutput
+from liver_sim.geometry.device_map import DeviceMap
+from liver_sim.local_model import LocalModel, penetration
 
 
 def check_passivity(p: dict) -> None:
@@ -27,16 +29,6 @@ def check_passivity(p: dict) -> None:
             f"{p['device_damping_ns_per_m']:g}, damping_ns_per_m={p['damping_ns_per_m']:g}, "
             f"device_scale={scale:g} and rate_hz={p['rate_hz']:g}, Colgate's b > K·T/2 + B allows "
             f"stiffness_n_per_m < {limit / scale:g} N/m")
-
-
-def frame_map(p: dict) -> FrameMap:
-    """The device→liver map named by the parameters, or ValueError naming the bad one."""
-    for name, size in (("device_rotation_xyzw", 4), ("device_translation_m", 3)):
-        if len(p[name]) != size or not np.isfinite(p[name]).all():
-            raise ValueError(f"parameter {name} must be {size} finite numbers, got {list(p[name])!r}")
-    if not np.linalg.norm(p["device_rotation_xyzw"]) > 0.0:
-        raise ValueError("parameter device_rotation_xyzw must be a non-zero quaternion (x, y, z, w)")
-    return FrameMap(np.array(p["device_rotation_xyzw"]), np.array(p["device_translation_m"]), p["device_scale"])
 
 
 class DepthRate:
@@ -69,7 +61,7 @@ class BridgeTick:
         check_passivity(p)
         self.p = p
         self.mode = p["local_model"]
-        self.frame = frame_map(p)
+        self.device_map = DeviceMap.from_parameters(p)
         period = 1.0 / p["rate_hz"]
         try:
             self.safety = SafeForceOutput(p["max_force_n"], p["max_force_rate_n_per_s"], period,
@@ -80,7 +72,7 @@ class BridgeTick:
         self.depth_rate = DepthRate(period, p["depth_rate_cutoff_hz"])
         self.glide = ModelGlide(p["model_glide_s"])
 
-    def render(self, model, tip: np.ndarray | None) -> np.ndarray:
+    def render(self, model: LocalModel | None, tip: np.ndarray | None) -> np.ndarray:
         """Local-model force on the tool (N, liver frame); zero without a model or a tip."""
         if model is None or tip is None:
             depth, direction = 0.0, np.zeros(3)
@@ -101,4 +93,4 @@ class BridgeTick:
         else:
             model, lifetime = source if source is not None else (None, self.p["lifetime_s"])
             force = self.render(self.glide.update(model, now_s), tip)
-        return self.safety.step(self.frame.liver_to_device_force(force), source_age_s, pose_age_s, lifetime)
+        return self.safety.step(self.device_map.liver_to_device_force(force), source_age_s, pose_age_s, lifetime)

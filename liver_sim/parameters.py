@@ -1,11 +1,14 @@
 """Node parameter declarations without ROS: name → default, description with unit, range or choices.
 
 The nodes declare them through rclpy (liver_sim.nodes.common.declare_parameters); offline runs
-(liver_sim.sessions) read and check the same tables, so both refuse the same values.
+(liver_sim.sessions) read and check the same tables, so both refuse the same values. List values
+(vectors, quaternions) are read through vector_parameter and quaternion_parameter.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
+
+import numpy as np
 
 
 @dataclass(frozen=True)
@@ -34,3 +37,19 @@ def check_parameter(name: str, spec: Param, value):
     if spec.choices and value not in spec.choices:
         raise ValueError(f"parameter {name}={value!r} must be one of {spec.choices}")
     return value
+
+
+def vector_parameter(values: dict, name: str, length: int) -> np.ndarray:
+    """Parameter `name` of `values` as a finite float array of `length`, or ValueError naming it."""
+    vector = np.asarray(values[name], dtype=np.float64)
+    if vector.shape != (length,) or not np.isfinite(vector).all():
+        raise ValueError(f"parameter {name} must be {length} finite numbers, got {values[name]!r}")
+    return vector
+
+
+def quaternion_parameter(values: dict, name: str) -> np.ndarray:
+    """Parameter `name` of `values` as a finite, non-zero (x, y, z, w) quaternion, or ValueError naming it."""
+    quaternion = vector_parameter(values, name, 4)
+    if not np.linalg.norm(quaternion) > 0.0:
+        raise ValueError(f"parameter {name} must be a non-zero quaternion (x, y, z, w), got {values[name]!r}")
+    return quaternion

@@ -11,8 +11,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-NODE_EXECUTABLES = ("liver_physics", "haptic_bridge", "liver_tool", "phantom_sim")
-NODE_MODULES = {"liver_physics": "liver_sim.nodes.physics_node", "haptic_bridge": "haptic_bridge.node",
+NODE_MODULES = {"liver_physics": "liver_sim.nodes.physics_node", "haptic_bridge": "liver_sim.nodes.bridge_node",
                 "liver_tool": "liver_sim.nodes.tool_node", "phantom_sim": "liver_sim.nodes.phantom_node"}
 
 

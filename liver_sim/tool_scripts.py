@@ -6,7 +6,8 @@ tip touches the rest surface at anchor + radius·z; `clearance_m` is the gap bet
 surface and the anchor when the tool is up, `depth_m` how far below the rest surface the tool's
 surface is driven. Every script first waits `start_delay_s` at its start point (again at each
 repetition when it loops). Between waypoints the tip moves along a straight line with a cosine-eased
-profile (zero velocity at every waypoint).
+profile (zero velocity at every waypoint). SCRIPT_PARAMETERS declare the settings for the nodes that
+play a script (liver_tool, phantom_sim); `script_from` reads them back.
 """
 from __future__ import annotations
 
@@ -15,8 +16,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from liver_sim.parameters import Param, vector_parameter
+
 #: Every script name, for parameter choices.
 SCRIPT_NAMES = ("press", "press_release", "slide", "withdraw", "press_slide_release", "hold", "pull")
+#: Orientation of a scripted tool: the liver frame's.
+IDENTITY_XYZW = (0.0, 0.0, 0.0, 1.0)
 
 
 @dataclass(frozen=True)
@@ -133,3 +138,38 @@ def make_script(name: str, settings: ScriptSettings = ScriptSettings()) -> Scrip
         raise ValueError(f"parameter loop_script: script {name!r} does not end where it starts, so it cannot "
                          f"loop; use press_release, slide, press_slide_release or hold")
     return trajectory
+
+
+_DEFAULT = ScriptSettings()
+#: Durations (s) a script segment may last.
+_SEGMENT_S = (0.0, 3600.0)
+#: A script's settings as node parameters, shared by liver_tool and phantom_sim so both take the same values.
+SCRIPT_PARAMETERS = {
+    "script": Param("press_slide_release", f"scripted tool-tip trajectory: {', '.join(SCRIPT_NAMES)}",
+                    choices=SCRIPT_NAMES),
+    "anchor_m": Param(list(_DEFAULT.anchor_m), "rest-surface point the script presses on, liver frame [x, y, z] "
+                      "(m); default: the default liver's dome"),
+    "tool_radius_m": Param(_DEFAULT.tool_radius_m, "radius of the tool sphere centred on the tip (m)", 0.0, 0.2),
+    "depth_m": Param(_DEFAULT.depth_m, "press depth of the tool below the rest surface (m)", 0.0, 0.2),
+    "clearance_m": Param(_DEFAULT.clearance_m, "gap between tool and rest surface when up (m)", 0.0, 0.5),
+    "slide_m": Param(_DEFAULT.slide_m, "slide length along +x at depth (m)", 0.0, 0.5),
+    "pull_m": Param(_DEFAULT.pull_m, "pull length back along +z after the hold, script pull (m)", 0.0, 0.5),
+    "start_delay_s": Param(_DEFAULT.start_delay_s, "wait at the start point before the script (s)", *_SEGMENT_S),
+    "approach_s": Param(_DEFAULT.approach_s, "clearance → contact (s)", *_SEGMENT_S),
+    "press_s": Param(_DEFAULT.press_s, "contact → depth (s)", *_SEGMENT_S),
+    "hold_s": Param(_DEFAULT.hold_s, "hold at depth (s)", *_SEGMENT_S),
+    "slide_s": Param(_DEFAULT.slide_s, "each slide along x, or the pull (s)", *_SEGMENT_S),
+    "withdraw_s": Param(_DEFAULT.withdraw_s, "depth → clearance (s)", *_SEGMENT_S),
+    "rest_s": Param(_DEFAULT.rest_s, "rest at clearance after the release (s)", *_SEGMENT_S),
+    "loop_script": Param(False, "repeat the script (press_release, slide, press_slide_release, hold)"),
+}
+
+
+def script_from(values: dict) -> ScriptedTrajectory:
+    """The script named by the SCRIPT_PARAMETERS `values`, or ValueError naming the bad parameter."""
+    settings = ScriptSettings(
+        anchor_m=tuple(vector_parameter(values, "anchor_m", 3)), loop=values["loop_script"],
+        **{name: values[name] for name in ("tool_radius_m", "depth_m", "clearance_m", "slide_m", "pull_m",
+                                           "start_delay_s", "approach_s", "press_s", "hold_s", "slide_s",
+                                           "withdraw_s", "rest_s")})
+    return make_script(values["script"], settings)

@@ -21,8 +21,9 @@ from shape_msgs.msg import Mesh, MeshTriangle
 from std_msgs.msg import ColorRGBA, Float64MultiArray, Header
 from visualization_msgs.msg import Marker
 
-from haptic_bridge.local_model import PlaneModel, SphereModel
-from liver_sim.rotations import quaternion_to_matrix
+from liver_sim.checks import positive
+from liver_sim.geometry.rotations import quaternion_from_z_axis, quaternion_to_matrix
+from liver_sim.local_model import LocalModel
 from msg_defs import cdr
 
 SKIN_COLOUR = (0.6, 0.25, 0.2, 1.0)
@@ -52,13 +53,6 @@ def _finite(value, shape: tuple, name: str, dtype=np.float64) -> np.ndarray:
         first = np.argwhere(~finite)[0].tolist()
         raise ValueError(f"{name} must be finite ({np.dtype(dtype).name}), got {arr[tuple(first)]} at index {first}")
     return arr
-
-
-def _positive(value, name: str) -> float:
-    value = float(value)
-    if not (math.isfinite(value) and value > 0.0):
-        raise ValueError(f"{name} must be finite and > 0, got {value!r}")
-    return value
 
 
 def _unit_quaternion(value, name: str) -> np.ndarray:
@@ -264,20 +258,6 @@ def skin_marker_serialized(positions, skin, stamp, frame_id: str, colour=SKIN_CO
 
 # ---------------------------------------------------------------- poses, the local model
 
-def quaternion_from_z_axis(normal) -> tuple[float, float, float, float]:
-    """Unit quaternion (x, y, z, w) of the shortest rotation taking +z to the direction of `normal`
-    (half a turn about x when `normal` points along −z)."""
-    n = _finite(normal, (3,), "normal")
-    length = float(np.linalg.norm(n))
-    if not length > 0.0:
-        raise ValueError(f"normal must be non-zero, got {n.tolist()}")
-    nx, ny, nz = n / length
-    if 1.0 + nz < 1e-12:
-        return (1.0, 0.0, 0.0, 0.0)
-    q = np.array([-ny, nx, 0.0, 1.0 + nz])
-    return tuple((q / np.linalg.norm(q)).tolist())
-
-
 def _pose(position, orientation_xyzw, position_name: str) -> Pose:
     x, y, z = _finite(position, (3,), position_name).tolist()
     qx, qy, qz, qw = _unit_quaternion(orientation_xyzw, "orientation_xyzw").tolist()
@@ -318,8 +298,9 @@ def pose_from_bytes(data: bytes) -> tuple[np.ndarray, np.ndarray, tuple[int, int
     return position, _unit_quaternion(values[3:], "PoseStamped.pose.orientation"), (sec, nanosec)
 
 
-def local_model_marker(model, stamp, frame_id: str, lifetime_s: float, patch_size_m: float = 0.04) -> Marker:
-    """The physics' LocalModel as the /liver/contact_plane Marker (ns "local_model", id 0), to be trusted
+def local_model_marker(model: LocalModel, stamp, frame_id: str, lifetime_s: float,
+                       patch_size_m: float = 0.04) -> Marker:
+    """The physics' local model as the /liver/contact_plane Marker (ns "local_model", id 0), to be trusted
     for `lifetime_s` seconds.
 
     plane: CUBE at `point`, orientation's z axis = outward `normal`, scale (patch, patch, 1 mm);
@@ -331,28 +312,27 @@ def local_model_marker(model, stamp, frame_id: str, lifetime_s: float, patch_siz
         marker.action = Marker.DELETE
         return marker
     if model.kind == "plane":
-        patch = _positive(patch_size_m, "patch_size_m")
+        patch = positive(patch_size_m, "patch_size_m")
         marker.type = Marker.CUBE
         marker.pose = _pose(model.point, quaternion_from_z_axis(model.normal), "LocalModel.point")
         marker.scale = Vector3(x=patch, y=patch, z=PLANE_THICKNESS_M)
         marker.color = _colour(PLANE_COLOUR)
-    elif model.kind == "sphere":
-        diameter = 2.0 * _positive(model.radius_m, "LocalModel.radius_m")
+    else:
+        diameter = 2.0 * model.radius_m
         marker.type = Marker.SPHERE
         marker.pose = _pose(model.centre, (0.0, 0.0, 0.0, 1.0), "LocalModel.centre")
         marker.scale = Vector3(x=diameter, y=diameter, z=diameter)
         marker.color = _colour(SPHERE_COLOUR)
-    else:
-        raise ValueError(f"LocalModel.kind must be 'plane' or 'sphere', got {model.kind!r}")
     return marker
 
 
-def marker_to_local_model(msg: Marker) -> tuple[PlaneModel | SphereModel | None, float]:
+def marker_to_local_model(msg: Marker) -> tuple[LocalModel | None, float]:
     """(local model, lifetime s) from a /liver/contact_plane Marker; the model is None for DELETE and
     DELETEALL (no surface near the tool).
 
-    CUBE → PlaneModel(pose.position, normal = the orientation's z axis); SPHERE → SphereModel(pose.position,
-    radius = scale.x / 2). A lifetime of 0 means "forever" to RViz: the caller decides what it trusts.
+    CUBE → LocalModel.plane(pose.position, normal = the orientation's z axis); SPHERE →
+    LocalModel.sphere(pose.position, radius = scale.x / 2). A lifetime of 0 means "forever" to RViz: the
+    caller decides what it trusts.
     """
     lifetime_s = seconds_from_stamp(msg.lifetime)
     if msg.action in (Marker.DELETE, Marker.DELETEALL):
@@ -364,8 +344,8 @@ def marker_to_local_model(msg: Marker) -> tuple[PlaneModel | SphereModel | None,
         raise ValueError(f"Marker.type is {msg.type}, expected CUBE ({Marker.CUBE}) or SPHERE ({Marker.SPHERE})")
     position, orientation = _pose_arrays(msg.pose, "Marker.pose")
     if msg.type == Marker.CUBE:
-        return PlaneModel(position, quaternion_to_matrix(orientation)[:, 2]), lifetime_s
-    return SphereModel(position, _positive(msg.scale.x, "Marker.scale.x") / 2.0), lifetime_s
+        return LocalModel.plane(position, quaternion_to_matrix(orientation)[:, 2]), lifetime_s
+    return LocalModel.sphere(position, positive(msg.scale.x, "Marker.scale.x") / 2.0), lifetime_s
 
 
 # ---------------------------------------------------------------- forces

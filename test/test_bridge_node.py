@@ -18,8 +18,8 @@ from geometry_msgs.msg import PoseStamped
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.signals import SignalHandlerOptions
 
-from liver_sim.physics.contact import LocalModel
-from liver_sim.rotations import quaternion_to_matrix
+from liver_sim.geometry.rotations import quaternion_to_matrix
+from liver_sim.local_model import LocalModel
 from msg_defs import conversions
 from msg_defs.topics import TOPICS
 
@@ -51,7 +51,7 @@ def local_model(kind: str) -> LocalModel:
 
 
 def start_bridge(env: dict, **params) -> subprocess.Popen:
-    args = [sys.executable, "-m", "haptic_bridge.node", "--ros-args", "--params-file", str(CONFIG)]
+    args = [sys.executable, "-m", "liver_sim.nodes.bridge_node", "--ros-args", "--params-file", str(CONFIG)]
     for name, v in params.items():
         text = "[" + ",".join(repr(float(x)) for x in v) + "]" if isinstance(v, list) else str(v)
         args += ["-p", f"{name}:={text}"]

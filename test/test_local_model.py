@@ -1,28 +1,20 @@
-"""The local model's closed-form penetration and force, the frame map and the passivity bounds."""
+"""The local model's closed-form penetration and force, the device map and the passivity bounds."""
 import math
 
 import numpy as np
 import pytest
 
-from haptic_bridge.local_model import (
-    FrameMap,
-    ModelGlide,
-    PlaneModel,
-    SphereModel,
-    blend,
-    contact_force,
-    max_passive_stiffness,
-    passivity_damping_min,
-    penetration,
-    quaternion_to_matrix,
-)
+from haptic_bridge.rendering import ModelGlide, blend, contact_force, max_passive_stiffness, passivity_damping_min
+from liver_sim.geometry.device_map import DeviceMap
+from liver_sim.geometry.rotations import quaternion_to_matrix
+from liver_sim.local_model import LocalModel, penetration
 
-PLANE = PlaneModel(point=[0.0, 0.0, 0.1], normal=[0.0, 0.0, 2.0])  # surface z = 0.1 m, outward +z
-SPHERE = SphereModel(centre=[0.1, 0.0, 0.0], radius=0.05)
+PLANE = LocalModel.plane(point=[0.0, 0.0, 0.1], normal=[0.0, 0.0, 2.0])  # surface z = 0.1 m, outward +z
+SPHERE = LocalModel.sphere(centre=[0.1, 0.0, 0.0], radius_m=0.05)
 
 
 def test_plane_normal_is_normalised_and_the_model_is_immutable():
-    model = PlaneModel(point=[1, 2, 3], normal=[3.0, 4.0, 0.0])
+    model = LocalModel.plane(point=[1, 2, 3], normal=[3.0, 4.0, 0.0])
     np.testing.assert_allclose(model.normal, [0.6, 0.8, 0.0])
     with pytest.raises(ValueError):
         model.normal[0] = 1.0
@@ -31,25 +23,25 @@ def test_plane_normal_is_normalised_and_the_model_is_immutable():
 
 
 @pytest.mark.parametrize("kwargs, field", [
-    ({"point": [0, 0, 0], "normal": [0, 0, 0]}, "PlaneModel.normal"),
-    ({"point": [0, 0, 0], "normal": [0, np.nan, 1]}, "PlaneModel.normal"),
-    ({"point": [0, 0, np.inf], "normal": [0, 0, 1]}, "PlaneModel.point"),
-    ({"point": [0, 0], "normal": [0, 0, 1]}, "PlaneModel.point"),
+    ({"point": [0, 0, 0], "normal": [0, 0, 0]}, "LocalModel.normal"),
+    ({"point": [0, 0, 0], "normal": [0, np.nan, 1]}, "LocalModel.normal"),
+    ({"point": [0, 0, np.inf], "normal": [0, 0, 1]}, "LocalModel.point"),
+    ({"point": [0, 0], "normal": [0, 0, 1]}, "LocalModel.point"),
 ])
 def test_plane_refuses_bad_fields_by_name(kwargs, field):
     with pytest.raises(ValueError, match=field):
-        PlaneModel(**kwargs)
+        LocalModel.plane(**kwargs)
 
 
 @pytest.mark.parametrize("kwargs, field", [
-    ({"centre": [0, 0, 0], "radius": 0.0}, "SphereModel.radius"),
-    ({"centre": [0, 0, 0], "radius": -0.1}, "SphereModel.radius"),
-    ({"centre": [0, 0, 0], "radius": np.nan}, "SphereModel.radius"),
-    ({"centre": [np.nan, 0, 0], "radius": 0.1}, "SphereModel.centre"),
+    ({"centre": [0, 0, 0], "radius_m": 0.0}, "LocalModel.radius_m"),
+    ({"centre": [0, 0, 0], "radius_m": -0.1}, "LocalModel.radius_m"),
+    ({"centre": [0, 0, 0], "radius_m": np.nan}, "LocalModel.radius_m"),
+    ({"centre": [np.nan, 0, 0], "radius_m": 0.1}, "LocalModel.centre"),
 ])
 def test_sphere_refuses_bad_fields_by_name(kwargs, field):
     with pytest.raises(ValueError, match=field):
-        SphereModel(**kwargs)
+        LocalModel.sphere(**kwargs)
 
 
 @pytest.mark.parametrize("tip, tool_radius, expected", [
@@ -123,7 +115,7 @@ def test_quaternion_to_matrix_known_rotations():
 
 
 def _random_map(rng):
-    return FrameMap(rotation=rng.normal(size=4), translation=rng.normal(size=3), scale=rng.uniform(0.2, 5.0))
+    return DeviceMap(rotation=rng.normal(size=4), translation=rng.normal(size=3), scale=rng.uniform(0.2, 5.0))
 
 
 def test_frame_map_round_trip_and_rigid_force_rotation():
@@ -135,31 +127,31 @@ def test_frame_map_round_trip_and_rigid_force_rotation():
         np.testing.assert_allclose(frame.device_to_liver(frame.liver_to_device(point)), point, atol=1e-12)
         device_force = frame.liver_to_device_force(force)
         assert np.linalg.norm(device_force) == pytest.approx(np.linalg.norm(force))  # scale ignored
-        np.testing.assert_allclose(frame.device_to_liver_force(device_force), force, atol=1e-12)
+        np.testing.assert_allclose(frame.rotation @ device_force, force, atol=1e-12)
 
 
 def test_frame_map_hand_computed():
     s = math.sqrt(0.5)
-    frame = FrameMap(rotation=[0, 0, s, s], translation=[0.0, 0.0, 0.2], scale=2.0)  # 90° about z
+    frame = DeviceMap(rotation=[0, 0, s, s], translation=[0.0, 0.0, 0.2], scale=2.0)  # 90° about z
     np.testing.assert_allclose(frame.device_to_liver(np.array([0.01, 0.0, 0.0])), [0.0, 0.02, 0.2], atol=1e-12)
     # A force along liver +y is along device +x; its magnitude does not depend on the scale.
     np.testing.assert_allclose(frame.liver_to_device_force(np.array([0.0, 1.5, 0.0])), [1.5, 0.0, 0.0],
                                atol=1e-12)
-    matrix_frame = FrameMap(rotation=quaternion_to_matrix([0, 0, s, s]), translation=[0, 0, 0.2], scale=2.0)
+    matrix_frame = DeviceMap(rotation=quaternion_to_matrix([0, 0, s, s]), translation=[0, 0, 0.2], scale=2.0)
     np.testing.assert_allclose(matrix_frame.rotation, frame.rotation, atol=1e-12)
 
 
 @pytest.mark.parametrize("kwargs, field", [
-    ({"rotation": np.diag([1.0, 1.0, -1.0])}, "FrameMap.rotation"),  # a reflection
-    ({"rotation": 2 * np.eye(3)}, "FrameMap.rotation"),
-    ({"rotation": np.eye(2)}, "FrameMap.rotation"),
-    ({"translation": [0, np.nan, 0]}, "FrameMap.translation"),
-    ({"scale": 0.0}, "FrameMap.scale"),
-    ({"scale": -1.0}, "FrameMap.scale"),
+    ({"rotation": np.diag([1.0, 1.0, -1.0])}, "DeviceMap.rotation"),  # a reflection
+    ({"rotation": 2 * np.eye(3)}, "DeviceMap.rotation"),
+    ({"rotation": np.eye(2)}, "DeviceMap.rotation"),
+    ({"translation": [0, np.nan, 0]}, "DeviceMap.translation"),
+    ({"scale": 0.0}, "DeviceMap.scale"),
+    ({"scale": -1.0}, "DeviceMap.scale"),
 ])
 def test_frame_map_refuses_bad_fields_by_name(kwargs, field):
     with pytest.raises(ValueError, match=field):
-        FrameMap(**kwargs)
+        DeviceMap(**kwargs)
 
 
 def test_passivity_bounds():
@@ -180,18 +172,18 @@ def test_passivity_bounds():
 
 
 def test_blend_interpolates_planes_and_spheres_and_falls_back_to_the_target():
-    start, target = PlaneModel((0, 0, 0), (0, 0, 1)), PlaneModel((0, 0, -0.01), (0, 1, 1))
+    start, target = LocalModel.plane((0, 0, 0), (0, 0, 1)), LocalModel.plane((0, 0, -0.01), (0, 1, 1))
     half = blend(start, target, 0.5)
     np.testing.assert_allclose(half.point, (0, 0, -0.005))
     bisector = np.array([0, 0, 1]) + np.array([0, 1, 1]) / np.sqrt(2)  # halfway between the unit normals
     np.testing.assert_allclose(half.normal, bisector / np.linalg.norm(bisector))
     assert blend(start, target, 1.5) is target and blend(None, target, 0.2) is target
-    sphere = SphereModel((0, 0, 0), 0.1)
+    sphere = LocalModel.sphere((0, 0, 0), 0.1)
     assert blend(sphere, target, 0.5) is target  # another kind: no blend
-    assert blend(PlaneModel((0, 0, 0), (0, 0, -1)), start, 0.5) is start  # opposite normals
-    quarter = blend(sphere, SphereModel((0.04, 0, 0), 0.2), 0.25)
+    assert blend(LocalModel.plane((0, 0, 0), (0, 0, -1)), start, 0.5) is start  # opposite normals
+    quarter = blend(sphere, LocalModel.sphere((0.04, 0, 0), 0.2), 0.25)
     np.testing.assert_allclose(quarter.centre, (0.01, 0, 0))
-    assert quarter.radius == pytest.approx(0.125)
+    assert quarter.radius_m == pytest.approx(0.125)
 
 
 def test_glide_spreads_a_physics_step_of_the_surface_over_the_ticks():
@@ -199,7 +191,7 @@ def test_glide_spreads_a_physics_step_of_the_surface_over_the_ticks():
     glide, at_once = ModelGlide(frame), ModelGlide(0.0)
     tip = np.array([0.0, 0.0, 0.0])
     depths = {id(glide): [], id(at_once): []}
-    models = [PlaneModel((0, 0, -0.001 * k), (0, 0, 1)) for k in range(4)]  # the surface recedes 1 mm a frame
+    models = [LocalModel.plane((0, 0, -0.001 * k), (0, 0, 1)) for k in range(4)]  # the surface recedes 1 mm a frame
     for i in range(int(3.5 * frame / tick)):
         now = i * tick
         newest = models[min(int(now / frame), 3)]

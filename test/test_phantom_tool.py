@@ -5,10 +5,10 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from haptic_bridge.local_model import FrameMap
+from liver_sim.geometry.device_map import DeviceMap
+from liver_sim.geometry.rotations import matrix_to_quaternion, quaternion_to_matrix
 from liver_sim.mesh.liver_shape import default_liver
-from liver_sim.phantom import DeviceToLiver, PhantomSim, StylusParams, matrix_to_quaternion
-from liver_sim.rotations import quaternion_to_matrix
+from liver_sim.phantom import PhantomSim, StylusParams
 from liver_sim.tool_scripts import SCRIPT_NAMES, ScriptSettings, make_script
 
 SETTINGS = ScriptSettings(anchor_m=(0.01, -0.02, 0.05), tool_radius_m=0.015, depth_m=0.012, clearance_m=0.008,
@@ -181,10 +181,10 @@ def test_stylus_stays_in_the_workspace_box():
 
 
 def test_hand_target_uses_the_inverse_device_map():
-    frame_map = FrameMap([0.0, 0.0, math.sin(math.pi / 4), math.cos(math.pi / 4)], [0.1, 0.0, -0.05], 2.0)
-    sim = PhantomSim(make_script("press_release", SETTINGS), frame_map)
+    device_map = DeviceMap([0.0, 0.0, math.sin(math.pi / 4), math.cos(math.pi / 4)], [0.1, 0.0, -0.05], 2.0)
+    sim = PhantomSim(make_script("press_release", SETTINGS), device_map)
     for t in (0.0, 0.7, 1.2):
-        np.testing.assert_allclose(frame_map.device_to_liver(sim.hand_target(t)),
+        np.testing.assert_allclose(device_map.device_to_liver(sim.hand_target(t)),
                                    sim.trajectory.position_at(t), atol=1e-12)
 
 
@@ -199,7 +199,7 @@ def test_advance_to_steps_until_the_given_time_and_skips_long_stalls():
 
 def test_device_samples_are_mapped_into_the_liver_frame():
     rotation = [0.0, 0.0, math.sin(math.pi / 4), math.cos(math.pi / 4)]  # 90° about z
-    mapping = DeviceToLiver(FrameMap(rotation, [0.1, 0.2, 0.3], 2.0), workspace_radius_m=0.3)
+    mapping = DeviceMap(rotation, [0.1, 0.2, 0.3], 2.0, workspace_radius_m=0.3)
     position, orientation = mapping.pose([0.01, 0.02, 0.03], [0.0, 0.0, 0.0, 1.0])
     np.testing.assert_allclose(position, [0.1 - 0.04, 0.2 + 0.02, 0.3 + 0.06])
     np.testing.assert_allclose(orientation, rotation, atol=1e-12)

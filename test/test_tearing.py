@@ -6,9 +6,9 @@ import pytest
 import scipy.sparse
 import scipy.sparse.csgraph
 
+from liver_sim.local_model import penetration
 from liver_sim.mesh.liver_shape import default_liver
 from liver_sim.mesh.tetmesh import TET_FACES, TetMesh, signed_volumes
-from haptic_bridge.local_model import PlaneModel, penetration
 from liver_sim.physics.contact import ToolPose
 from liver_sim.physics.model import LiverModel
 from liver_sim.physics.params import ModelParams
@@ -323,7 +323,7 @@ def test_grasped_nodes_follow_the_tool_and_pull_it_back_towards_the_liver():
     assert results[-1].tool_force_n[2] < -1.0       # the tissue pulls the tool back down
     # the local model renders the pull: the bridge's λ·depth·n for the tool sphere is the tissue's force
     last = results[-1].local_model
-    depth, direction = penetration(PlaneModel(last.point, last.normal), tips[-1], model.tool.radius_m)
+    depth, direction = penetration(last, tips[-1], model.tool.radius_m)
     np.testing.assert_allclose(model.params.contact_stiffness_n_per_m * depth * direction,
                                results[-1].tool_force_n, rtol=1e-9)
     model.release()

@@ -29,6 +29,8 @@ SPIN_MARGIN_S = 0.0001
 CATCH_UP_PERIODS = 2
 #: How often (s) a thread holding the GIL is asked to hand it over.
 GIL_SWITCH_INTERVAL_S = 0.0002
+#: A loop is on rate while it achieves at least this fraction of its rate (diagnostics).
+ON_RATE_FRACTION = 0.98
 
 
 class Latest:
@@ -230,6 +232,17 @@ def diagnostic_status(name: str, stats: dict, level_ok: bool, message: str,
     status.values = [KeyValue(key=key, value=f"{value:.6g}" if isinstance(value, float) else str(value))
                      for key, value in fields.items()]
     return status
+
+
+def on_rate(stats: dict, rate_hz: float) -> bool:
+    """Whether a loop with LoopStats.summary() `stats` achieves ON_RATE_FRACTION of `rate_hz` (Hz)."""
+    return stats["rate_hz"] >= ON_RATE_FRACTION * rate_hz
+
+
+def loop_status(name: str, stats: dict, rate_hz: float, extra: dict) -> DiagnosticStatus:
+    """A node loop's DiagnosticStatus: OK while it is on rate (:func:`on_rate`)."""
+    ok = on_rate(stats, rate_hz)
+    return diagnostic_status(name, stats, ok, "ok" if ok else f"below {rate_hz:g} Hz", extra)
 
 
 def publish_diagnostics(node, publisher, statuses: list[DiagnosticStatus]) -> None:

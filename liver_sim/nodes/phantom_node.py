@@ -5,6 +5,7 @@ virtual hand playing a `tool_scripts` script — and publishes the stylus on /ph
 (frame `phantom_base`, stamped with the sample's time). The newest force command from
 /phantom/servo_cf (format `force_output`) pushes the stylus; a command older than
 `command_timeout_s`, or a malformed one, counts as zero, as a real driver's safety would do.
+Its parameters are liver_sim.phantom.PARAMETERS.
 """
 from __future__ import annotations
 
@@ -13,40 +14,15 @@ import time
 import numpy as np
 from rclpy.node import Node
 
+from liver_sim.geometry.device_map import DeviceMap
 from liver_sim.nodes.common import (Latest, LoopInputs, RateLoop, apply_realtime_priority, declare_parameters,
-                                    publish_diagnostics, run_node)
-from liver_sim.parameters import Param, realtime_priority_parameter
-from liver_sim.nodes.tool_node import (DEVICE_MAP_PARAMETERS, IDENTITY_XYZW, SCRIPT_PARAMETERS, frame_map_from,
-                                       loop_status, script_from)
-from liver_sim.phantom import PhantomSim, StylusParams
+                                    loop_status, publish_diagnostics, run_node)
+from liver_sim.phantom import PARAMETERS, PhantomSim, StylusParams
+from liver_sim.tool_scripts import IDENTITY_XYZW, script_from
 from msg_defs import conversions
-from msg_defs.conversions import FORCE_OUTPUT_FORMATS
 from msg_defs.topics import TOPICS
 
-STYLUS = StylusParams()
-#: Force formats a simulated device can take (OmniFeedback is another driver's own message).
-FORCE_FORMATS = tuple(fmt for fmt in FORCE_OUTPUT_FORMATS if fmt != "omni_feedback")
 _ZERO = np.zeros(3)
-
-PARAMETERS = {
-    "rate_hz": Param(1000.0, "stylus integration and publishing rate (Hz)", 100.0, 10000.0),
-    "realtime_priority": realtime_priority_parameter(80),
-    "stylus_mass_kg": Param(STYLUS.mass_kg, "effective stylus mass at the tip (kg)", 0.001, 10.0),
-    "hand_stiffness_n_per_m": Param(STYLUS.hand_stiffness_n_per_m, "virtual hand spring to the script (N/m)",
-                                    1.0, 10000.0),
-    "hand_damping_ns_per_m": Param(STYLUS.hand_damping_ns_per_m, "virtual hand damping (N·s/m)", 0.0, 1000.0),
-    "max_force_n": Param(STYLUS.max_force_n, "commanded force clamp, as the device's (N)", 0.01, STYLUS.max_force_n),
-    "workspace_half_m": Param(STYLUS.workspace_half_m, "the stylus stays within ±this on each device axis (m)",
-                              0.01, 2.0),
-    "command_timeout_s": Param(0.05, "a force command older than this counts as zero (s)", 0.001, 10.0),
-    "force_output": Param("wrench_stamped", f"format of the force commands: {', '.join(FORCE_FORMATS)}",
-                          choices=FORCE_FORMATS),
-    "frame_id": Param("phantom_base", "frame of the published stylus pose"),
-    "measured_cp_topic": Param(TOPICS["measured_cp"].name, "stylus pose out, device frame (PoseStamped)"),
-    "servo_cf_topic": Param(TOPICS["servo_cf"].name, "force command in, device frame"),
-    **SCRIPT_PARAMETERS,
-    **DEVICE_MAP_PARAMETERS,
-}
 
 
 class PhantomNode(Node):
@@ -57,7 +33,7 @@ class PhantomNode(Node):
         p = self.p = declare_parameters(self, PARAMETERS)
         stylus = StylusParams(p["stylus_mass_kg"], p["hand_stiffness_n_per_m"], p["hand_damping_ns_per_m"],
                               p["max_force_n"], p["workspace_half_m"])
-        self.sim = PhantomSim(script_from(p), frame_map_from(p), stylus)
+        self.sim = PhantomSim(script_from(p), DeviceMap.from_parameters(p), stylus)
         self._command = Latest()
         self.bad_commands = 0
         self._publisher = self.create_publisher(TOPICS["measured_cp"].type, p["measured_cp_topic"],

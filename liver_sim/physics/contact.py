@@ -13,8 +13,9 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
+from liver_sim.geometry.rotations import quaternion_to_matrix
+from liver_sim.local_model import LocalModel
 from liver_sim.physics import kernels
-from liver_sim.rotations import quaternion_to_matrix
 
 TOOL_KINDS = {"sphere": kernels.TOOL_SPHERE, "capsule": kernels.TOOL_CAPSULE, "box": kernels.TOOL_BOX}
 
@@ -86,31 +87,6 @@ def candidate_triangles(points: np.ndarray, skin: np.ndarray, shape: ToolShape, 
     circumradius = np.linalg.norm(corners - centroids[:, None, :], axis=2).max()
     hits = cKDTree(centroids).query_ball_point((a + b) / 2.0, shape.bounding_radius_m + circumradius + reach_m)
     return np.sort(np.asarray(hits, dtype=np.int64))
-
-
-@dataclass(frozen=True)
-class LocalModel:
-    """The local model of §2.5 (P11) sent to the haptic loop.
-
-    kind 'plane': the surface through `point` with outward unit `normal`; kind 'sphere': a sphere of
-    `radius_m` about `centre` holding the liver.  `valid` is False when no surface is within reach of
-    the tool.  `depth_m` is the tool's deepest penetration seen by the physics.
-    """
-
-    kind: str
-    valid: bool
-    point: np.ndarray
-    normal: np.ndarray
-    centre: np.ndarray
-    radius_m: float
-    depth_m: float
-    in_contact: bool
-
-    @classmethod
-    def invalid(cls) -> "LocalModel":
-        """No surface near the tool."""
-        zero = np.zeros(3)
-        return cls("plane", False, zero, np.array([0.0, 0.0, 1.0]), zero, 0.0, 0.0, False)
 
 
 def fit_local_model(gap: np.ndarray, point: np.ndarray, direction: np.ndarray, reach_m: float,

@@ -13,7 +13,7 @@ import math
 import numba
 import numpy as np
 
-from liver_sim.geometry import closest_point_on_triangle
+from liver_sim.geometry.closest_point import closest_point_on_triangle
 
 TOOL_NONE = 0
 TOOL_SPHERE = 1

@@ -16,7 +16,7 @@ NODES = ("liver_physics", "haptic_bridge")
 
 def declarations() -> dict:
     """{node: PARAMETERS} of the physics node and the haptic bridge."""
-    from haptic_bridge.node import PARAMETERS as BRIDGE
+    from haptic_bridge.parameters import PARAMETERS as BRIDGE
     from liver_sim.nodes.physics_node import PARAMETERS as PHYSICS
 
     return {"liver_physics": PHYSICS, "haptic_bridge": BRIDGE}

@@ -95,7 +95,7 @@ def session_arrays(bag: Path, physics: dict, bridge: dict) -> dict:
 
 def penetration_series(tool_t, tips, model_t, models, tool_radius_m: float) -> np.ndarray:
     """Depth (m) of the tool sphere at each tip below the newest local model logged before it (0 without one)."""
-    from haptic_bridge.local_model import penetration
+    from liver_sim.local_model import penetration
 
     index = np.searchsorted(model_t, tool_t, side="right") - 1
     depth = np.zeros(len(tool_t))

@@ -1,0 +1,44 @@
+"""The haptic bridge's parameters (no ROS): declared by the `haptic_bridge` node, read by BridgeTick and by
+the offline sessions (liver_sim.sessions), so both refuse the same values."""
+from haptic_bridge.safety import DEFAULT_MAX_FORCE_N, PHANTOM_MAX_FORCE_N
+from liver_sim.geometry.device_map import DEVICE_MAP_PARAMETERS
+from liver_sim.parameters import Param, realtime_priority_parameter
+from msg_defs.conversions import FORCE_OUTPUT_FORMATS
+from msg_defs.topics import TOPICS
+
+MODES = ("plane", "sphere", "none")
+PARAMETERS = {
+    "rate_hz": Param(1000.0, "haptic loop rate (Hz); its period is the T of the passivity bound", 50.0, 5000.0),
+    "realtime_priority": realtime_priority_parameter(80),
+    "local_model": Param("plane", "plane or sphere: render the local model on local_model_topic (the marker's "
+                         "kind decides: CUBE plane, SPHERE sphere); none: hold the physics contact wrench "
+                         "(Fig. 8 baseline)", choices=MODES),
+    "stiffness_n_per_m": Param(300.0, "local-model stiffness K (N/m of penetration in the liver frame); "
+                               "K·device_scale must stay below 2·(device_damping_ns_per_m − "
+                               "damping_ns_per_m·device_scale)/T (Colgate)", 0.0, 10000.0),
+    "model_glide_s": Param(round(1.0 / 150.0, 4), "time over which a new local model replaces the rendered one "
+                           "(s): the surface glides to its new place instead of jumping at each physics update; "
+                           "about one physics period; 0: at once", 0.0, 0.1),
+    "damping_ns_per_m": Param(0.1, "local-model damping B on the penetration rate (N·s/m)", 0.0, 10.0),
+    "device_damping_ns_per_m": Param(0.5, "physical damping b of the device at the stylus (N·s/m), for the "
+                                     "passivity check b > K·T/2 + B; PHANToM-like default, identify yours",
+                                     0.0, 100.0),
+    "depth_rate_cutoff_hz": Param(50.0, "one-pole low-pass on the finite-difference penetration rate (Hz); "
+                                  "0: unfiltered", 0.0, 500.0),
+    "tool_radius_m": Param(0.015, "radius of the tool tip sphere (m); same as the physics tool", 0.0, 0.2),
+    "max_force_n": Param(DEFAULT_MAX_FORCE_N, f"force clamp by norm (N), at most {PHANTOM_MAX_FORCE_N} N "
+                         "(PHANToM peak)", 0.01, PHANTOM_MAX_FORCE_N),
+    "max_force_rate_n_per_s": Param(400.0, "largest change of the commanded force (N/s); at least "
+                                    "max_force_n/ramp_time_s", 1.0, 100000.0),
+    "lifetime_s": Param(0.05, "age (s) beyond which the tool pose, the physics wrench, or a local model "
+                        "without its own lifetime is stale", 0.001, 10.0),
+    "ramp_time_s": Param(0.01, "time (s) for the watchdog to ramp the force to zero on stale data", 0.001, 0.01),
+    "force_output": Param("wrench_stamped", "message type of the force command", choices=FORCE_OUTPUT_FORMATS),
+    "force_topic": Param(TOPICS["servo_cf"].name, "force command to the device driver"),
+    "tool_pose_topic": Param(TOPICS["tool_pose"].name, "tool tip pose in the liver frame (PoseStamped)"),
+    "local_model_topic": Param(TOPICS["contact_plane"].name, "local model from the physics (Marker)"),
+    "tool_wrench_topic": Param(TOPICS["tool_wrench"].name, "physics contact force on the tool, liver frame "
+                               "(WrenchStamped); rendered with local_model: none"),
+    "device_frame_id": Param("phantom_base", "frame_id of the force command"),
+    **DEVICE_MAP_PARAMETERS,
+}
