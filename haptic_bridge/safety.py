@@ -47,9 +47,9 @@ class RateLimiter:
                            * positive(period_s, "period_s"))
         self.last = np.zeros(3)
 
-    def reset(self, force: np.ndarray | None = None) -> None:
-        """Restart from `force` (N), zero by default."""
-        self.last = np.zeros(3) if force is None else np.array(force, dtype=np.float64)
+    def reset(self) -> None:
+        """Restart from zero force."""
+        self.last = np.zeros(3)
 
     def step(self, target: np.ndarray) -> np.ndarray:
         """The force (N) one tick closer to `target`: F_{k−1} + Δ, |Δ| ≤ max_step_n."""

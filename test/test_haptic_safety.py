@@ -54,7 +54,7 @@ def test_rate_limiter_bounds_the_change_per_tick():
 
 def test_rate_limiter_survives_a_non_finite_target():
     limiter = RateLimiter(200.0, 0.001)
-    limiter.reset(np.array([1.0, 0.0, 0.0]))
+    limiter.last = np.array([1.0, 0.0, 0.0])  # the force it sent last
     out = limiter.step(np.array([np.nan, 0.0, 0.0]))
     np.testing.assert_allclose(out, [0.8, 0.0, 0.0])  # heads for zero at the rate limit
     np.testing.assert_allclose(limiter.step(np.array([1.0, 0.0, 0.0])), [1.0, 0.0, 0.0])
