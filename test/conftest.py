@@ -13,6 +13,11 @@
   duration of the test, so that no two tests -- in this session, in
   pytest-xdist workers, or in another checkout's test run on the same machine
   -- ever share one.
+* Test tiers: every test that takes ``ros_domain_id`` (directly, through
+  ``ros_env`` or through another fixture), or is listed in
+  ``ROS_WITHOUT_FIXTURE``, is marked ``ros``: it starts node processes or an
+  rclpy context and talks DDS. The rest is the ROS-free tier,
+  ``pytest -m "not ros"`` (``make test-quick``); ``make test`` runs both.
 
 These settings are made at import time, before any test module imports
 rclpy or matplotlib.
@@ -92,6 +97,21 @@ os.environ["ROS_DOMAIN_ID"] = str(SESSION_DOMAIN_ID)
 
 def pytest_unconfigure(config):
     _SESSION_LOCK.close()
+
+
+#: Fixtures that give a test a ROS domain of its own: what starting ROS processes or contexts takes.
+ROS_FIXTURES = frozenset({"ros_domain_id", "ros_env"})
+#: Tests (name prefixes, parameters included) that open an rclpy context in this process without those
+#: fixtures: `liver-sim replay` on a bag that is found damaged only once its publishers are up.
+ROS_WITHOUT_FIXTURE = ("test_a_damaged_bag_is_refused_with_a_clear_error[replay-",)
+
+
+def pytest_collection_modifyitems(config, items):
+    """Mark ``ros`` every test whose fixture closure holds one of ROS_FIXTURES, or named in ROS_WITHOUT_FIXTURE."""
+    for item in items:
+        if (ROS_FIXTURES.intersection(getattr(item, "fixturenames", ()))
+                or item.name.startswith(ROS_WITHOUT_FIXTURE)):
+            item.add_marker(pytest.mark.ros)
 
 
 def pytest_report_header(config):
