@@ -15,7 +15,7 @@ from setuptools import find_packages, setup
 
 package_name = 'liver_sim'
 
-# Executables (DESIGN.md, "Executables"): the command line and the four nodes.
+# Executables (docs/contract.md, "Executables"): the command line and the four nodes.
 CONSOLE_SCRIPTS = [
     'liver-sim = liver_sim.cli:main',
     'liver_physics = liver_sim.nodes.physics_node:main',
