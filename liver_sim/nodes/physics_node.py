@@ -215,13 +215,12 @@ class PhysicsNode(Node):
         started = time.perf_counter()
         self._inputs.poll()
         pose = self._tool_pose(now)
-        self._tool_use.before_frame(pose)
-        result = self.model.step_frame(pose)
+        result, cut = self._tool_use.step_frame(pose)
         if result.divergence:
             self.get_logger().error(result.divergence, throttle_duration_sec=1.0)
         if result.topology_changed:
             self._topology_changed("torn")
-        if self._tool_use.after_frame(result.local_model):
+        if cut:
             self._topology_changed("cut")
         while self._tool_use.events:
             self.get_logger().info(self._tool_use.events.pop(0))

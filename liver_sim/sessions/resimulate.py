@@ -72,9 +72,8 @@ class _Session:
 
         from msg_defs import conversions
 
-        self.tool_use.before_frame(pose)
-        result = self.model.step_frame(pose)
-        changed = self.tool_use.after_frame(result.local_model) or result.topology_changed
+        result, cut = self.tool_use.step_frame(pose)
+        changed = cut or result.topology_changed
         t = t0 + self.model.time_s
         stamp, frame_id = conversions.stamp_from_seconds(t), self.p["frame_id"]
         marker = conversions.local_model_marker(result.local_model, stamp, frame_id, self.p["local_model_lifetime_s"])
