@@ -170,7 +170,7 @@ def tool_state(shape: ToolShape, pose: ToolPose | None, previous: ToolPose | Non
                inward_point: np.ndarray) -> kernels.ToolState:
     """The tool over one frame for kernels.run_frame (pose None: no tool).
 
-    Its core moves at constant velocity (previous core − core)/frame period from where `previous` held
+    Its core moves at constant velocity (core − previous core)/frame period from where `previous` held
     it to where `pose` holds it; a jump beyond TOOL_JUMP_M is a re-placed tool, at rest at `pose`.
     Candidates: the skin nodes within its bounding radius + `reach_m` + the distance moved; contact
     law: params.contact_stiffness_n_per_m, params.contact_damping_ns_per_m (Eq. 3).

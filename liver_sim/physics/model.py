@@ -113,8 +113,9 @@ class LiverModel:
         mesh, state = carry_over(change, state, self.mesh.source, self.params.density_kg_m3,
                                  self.params.min_node_mass_fraction)
         self._set_mesh(mesh, change.capsule_triangles, state)
-        self.stable_dt_s = estimate_stable_time_step(self.springs, self.masses_kg, self.params.environment_damping_per_s,
-                                                     self.params.integrator, mesh.points)
+        params = self.params
+        self.stable_dt_s = estimate_stable_time_step(self.springs, self.masses_kg, params.environment_damping_per_s,
+                                                     params.integrator, mesh.points)
         if self.params.dt_s > STABILITY_MARGIN * self.stable_dt_s:  # new short springs or light nodes
             needed = math.ceil(self.frame_period_s / (STABILITY_MARGIN * self.stable_dt_s))
             self.params = self.params.with_changes(substeps=min(needed, 10_000))
@@ -185,7 +186,8 @@ class LiverModel:
         if pose is None:
             local_model = LocalModel.invalid()
         elif holding:
-            local_model = pull_local_model(pose, -liver_force, self.params.contact_stiffness_n_per_m, self.tool.radius_m)
+            local_model = pull_local_model(pose, -liver_force, self.params.contact_stiffness_n_per_m,
+                                           self.tool.radius_m)
         else:
             local_model = surface_local_model(self.tool, pose, tool, self.positions, self._skin,
                                               self.local_model_reach_m, self.local_model_kind)

@@ -56,7 +56,8 @@ def carry_over(change: TopologyChange, state: NodeState, source: str, density_kg
     nodes that draw on it, in shares ∝ w·(their lumped tet mass at `density_kg_m3`) (mass_shares);
     each old mass is so split exactly: the total is conserved and, for duplicated nodes (one source,
     weight 1), so is the momentum; mass of an old node nothing draws on is spread over all nodes ∝ mass.
-    External forces are split with the same shares.  A new node drawing only on fixed nodes is fixed.  ValueError for a change that does not fit the old nodes.
+    External forces are split with the same shares.  A new node drawing only on fixed nodes is fixed.
+    ValueError for a change that does not fit the old nodes.
     """
     sources = np.asarray(change.node_sources, dtype=np.int64)
     weights = np.asarray(change.node_weights, dtype=np.float64)
