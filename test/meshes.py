@@ -15,3 +15,8 @@ def box_mesh(nx: int, ny: int, nz: int, spacing_m: float) -> TetMesh:
     corners = np.stack([index[i:i + nx, j:j + ny, k:k + nz].ravel()
                         for i in (0, 1) for j in (0, 1) for k in (0, 1)], axis=1)
     return TetMesh.from_arrays(points, corners[:, KUHN_TETS].reshape(-1, 4), source=f"box {nx}x{ny}x{nz}")
+
+
+def kinetic_energy_j(model) -> float:
+    """½·Σ m·|v|² (J) of a LiverModel."""
+    return 0.5 * float((model.masses_kg * (model.velocities ** 2).sum(axis=1)).sum())

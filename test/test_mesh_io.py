@@ -77,6 +77,12 @@ def test_volume_formats_load_and_reorient_the_inverted_tet(tmp_path, name, other
     assert len(mesh.skin) == 12 and mesh.watertight
 
 
+def test_the_volumes_of_reoriented_tets_are_the_inputs_volumes_exactly():
+    points, tets = inverted_cube_arrays()
+    mesh = TetMesh.from_arrays(points, tets)
+    np.testing.assert_array_equal(mesh.volumes, np.abs(signed_volumes(points, tets)))
+
+
 def test_gmsh_v1_reader_maps_node_labels(tmp_path):
     points, tets = cube_arrays()
     labels = np.array([70, 10, 30, 80, 20, 50, 40, 60])  # node i is written as labels[i]

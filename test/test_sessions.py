@@ -161,6 +161,14 @@ def test_parameter_overrides_are_checked_as_the_nodes_check_them():
             node_parameters([override])
 
 
+def test_the_physics_topic_parameters_default_to_the_topics_table():
+    from liver_sim.physics.pipeline import PARAMETERS
+    from msg_defs.topics import TOPICS
+
+    for key in ("nodes", "surface", "marker", "contact_plane", "tool_wrench", "tool_pose"):
+        assert PARAMETERS[f"{key}_topic"].default == TOPICS[key].name
+
+
 def test_replay_republishes_the_recorded_messages_in_order(ros_env, tmp_path, ros_domain_id):
     import rclpy
     from geometry_msgs.msg import WrenchStamped

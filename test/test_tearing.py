@@ -12,7 +12,8 @@ from liver_sim.mesh.tetmesh import TET_FACES, TetMesh, signed_volumes
 from liver_sim.physics.contact import ToolPose
 from liver_sim.physics.model import LiverModel
 from liver_sim.physics.params import ModelParams
-from liver_sim.physics.topology import TearDetector, duplication_change, separate_faces, tear_faces
+from liver_sim.physics.tool_use import ToolUse
+from liver_sim.physics.topology import TearDetector, duplication_change, separate_faces
 from liver_sim.scenarios import press_anchor
 
 from meshes import box_mesh
@@ -94,7 +95,7 @@ def record_changes(model):
 def test_one_face_cut_between_two_tets():
     points = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [0.3, 0.3, -1.0]])
     mesh = TetMesh.from_arrays(points, [[0, 1, 2, 3], [0, 2, 1, 4]])
-    tets, parent = separate_faces(mesh.tets, [[2, 0, 1]])
+    tets, parent, _ = separate_faces(mesh.tets, [[2, 0, 1]])
     assert np.array_equal(parent[:5], np.arange(5))
     assert sorted(parent[5:].tolist()) == [0, 1, 2]
     assert not set(tets[0].tolist()) & set(tets[1].tolist())
@@ -105,7 +106,7 @@ def test_one_face_cut_between_two_tets():
 
 def test_non_interior_faces_are_ignored():
     mesh = box_mesh(2, 2, 2, 0.01)
-    tets, parent = separate_faces(mesh.tets, mesh.skin[:5])
+    tets, parent, _ = separate_faces(mesh.tets, mesh.skin[:5])
     assert np.array_equal(tets, mesh.tets) and np.array_equal(parent, np.arange(len(mesh.points)))
 
 
@@ -115,7 +116,7 @@ def test_crack_ending_inside_keeps_the_skin_manifold():
     corners = mesh.points[faces]
     on_plane = np.isclose(corners[:, :, 0], 0.02).all(axis=1)
     crack = faces[on_plane & (corners[:, :, 1] <= 0.02 + 1e-9).all(axis=1)]  # half the plane
-    tets, parent = separate_faces(mesh.tets, crack)
+    tets, parent, _ = separate_faces(mesh.tets, crack)
     torn = TetMesh.from_arrays(mesh.points[parent], tets)
     assert len(torn.points) > len(mesh.points)
     assert opened_faces(mesh.tets, tets, parent)
@@ -129,7 +130,7 @@ def test_random_cuts_keep_every_skin_edge_on_two_triangles():
     rng = np.random.default_rng(3)
     for fraction in (0.05, 0.2, 0.5):
         cut = faces[rng.random(len(faces)) < fraction]
-        tets, parent = separate_faces(mesh.tets, cut)
+        tets, parent, _ = separate_faces(mesh.tets, cut)
         opened = opened_faces(mesh.tets, tets, parent)
         assert face_keys(opened) <= face_keys(cut)
         assert_sound(TetMesh.from_arrays(mesh.points[parent], tets))
@@ -137,12 +138,12 @@ def test_random_cuts_keep_every_skin_edge_on_two_triangles():
 
 # --- stretch ------------------------------------------------------------------------------------
 
-def test_tear_faces_selects_exactly_the_faces_stretched_beyond_their_threshold():
+def test_torn_faces_selects_exactly_the_faces_stretched_beyond_their_threshold():
     mesh = box_mesh(6, 3, 3, 0.01)
     slab = (0.02, 0.04)
     positions = mesh.points.copy()
     positions[:, 0] += 0.7 * np.clip(mesh.points[:, 0] - slab[0], 0.0, slab[1] - slab[0])  # x strain 0.7 in the slab
-    torn = face_keys(tear_faces(mesh.points, mesh.tets, positions, mesh.skin, 0.4, 0.5))
+    torn = face_keys(TearDetector(mesh.points, mesh.tets, mesh.skin, 0.4, 0.5).torn_faces(positions))
     # Independent expectation: F = diag(1.7, 1, 1) in the slab's tets, identity elsewhere.
     cap_edges = {tuple(sorted(e)) for t in mesh.skin.tolist() for e in ((t[0], t[1]), (t[1], t[2]), (t[2], t[0]))}
     centroid_x = mesh.points[mesh.tets].mean(axis=1)[:, 0]
@@ -304,19 +305,21 @@ def test_default_liver_tears_under_a_strong_pull_and_keeps_a_manifold_skin():
 
 
 def pull_the_dome(tearing):
-    """The default liver grasped at its dome and pulled 8 cm up over 400 frames; (model, results, tool tips)."""
+    """The default liver grasped at its dome and pulled 8 cm up over 400 frames; (model, tool use, results,
+    tool tips)."""
     liver = default_liver()
     model = LiverModel(liver, ModelParams(tearing=tearing))
+    use = ToolUse(model, "grasp", grasp_margin_m=0.005)
     dome = press_anchor(liver)
     start = dome + [0.0, 0.0, model.tool.radius_m - 0.004]
-    assert model.grasp(ToolPose(start), 0.005) > 0
+    assert use.grasp(ToolPose(start)) > 0
     tips = [start + [0.0, 0.0, 0.08 * min(1.0, k / 400)] for k in range(450)]
-    return model, [model.step_frame(ToolPose(tip)) for tip in tips], tips
+    return model, use, [use.step_frame(ToolPose(tip))[0] for tip in tips], tips
 
 
 def test_grasped_nodes_follow_the_tool_and_pull_it_back_towards_the_liver():
-    model, results, tips = pull_the_dome(tearing=False)
-    held = model.grasped_nodes
+    model, use, results, tips = pull_the_dome(tearing=False)
+    held = model.held_nodes
     offsets = model.positions[held] - tips[-1]
     np.testing.assert_allclose(offsets, model.mesh.points[held] - tips[0], atol=1e-12)  # carried rigidly
     assert not any(r.divergence or r.topology_changed for r in results)
@@ -326,15 +329,15 @@ def test_grasped_nodes_follow_the_tool_and_pull_it_back_towards_the_liver():
     depth, direction = penetration(last, tips[-1], model.tool.radius_m)
     np.testing.assert_allclose(model.params.contact_stiffness_n_per_m * depth * direction,
                                results[-1].tool_force_n, rtol=1e-9)
-    model.release()
-    assert model.grasped_nodes.size == 0 and (model.inv_mass[held] > 0).all()
+    use.release()
+    assert model.held_nodes.size == 0 and (model.inv_mass[held] > 0).all()
     for _ in range(150):
         model.step_frame()
     assert model.positions[held, 2].max() < tips[-1][2] - 0.03  # let go, the dome falls back
 
 
 def test_a_grasped_and_pulled_liver_tears_and_stays_sound():
-    model, results, _ = pull_the_dome(tearing=True)
+    model, _, results, _ = pull_the_dome(tearing=True)
     mass = default_liver().lumped_masses(ModelParams().density_kg_m3).sum()
     assert model.topology_version > 0 and len(model.positions) > len(default_liver().points)
     assert not any(r.divergence for r in results)

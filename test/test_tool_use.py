@@ -19,11 +19,9 @@ def play(mode, script_name="press_slide_release", **settings):
     script = make_script(script_name, ScriptSettings(anchor_m=tuple(press_anchor(liver)), **settings))
     changed, contact = [], []
     for k in range(int(script.duration_s * model.params.frame_rate_hz)):
-        pose = ToolPose(script.position_at(k * model.frame_period_s))
-        use.before_frame(pose)
-        result = model.step_frame(pose)
+        result, cut = use.step_frame(ToolPose(script.position_at(k * model.frame_period_s)))
         contact.append(result.local_model.in_contact)
-        if use.after_frame(result.local_model):
+        if cut:
             changed.append(k)
     return model, use, changed, np.array(contact)
 
@@ -43,10 +41,10 @@ def test_pressing_never_changes_the_mesh():
 
 def test_grasp_holds_on_contact_and_lets_go_when_the_mode_changes():
     model, use, _, _ = play("grasp", script_name="press", depth_m=0.004)
-    assert model.grasped_nodes.size > 0 and use.events[0].startswith("grasped")
+    assert model.held_nodes.size > 0 and use.events[0].startswith("grasped")
     use.mode = "press"
-    use.before_frame(ToolPose(model.positions[model.grasped_nodes[0]]))
-    assert model.grasped_nodes.size == 0 and use.events[-1] == "released the grasped nodes"
+    use.before_frame(ToolPose(model.positions[model.held_nodes[0]]))
+    assert model.held_nodes.size == 0 and use.events[-1] == "released the grasped nodes"
 
 
 def test_an_unknown_mode_is_refused_by_parameter_name():

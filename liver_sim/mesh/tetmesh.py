@@ -155,7 +155,6 @@ class TetMesh:
             tets = tets.copy()
             tets[inverted] = tets[inverted][:, [0, 1, 3, 2]]
         mesh = cls(points, tets, source)
-        mesh.__dict__["volumes"] = np.abs(volumes)  # the cached property: re-oriented tets' volumes flip sign exactly
         mesh._check_face_pairing()
         return mesh
 
@@ -189,7 +188,7 @@ class TetMesh:
 
     @cached_property
     def volumes(self) -> np.ndarray:
-        """Tet volumes (M,) in m^3, all positive."""
+        """Tet volumes (M,) in m^3, all positive (from_arrays orients every tet positively)."""
         return signed_volumes(self.points, self.tets)
 
     @property

@@ -16,6 +16,7 @@ from scipy.spatial import cKDTree
 from liver_sim.geometry.rotations import quaternion_to_matrix
 from liver_sim.local_model import LocalModel
 from liver_sim.physics import kernels
+from liver_sim.physics.params import ModelParams
 
 TOOL_KINDS = {"sphere": kernels.TOOL_SPHERE, "capsule": kernels.TOOL_CAPSULE, "box": kernels.TOOL_BOX}
 
@@ -134,3 +135,67 @@ def fit_sphere(points: np.ndarray) -> tuple[np.ndarray, float]:
         return points.mean(axis=0), math.inf
     centre = solution[:3]
     return centre, float(math.sqrt(max(solution[3] + centre @ centre, 0.0)))
+
+
+#: A tool that moves farther than this in one frame is taken as re-placed, not as moving (m).
+TOOL_JUMP_M = 0.05
+
+
+def tool_state(shape: ToolShape, pose: ToolPose | None, previous: ToolPose | None, params: ModelParams,
+               reach_m: float, positions: np.ndarray, skin_nodes: np.ndarray,
+               inward_point: np.ndarray) -> kernels.ToolState:
+    """The tool over one frame for kernels.run_frame (pose None: no tool).
+
+    Its core moves at constant velocity (core − previous core)/frame period from where `previous` held
+    it to where `pose` holds it; a jump beyond TOOL_JUMP_M is a re-placed tool, at rest at `pose`.
+    Candidates: the skin nodes within its bounding radius + `reach_m` + the distance moved; contact
+    law: params.contact_stiffness_n_per_m, params.contact_damping_ns_per_m (Eq. 3).
+    """
+    core_a = core_b = velocity = np.zeros(3)
+    axes = np.eye(3)
+    kind = kernels.TOOL_NONE
+    nodes = np.zeros(0, dtype=np.int64)
+    period = 1.0 / params.frame_rate_hz
+    if pose is not None:
+        kind = TOOL_KINDS[shape.kind]
+        core_a, core_b = tool_core(shape, pose)
+        axes = np.ascontiguousarray(pose.rotation)
+        if previous is not None:
+            start_a, start_b = tool_core(shape, previous)
+            if np.linalg.norm(core_a - start_a) <= TOOL_JUMP_M:
+                velocity = (core_a - start_a) / period
+                core_a, core_b = start_a, start_b
+        nodes = candidate_nodes(positions, skin_nodes, shape, pose, reach_m + float(np.linalg.norm(velocity)) * period)
+    return kernels.ToolState(kind, core_a, core_b, shape.radius_m, axes,
+                             np.asarray(shape.half_extents_m, dtype=np.float64), velocity,
+                             params.contact_stiffness_n_per_m, params.contact_damping_ns_per_m, inward_point, nodes,
+                             np.full(len(nodes), np.inf), np.zeros((len(nodes), 3)), np.zeros((len(nodes), 3)))
+
+
+def surface_local_model(shape: ToolShape, pose: ToolPose, state: kernels.ToolState, positions: np.ndarray,
+                        skin: np.ndarray, reach_m: float, kind: str) -> LocalModel:
+    """The local model at the end of a frame (fit_local_model): from the skin triangles near a round
+    tool, from the box's candidate nodes (`state`, as kernels.run_frame left them) for a box."""
+    if shape.kind == "box":
+        return fit_local_model(state.gap, state.point, state.direction, reach_m, kind, positions[state.candidates])
+    core_a, core_b = tool_core(shape, pose)
+    triangles = candidate_triangles(positions, skin, shape, pose, reach_m)
+    gap = np.full(len(triangles), np.inf)
+    point = np.zeros((len(triangles), 3))
+    direction = np.zeros((len(triangles), 3))
+    kernels.surface_gaps(positions, skin, triangles, core_a, core_b, shape.radius_m, gap, point, direction)
+    return fit_local_model(gap, point, direction, reach_m, kind, positions[np.unique(skin[triangles])])
+
+
+def pull_local_model(pose: ToolPose, pull_n: np.ndarray, stiffness_n_per_m: float, radius_m: float) -> LocalModel:
+    """The local model of a grasp: a plane with normal n = pull/|pull| that the tool sphere (radius r)
+    penetrates by |pull|/λ (λ: the contact stiffness), so that a haptic loop rendering λ·depth·n feels
+    the tissue's pull now, and a spring of stiffness λ as the tool moves before the next frame (paper
+    §2.5, applied to the pull).  Invalid when the tissue does not pull."""
+    magnitude = float(np.linalg.norm(pull_n))
+    if not (magnitude > 0.0 and stiffness_n_per_m > 0.0):
+        return LocalModel.invalid()
+    normal = pull_n / magnitude
+    depth = magnitude / stiffness_n_per_m
+    point = np.asarray(pose.position) - (radius_m - depth) * normal
+    return LocalModel("plane", True, point, normal, point, 0.0, depth, True)

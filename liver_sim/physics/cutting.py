@@ -24,6 +24,8 @@ on a coarse mesh: a node is only duplicated where the cut passes all around it.
 """
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
 from liver_sim.mesh.tetmesh import TET_EDGES, TET_FACES, face_keys, isin_keys, skin_slots, unique_edges
@@ -117,6 +119,10 @@ def cut_along_path(rest_points: np.ndarray, tets: np.ndarray, positions: np.ndar
     blade_direction: the sweep direction (into the organ); None: `default_blade_direction`.  Returns the
     TopologyChange (new nodes on edges: sources (a, b), weights (1 − t, t); duplicated nodes: their
     parent's), or None when the path has fewer than two distinct points or no face opens.
+
+    Phases: the tets near the ribbon (`_tet_boxes`, `_boxes_meet`), the ribbon coordinates of their
+    nodes (`_ribbon_coordinates`), the edges to split (`_edges_to_split`), the bisected tets (`_bisect`),
+    the faces on the cut (`_faces_on_cut`), and the change that opens them (`_opening_change`).
     """
     rest_points = np.asarray(rest_points, dtype=np.float64)
     tets = np.asarray(tets, dtype=np.int64)
@@ -126,26 +132,61 @@ def cut_along_path(rest_points: np.ndarray, tets: np.ndarray, positions: np.ndar
         raise ValueError(f"snap_fraction must lie in (0, 0.5), got {snap_fraction}")
     if len(path_m) < 2 or not np.isfinite(path_m).all() or depth_m <= 0:
         return None
-    corners = positions[tets]
-    box_low = np.minimum(np.minimum(corners[:, 0], corners[:, 1]), np.minimum(corners[:, 2], corners[:, 3]))
-    box_high = np.maximum(np.maximum(corners[:, 0], corners[:, 1]), np.maximum(corners[:, 2], corners[:, 3]))
-    low, high = path_m.min(axis=0) - depth_m, path_m.max(axis=0) + depth_m
-    if not ((box_low <= high) & (box_high >= low)).all(axis=1).any():
+    boxes = _tet_boxes(positions, tets)
+    if not _boxes_meet(boxes, path_m, depth_m).any():
         return None
     direction = (default_blade_direction(positions, tets, path_m) if blade_direction is None
                  else np.asarray(blade_direction, dtype=np.float64))
     ribbon = Ribbon(path_m, direction)
     if len(ribbon.seg_length_m) == 0:
         return None
-    n = len(rest_points)
-
-    # Tets whose deformed bounding box meets the ribbon's (inner), with their node neighbours (outer):
-    # φ on the outer tets' nodes, so that every tet holding an edge of an inner tet sees true signs.
-    reach = np.abs(ribbon.direction) * depth_m
-    low, high = path_m.min(axis=0) - reach, path_m.max(axis=0) + reach
-    inner = ((box_low <= high) & (box_high >= low)).all(axis=1)
+    inner = _boxes_meet(boxes, path_m, np.abs(ribbon.direction) * depth_m)
     if not inner.any():
         return None
+    n = len(rest_points)
+    phi, node_s, node_h, outer = _ribbon_coordinates(ribbon, positions, tets, inner)
+    split = _edges_to_split(ribbon, positions, tets[inner], outer, phi, node_s, node_h, depth_m, snap_fraction)
+    if split is None:
+        return None
+    pieces = _bisect(tets, split.edges, n)
+    total = n + len(split.edges)
+    slot_a, slot_b, cut = _faces_on_cut(pieces, total, ribbon.length_m, depth_m,
+                                        np.concatenate([phi, np.zeros(len(split.edges))]),
+                                        np.concatenate([node_s, split.s_m]), np.concatenate([node_h, split.h_m]))
+    if not cut.any():
+        return None
+    return _opening_change(rest_points, capsule_triangles, pieces, slot_a, slot_b, cut, split)
+
+
+class _Split(NamedTuple):
+    """The edges (K, 2) to split, sorted pairs, at parameter t from edges[:, 0], with the ribbon
+    coordinates s, h (m) of the new nodes."""
+
+    edges: np.ndarray
+    t: np.ndarray
+    s_m: np.ndarray
+    h_m: np.ndarray
+
+
+def _tet_boxes(positions: np.ndarray, tets: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(low, high) (M, 3) m: the tets' bounding boxes at `positions`."""
+    corners = positions[tets]
+    low = np.minimum(np.minimum(corners[:, 0], corners[:, 1]), np.minimum(corners[:, 2], corners[:, 3]))
+    high = np.maximum(np.maximum(corners[:, 0], corners[:, 1]), np.maximum(corners[:, 2], corners[:, 3]))
+    return low, high
+
+
+def _boxes_meet(boxes: tuple[np.ndarray, np.ndarray], path_m: np.ndarray, reach_m) -> np.ndarray:
+    """Mask over the tets: its box meets the path's box grown by `reach_m` (m, scalar or per axis)."""
+    low, high = path_m.min(axis=0) - reach_m, path_m.max(axis=0) + reach_m
+    return ((boxes[0] <= high) & (boxes[1] >= low)).all(axis=1)
+
+
+def _ribbon_coordinates(ribbon: Ribbon, positions: np.ndarray, tets: np.ndarray,
+                        inner: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(φ, s, h, outer): Ribbon.locate of the nodes of the `inner` tets' node neighbours (`outer` tets), so
+    that every tet holding an edge of an inner tet sees true signs; φ = 1, s = h = NaN elsewhere."""
+    n = len(positions)
     touched = np.zeros(n, dtype=bool)
     touched[tets[inner]] = True
     outer = tets[touched[tets].any(axis=1)]
@@ -154,10 +195,19 @@ def cut_along_path(rest_points: np.ndarray, tets: np.ndarray, positions: np.ndar
     node_s = np.full(n, np.nan)
     node_h = np.full(n, np.nan)
     phi[nodes], node_s[nodes], node_h[nodes] = ribbon.locate(positions[nodes])
+    return phi, node_s, node_h, outer
 
+
+def _edges_to_split(ribbon: Ribbon, positions: np.ndarray, inner_tets: np.ndarray, outer: np.ndarray,
+                    phi: np.ndarray, node_s: np.ndarray, node_h: np.ndarray, depth_m: float,
+                    snap_fraction: float) -> _Split | None:
+    """The edges of the outer tets that φ crosses (after `_snap`, which zeroes φ in place) and that lie
+    in an inner tet split by the cut: φ changes sign in it and one corner of its cut lies in the ribbon
+    (0 ≤ s ≤ length, |h| ≤ depth_m).  None when φ neither crosses an edge nor vanishes at a node."""
+    n = len(positions)
     edges = unique_edges(outer, TET_EDGES)
     crossing, t = _snap(phi, edges, snap_fraction)
-    if not crossing.any() and not (phi[nodes] == 0).any():
+    if not crossing.any() and not (phi[outer] == 0).any():
         return None
     cross_edges, t = edges[crossing], t[crossing]
     cross_points = (1 - t)[:, None] * positions[cross_edges[:, 0]] + t[:, None] * positions[cross_edges[:, 1]]
@@ -166,8 +216,6 @@ def cut_along_path(rest_points: np.ndarray, tets: np.ndarray, positions: np.ndar
     def in_band(s, h):
         return (s >= 0) & (s <= ribbon.length_m) & (np.abs(h) <= depth_m)
 
-    # An inner tet is split when φ changes sign in it and one corner of its cut lies in the ribbon.
-    inner_tets = tets[inner]
     edge_keys = cross_edges[:, 0] * n + cross_edges[:, 1]
     local = np.sort(inner_tets[:, TET_EDGES], axis=2)
     local_keys = local[:, :, 0] * n + local[:, :, 1]
@@ -177,40 +225,42 @@ def cut_along_path(rest_points: np.ndarray, tets: np.ndarray, positions: np.ndar
     active = crossed.any(axis=1) & ((crossed & in_band(cross_s, cross_h)[where]).any(axis=1)
                                     | zero_in_band[inner_tets].any(axis=1))
     split = np.unique(where[active][crossed[active]])
+    return _Split(cross_edges[split], t[split], cross_s[split], cross_h[split])
 
-    new_t = t[split]
-    split_edges = cross_edges[split]
-    new_s, new_h = cross_s[split], cross_h[split]
-    pieces = _bisect(tets, split_edges, n)
-    total = n + len(split)
-    phi_all = np.concatenate([phi, np.zeros(len(split))])
-    s_all = np.concatenate([node_s, new_s])
-    h_all = np.concatenate([node_h, new_h])
 
-    # Faces on the cut: shared by pieces lying on opposite sides, with every corner in the extent.
-    sign = np.sign(phi_all[pieces])
+def _faces_on_cut(pieces: np.ndarray, total: int, length_m: float, depth_m: float, phi: np.ndarray,
+                  s_m: np.ndarray, h_m: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(slot_a, slot_b, cut): the interior face pairs of `pieces` (interior_face_pairs) and the mask of
+    those on the cut: shared by pieces lying on opposite sides (sign of φ at their nodes), with every
+    corner in the extent (see the module doc; s, h: the nodes' ribbon coordinates)."""
+    sign = np.sign(phi[pieces])
     side = np.where((sign >= 0).all(axis=1), 1, 0) - np.where((sign <= 0).all(axis=1), 1, 0)
     faces = pieces[:, TET_FACES].reshape(-1, 3)
     slot_a, slot_b, _ = interior_face_pairs(pieces, total)
     candidate = faces[slot_a]
-    fs, fh = s_all[candidate], h_all[candidate]
+    fs, fh = s_m[candidate], h_m[candidate]
     fh_min = np.minimum(np.minimum(fh[:, 0], fh[:, 1]), fh[:, 2])
     fs_min = np.minimum(np.minimum(fs[:, 0], fs[:, 1]), fs[:, 2])
     fs_max = np.maximum(np.maximum(fs[:, 0], fs[:, 1]), fs[:, 2])
     cut = ((side[slot_a // 4] * side[slot_b // 4] == -1) & (fh_min >= -depth_m) & (fh_min <= depth_m)
-           & (fs_max >= 0) & (fs_min <= ribbon.length_m))
-    if not cut.any():
-        return None
+           & (fs_max >= 0) & (fs_min <= length_m))
+    return slot_a, slot_b, cut
 
-    new_tets, parent, shared = separate_pairs(pieces, total, slot_a, slot_b, cut)
+
+def _opening_change(rest_points: np.ndarray, capsule_triangles: np.ndarray, pieces: np.ndarray,
+                    slot_a: np.ndarray, slot_b: np.ndarray, cut: np.ndarray, split: _Split) -> TopologyChange | None:
+    """The TopologyChange that opens the faces `cut` between `pieces` (separate_pairs); None if none opens.
+    Node k < N keeps old node k; new node N + i lies on split.edges[i] at split.t[i]."""
+    n = len(rest_points)
+    new_tets, parent, shared = separate_pairs(pieces, n + len(split.edges), slot_a, slot_b, cut)
     opened = int((~shared).sum())
     if opened == 0:
         return None
-    sources = np.concatenate([np.stack([np.arange(n), np.zeros(n, np.int64)], axis=1), split_edges])
+    sources = np.concatenate([np.stack([np.arange(n), np.zeros(n, np.int64)], axis=1), split.edges])
     weights = np.concatenate([np.column_stack([np.ones(n), np.zeros(n)]),
-                              np.column_stack([1 - new_t, new_t])])
-    rest_new = np.concatenate([rest_points, (1 - new_t)[:, None] * rest_points[split_edges[:, 0]]
-                               + new_t[:, None] * rest_points[split_edges[:, 1]]])
+                              np.column_stack([1 - split.t, split.t])])
+    rest_new = np.concatenate([rest_points, (1 - split.t)[:, None] * rest_points[split.edges[:, 0]]
+                               + split.t[:, None] * rest_points[split.edges[:, 1]]])
     sources, weights, rest_new = sources[parent], weights[parent], rest_new[parent]
     return TopologyChange(
         rest_points=rest_new,
@@ -219,7 +269,7 @@ def cut_along_path(rest_points: np.ndarray, tets: np.ndarray, positions: np.ndar
             split_skin_slots(len(pieces), slot_a, slot_b, shared)], sources, weights, capsule_triangles, n),
         node_sources=sources,
         node_weights=weights,
-        separated_faces=int(opened),
+        separated_faces=opened,
     )
 
 

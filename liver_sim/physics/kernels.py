@@ -5,10 +5,16 @@ forces accumulate in `f` (N, 3) in newtons.  The serial and the parallel spring
 kernels are separate functions (a cached dispatcher must never be shared between
 a `parallel=True` and a serial build).  `liver_sim.physics.reference` is the
 plain-NumPy oracle of the spring and integration kernels.
+
+`run_frame` takes the state arrays and four named tuples (numba reads their fields as
+compile-time attributes, at no cost): the spring network (`SpringArrays`), the integration
+settings (`StepSettings`), the tool and its contact candidates (`ToolState`) and the work
+arrays (`WorkArrays`).
 """
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numba
 import numpy as np
@@ -19,6 +25,64 @@ TOOL_NONE = 0
 TOOL_SPHERE = 1
 TOOL_CAPSULE = 2
 TOOL_BOX = 3
+
+
+class SpringArrays(NamedTuple):
+    """One Eq. 1 connector per edge: node pairs (E,) int64, rest lengths (m), λ1 (N), λ2 (N), μ (N·s/m)."""
+
+    node_i: np.ndarray
+    node_j: np.ndarray
+    rest_m: np.ndarray
+    lambda1_n: np.ndarray
+    lambda2_n: np.ndarray
+    mu_ns_per_m: np.ndarray
+
+
+class StepSettings(NamedTuple):
+    """Integration of one frame: `substeps` steps of `dt_s` (s), environmental damping c (1/s), gravity
+    (3,) m/s², symplectic (True) or explicit Euler (False)."""
+
+    dt_s: float
+    substeps: int
+    environment_damping_per_s: float
+    gravity_m_s2: np.ndarray
+    symplectic: bool
+
+
+class ToolState(NamedTuple):
+    """The tool over one frame and its contact candidates (Eq. 3).
+
+    kind: TOOL_NONE, TOOL_SPHERE, TOOL_CAPSULE or TOOL_BOX; the core (a point, or the capsule's segment
+    core_a–core_b, m) starts where given and moves at `velocity_m_s`; radius (m) of sphere and capsule;
+    box axes (columns of a rotation) and half extents (m); penalty λ (N/m) and μ (N·s/m); `inward_point`:
+    a point inside the liver (push direction of a node on the core); `candidates`: skin nodes near the
+    tool; per candidate, `gap` (m), `point` and `direction` (the box's contact geometry, see
+    box_tool_contacts).
+    """
+
+    kind: int
+    core_a: np.ndarray
+    core_b: np.ndarray
+    radius_m: float
+    axes: np.ndarray
+    half_extents_m: np.ndarray
+    velocity_m_s: np.ndarray
+    stiffness_n_per_m: float
+    damping_ns_per_m: float
+    inward_point: np.ndarray
+    candidates: np.ndarray
+    gap: np.ndarray
+    point: np.ndarray
+    direction: np.ndarray
+
+
+class WorkArrays(NamedTuple):
+    """Scratch of one model: `force` (N, 3) N; with `parallel`, the spring kernel's per-thread
+    `partial` sums (threads, N, 3)."""
+
+    force: np.ndarray
+    partial: np.ndarray
+    parallel: bool
 
 
 @numba.njit(cache=True, inline="always")
@@ -207,34 +271,44 @@ def box_tool_contacts(x, v, candidates, centre, axes, half_extents, tool_velocit
     return total
 
 
+@numba.njit(cache=True, inline="always")
+def add_forces(x, v, external_force, springs, tool, work, shift, contact):
+    """work.force ← external force + Eq. 1 spring forces + Eq. 3 contact of the tool core moved by `shift`;
+    the contact force on the liver (N) goes to `contact` (left alone without a tool)."""
+    f = work.force
+    f[:] = external_force
+    s = springs
+    if work.parallel:
+        spring_forces_parallel(x, v, s.node_i, s.node_j, s.rest_m, s.lambda1_n, s.lambda2_n, s.mu_ns_per_m,
+                               work.partial, f)
+    else:
+        spring_forces_serial(x, v, s.node_i, s.node_j, s.rest_m, s.lambda1_n, s.lambda2_n, s.mu_ns_per_m, f)
+    t = tool
+    if t.kind == TOOL_BOX:
+        contact[:] = box_tool_contacts(x, v, t.candidates, t.core_a + shift, t.axes, t.half_extents_m,
+                                       t.velocity_m_s, t.stiffness_n_per_m, t.damping_ns_per_m, f, t.gap, t.point,
+                                       t.direction)
+    elif t.kind != TOOL_NONE:
+        contact[:] = round_tool_contacts(x, v, t.candidates, t.core_a, t.core_b, shift, t.radius_m, t.inward_point,
+                                         t.velocity_m_s, t.stiffness_n_per_m, t.damping_ns_per_m, f)
+
+
 @numba.njit(cache=True, nogil=True)
-def run_frame(x, v, inv_mass, node_i, node_j, rest, lambda1, lambda2, mu, partial, use_parallel,
-              dt, substeps, environment_damping, gravity, symplectic,
-              tool_kind, core_a, core_b, radius, axes, half_extents, tool_velocity,
-              stiffness, damping, inward_point, candidates, external_force, f, gap, point, direction):
-    """`substeps` steps of the model; the tool core moves at `tool_velocity` from core_a/core_b.
+def run_frame(x, v, inv_mass, external_force, springs, settings, tool, work):
+    """`settings.substeps` steps of the model; the tool core moves at `tool.velocity_m_s` from its start.
 
     Runs without the GIL, so a node's executor thread keeps delivering messages meanwhile.
-    `external_force` (N, 3) is added to every node each step; `candidates` are skin nodes near the
-    tool.  Returns the contact force on the liver at the last substep (N); the tool's reaction is
-    its opposite.  For a box, the candidates' contact geometry of the last substep is left in
-    gap/point/direction.
+    `external_force` (N, 3) is added to every node each step.  Returns the contact force on the liver
+    at the last substep (N); the tool's reaction is its opposite.  For a box, the candidates' contact
+    geometry of the last substep is left in tool.gap/point/direction.
     """
     contact = np.zeros(3)
     shift = np.zeros(3)
-    for step in range(substeps):
-        f[:] = external_force
-        if use_parallel:
-            spring_forces_parallel(x, v, node_i, node_j, rest, lambda1, lambda2, mu, partial, f)
-        else:
-            spring_forces_serial(x, v, node_i, node_j, rest, lambda1, lambda2, mu, f)
+    dt = settings.dt_s
+    for step in range(settings.substeps):
         for k in range(3):
-            shift[k] = tool_velocity[k] * ((step + 1) * dt)
-        if tool_kind == TOOL_BOX:
-            contact = box_tool_contacts(x, v, candidates, core_a + shift, axes, half_extents, tool_velocity,
-                                        stiffness, damping, f, gap, point, direction)
-        elif tool_kind != TOOL_NONE:
-            contact = round_tool_contacts(x, v, candidates, core_a, core_b, shift, radius, inward_point,
-                                          tool_velocity, stiffness, damping, f)
-        integrate(x, v, f, inv_mass, dt, environment_damping, gravity, symplectic)
+            shift[k] = tool.velocity_m_s[k] * ((step + 1) * dt)
+        add_forces(x, v, external_force, springs, tool, work, shift, contact)
+        integrate(x, v, work.force, inv_mass, dt, settings.environment_damping_per_s, settings.gravity_m_s2,
+                  settings.symplectic)
     return contact

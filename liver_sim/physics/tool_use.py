@@ -1,14 +1,16 @@
 """What the tool does besides pressing (P13, P14): grasp what it touches, or cut along each stroke.
 
-`ToolUse` wraps one LiverModel frame: `before_frame` grasps or lets go, `after_frame` follows a cutting
-stroke and cuts when the tool leaves the surface.  The physics node and offline re-simulation use it alike.
+`ToolUse.step_frame` runs one LiverModel frame with the tool in its mode: grasp or let go before it,
+hold the grasped nodes during it, follow a cutting stroke after it and cut when the tool leaves the
+surface.  The frame pipeline (physics node and offline re-simulation) steps the model through it.
 """
 from __future__ import annotations
 
 import numpy as np
 
-from liver_sim.physics.contact import LocalModel, ToolPose
-from liver_sim.physics.model import LiverModel
+from liver_sim.local_model import LocalModel
+from liver_sim.physics.contact import ToolPose, candidate_nodes
+from liver_sim.physics.model import FrameResult, LiverModel
 
 TOOL_MODES = ("press", "grasp", "cut")
 #: cut: a contact point joins the stroke's path when this far (m) from the last one.
@@ -19,9 +21,9 @@ class ToolUse:
     """The tool's mode on a model: press (Eq. 3 only), grasp or cut; `mode` may change between frames.
 
     grasp: at the first frame in contact the skin nodes within the tool (+ `grasp_margin_m`) are held
-    (LiverModel.grasp) until the mode changes.  cut: the stroke's path is the local model's contact
-    point, frame by frame; when the tool leaves the surface the model is cut along it, `cut_depth_m`
-    deep (LiverModel.cut).  `events` collects what happened, for a log.
+    (`grasp`) until the mode changes.  cut: the stroke's path is the local model's contact point,
+    frame by frame; when the tool leaves the surface the model is cut along it, `cut_depth_m` deep
+    (LiverModel.cut).  `events` collects what happened, for a log.
     """
 
     def __init__(self, model: LiverModel, mode: str = "press", grasp_margin_m: float = 0.005,
@@ -33,6 +35,7 @@ class ToolUse:
         self.events: list[str] = []
         self._in_contact = False
         self._path: list[np.ndarray] = []
+        self._grasp_offsets = np.zeros((0, 3))
 
     @property
     def mode(self) -> str:
@@ -44,13 +47,37 @@ class ToolUse:
             raise ValueError(f"parameter tool_mode must be one of {TOOL_MODES}, got {mode!r}")
         self._mode = mode
 
+    def grasp(self, pose: ToolPose) -> int:
+        """Hold the skin nodes within the tool's bounding ball (+ `grasp_margin_m`) where they are in the
+        tool frame: from the next frame on they move with the tool, kinematically, until `release()`.
+        Returns how many nodes are held."""
+        model = self.model
+        nodes = candidate_nodes(model.positions, model.mesh.skin_nodes, model.tool, pose, self.grasp_margin_m)
+        self._grasp_offsets = (model.positions[nodes] - pose.position) @ pose.rotation
+        model.hold(nodes)
+        return len(nodes)
+
+    def release(self) -> None:
+        """Let go of the grasped nodes."""
+        self.model.hold(np.zeros(0, dtype=np.int64))
+
+    def step_frame(self, pose: ToolPose | None) -> tuple[FrameResult, bool]:
+        """One model frame with the tool at `pose` in its mode: (the model's result, True when a cut
+        changed the mesh after it)."""
+        self.before_frame(pose)
+        held = None
+        if pose is not None and self.model.held_nodes.size:  # where the tool at `pose` holds them
+            held = pose.position + self._grasp_offsets @ pose.rotation.T
+        result = self.model.step_frame(pose, held)
+        return result, self.after_frame(result.local_model)
+
     def before_frame(self, pose: ToolPose | None) -> None:
         """Grasp what the tool touches in grasp mode; let go in any other mode."""
-        grasping = self.model.grasped_nodes.size > 0
+        grasping = self.model.held_nodes.size > 0
         if self._mode == "grasp" and not grasping and pose is not None and self._in_contact:
-            self.events.append(f"grasped {self.model.grasp(pose, self.grasp_margin_m)} skin node(s)")
+            self.events.append(f"grasped {self.grasp(pose)} skin node(s)")
         elif self._mode != "grasp" and grasping:
-            self.model.release()
+            self.release()
             self.events.append("released the grasped nodes")
 
     def after_frame(self, local_model: LocalModel) -> bool:

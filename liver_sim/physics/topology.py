@@ -10,11 +10,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numba
 import numpy as np
 
-from liver_sim.mesh.tetmesh import TET_FACES, TRIANGLE_EDGES, edge_keys, face_keys, isin_keys, key_groups, unique_edges
+from liver_sim.mesh.tetmesh import (TET_FACES, TRIANGLE_EDGES, TetMesh, edge_keys, face_keys, isin_keys, key_groups,
+                                    unique_edges)
 
 
 @dataclass(frozen=True, eq=False)
@@ -33,6 +35,67 @@ class TopologyChange:
     node_sources: np.ndarray
     node_weights: np.ndarray
     separated_faces: int
+
+
+class NodeState(NamedTuple):
+    """What a model keeps per node: positions (N, 3) m, velocities (N, 3) m/s, external forces (N, 3) N,
+    masses (N,) kg, and the sorted fixed nodes."""
+
+    positions: np.ndarray
+    velocities: np.ndarray
+    external_forces_n: np.ndarray
+    masses_kg: np.ndarray
+    fixed_nodes: np.ndarray
+
+
+def carry_over(change: TopologyChange, state: NodeState, source: str, density_kg_m3: float,
+               min_node_mass_fraction: float) -> tuple[TetMesh, NodeState]:
+    """The new mesh (named `source`) of `change` and the node state carried onto it.
+
+    New positions, velocities: x'_k = Σ w·x[source].  Masses: old node i's mass goes to the new
+    nodes that draw on it, in shares ∝ w·(their lumped tet mass at `density_kg_m3`) (mass_shares);
+    each old mass is so split exactly: the total is conserved and, for duplicated nodes (one source,
+    weight 1), so is the momentum; mass of an old node nothing draws on is spread over all nodes ∝ mass.
+    External forces are split with the same shares.  A new node drawing only on fixed nodes is fixed.
+    ValueError for a change that does not fit the old nodes.
+    """
+    sources = np.asarray(change.node_sources, dtype=np.int64)
+    weights = np.asarray(change.node_weights, dtype=np.float64)
+    old_count = len(state.positions)
+    if sources.ndim != 2 or sources.shape != weights.shape or len(sources) != len(change.rest_points):
+        raise ValueError("topology change: node_sources and node_weights must both be (N', S) "
+                         f"with N' = {len(change.rest_points)} rest points")
+    if sources.size and (sources.min() < 0 or sources.max() >= old_count):
+        raise ValueError(f"topology change: node_sources must index the old nodes 0..{old_count - 1}")
+    mesh = TetMesh.from_arrays(change.rest_points, change.tets, source=source)
+    if len(mesh.points) != len(change.rest_points) or not np.array_equal(mesh.tets, change.tets):
+        raise ValueError("topology change: tets must use every node and be positively oriented at rest")
+    used = weights > 0.0
+    claims = np.where(used, weights, 0.0) * mesh.lumped_masses(density_kg_m3)[:, None]
+    share = mass_shares(sources, claims, used, state.masses_kg, min_node_mass_fraction)
+    masses = (share * state.masses_kg[sources]).sum(axis=1)
+    masses *= state.masses_kg.sum() / masses.sum()
+    fixed_old = np.zeros(old_count, dtype=bool)
+    fixed_old[state.fixed_nodes] = True
+    fixed = used.any(axis=1) & (fixed_old[sources] | ~used).all(axis=1)
+    return mesh, NodeState(np.einsum("ks,ksj->kj", weights, state.positions[sources]),
+                           np.einsum("ks,ksj->kj", weights, state.velocities[sources]),
+                           np.einsum("ks,ksj->kj", share, state.external_forces_n[sources]),
+                           masses, np.flatnonzero(fixed))
+
+
+def mass_shares(sources: np.ndarray, claims: np.ndarray, used: np.ndarray, masses_kg: np.ndarray,
+                min_node_mass_fraction: float) -> np.ndarray:
+    """(N', S) fraction of each source's mass each new node gets: its claim (weight × lumped mass) over
+    all claims on that source, first raised to φ_i = min(min_node_mass_fraction·mean mass / m_i, 1/n_i)
+    (n_i: nodes drawing on i), then renormalised, so a copy keeps at least φ_i/2 of m_i."""
+    old_count = len(masses_kg)
+    total = np.bincount(sources[used], claims[used], old_count)
+    count = np.bincount(sources[used], minlength=old_count)
+    floor = np.minimum(min_node_mass_fraction * masses_kg.mean() / masses_kg, 1.0 / np.maximum(count, 1))
+    share = np.where(used, np.maximum(claims / np.where(total > 0.0, total, 1.0)[sources], floor[sources]), 0.0)
+    norm = np.bincount(sources[used], share[used], old_count)
+    return np.where(used, share / np.where(norm > 0.0, norm, 1.0)[sources], 0.0)
 
 
 def interior_face_pairs(tets: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -120,9 +183,10 @@ def split_skin_slots(tet_count: int, slot_a: np.ndarray, slot_b: np.ndarray, sha
     return np.flatnonzero(on_skin)
 
 
-def separate_faces(tets: np.ndarray, cut_faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(new_tets (M,4), parent (N',)): nodes duplicated so that the two tets of each cut face no longer share
-    that face; parent[k] = the old node new node k copies (identity for k < N = tets.max()+1, copies appended).
+def separate_faces(tets: np.ndarray, cut_faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
+    """(new_tets (M,4), parent (N'), opened): nodes duplicated so that the two tets of each cut face no longer
+    share that face; parent[k] = the old node new node k copies (identity for k < N = tets.max()+1, copies
+    appended); opened: how many faces no longer are shared.
 
     The corners (tet, node) around each node are grouped into components joined through shared faces
     that are not cut; the component holding the node's lowest corner (4·tet + local index) keeps the
@@ -138,8 +202,8 @@ def separate_faces(tets: np.ndarray, cut_faces: np.ndarray) -> tuple[np.ndarray,
     tets = np.asarray(tets, dtype=np.int64)
     n = int(tets.max()) + 1
     slot_a, slot_b, keys = interior_face_pairs(tets, n)
-    new_tets, parent, _ = separate_pairs(tets, n, slot_a, slot_b, _cut_mask(keys, cut_faces, n))
-    return new_tets, parent
+    new_tets, parent, shared = separate_pairs(tets, n, slot_a, slot_b, _cut_mask(keys, cut_faces, n))
+    return new_tets, parent, int((~shared).sum())
 
 
 def _cut_mask(keys: np.ndarray, cut_faces: np.ndarray, n: int) -> np.ndarray:
@@ -249,40 +313,27 @@ class TearDetector:
         return self.faces[self.over_threshold(positions)]
 
 
-def tear_faces(rest_points: np.ndarray, tets: np.ndarray, positions: np.ndarray, capsule_triangles: np.ndarray,
-               parenchyma_threshold: float, capsule_threshold: float) -> np.ndarray:
-    """The interior faces (F, 3) whose stretch (see TearDetector) exceeds their threshold.
-
-    Builds a TearDetector each call; a caller checking every frame keeps one instead.
-    """
-    return TearDetector(rest_points, tets, capsule_triangles, parenchyma_threshold,
-                        capsule_threshold).torn_faces(positions)
-
-
 def duplication_change(rest_points: np.ndarray, tets: np.ndarray, capsule_triangles: np.ndarray,
                        cut_faces: np.ndarray) -> TopologyChange | None:
     """The change that opens `cut_faces` by duplicating nodes (separate_faces); None if nothing opens."""
     tets = np.asarray(tets, dtype=np.int64)
-    n = int(tets.max()) + 1
-    slot_a, slot_b, keys = interior_face_pairs(tets, n)
-    new_tets, parent, shared = separate_pairs(tets, n, slot_a, slot_b, _cut_mask(keys, cut_faces, n))
-    opened = int((~shared).sum())
+    new_tets, parent, opened = separate_faces(tets, cut_faces)
     if opened == 0:
         return None
     return TopologyChange(
         rest_points=np.ascontiguousarray(np.asarray(rest_points, dtype=np.float64)[parent]),
         tets=new_tets,
-        capsule_triangles=_carry_triangles(tets, new_tets, capsule_triangles, n),
+        capsule_triangles=_carry_triangles(tets, new_tets, capsule_triangles, int(tets.max()) + 1),
         node_sources=parent[:, None].copy(),
         node_weights=np.ones((len(parent), 1)),
-        separated_faces=int(opened),
+        separated_faces=opened,
     )
 
 
 def tear(rest_points: np.ndarray, tets: np.ndarray, positions: np.ndarray, capsule_triangles: np.ndarray,
          parenchyma_threshold: float, capsule_threshold: float,
          detector: TearDetector | None = None) -> TopologyChange | None:
-    """Open the faces stretched beyond their threshold (tear_faces, separate_faces); None if none opens.
+    """Open the faces stretched beyond their threshold (TearDetector, separate_faces); None if none opens.
 
     `detector`, when given, must be the TearDetector of these rest_points, tets and capsule_triangles;
     it remembers the last set of faces that opened nothing (no node to split), so that the same set

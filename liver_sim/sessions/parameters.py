@@ -1,6 +1,6 @@
 """The physics' and the bridge's parameters for offline runs: the nodes' own declarations
 (PARAMETERS), their config/<node>.yaml values, then `name:=value` overrides, range-checked as the
-nodes check them (liver_sim.nodes.common.check_parameter).
+nodes check them (liver_sim.parameters.check_parameter).
 
 An override `name:=value` applies to every node declaring `name` (tool_radius_m: both);
 `liver_physics.name:=value` or `haptic_bridge.name:=value` to one.  Values are YAML, as after `-p`.
@@ -17,7 +17,7 @@ NODES = ("liver_physics", "haptic_bridge")
 def declarations() -> dict:
     """{node: PARAMETERS} of the physics node and the haptic bridge."""
     from haptic_bridge.parameters import PARAMETERS as BRIDGE
-    from liver_sim.nodes.physics_node import PARAMETERS as PHYSICS
+    from liver_sim.physics.pipeline import PARAMETERS as PHYSICS
 
     return {"liver_physics": PHYSICS, "haptic_bridge": BRIDGE}
 

@@ -1,14 +1,14 @@
 """`liver-sim resimulate`: the physics and the haptic bridge re-run offline, as fast as the machine
 allows, on the tool poses of a recorded session, with changed parameters if asked.
 
-Simulation time is the recorded poses' stamps.  Physics frame k starts at t₀ + k/rate_hz (t₀: the
-first pose) with the newest pose stamped before it (none when older than tool_pose_timeout_s or
-outside the workspace, as in the node) and is published at its end, stamped t₀ + model time.  The
+Simulation time is the recorded poses' stamps.  The physics is the node's FramePipeline
+(liver_sim.physics.pipeline): frame k starts at t₀ + k/rate_hz (t₀: the first pose) with the newest
+pose stamped before it and is published at its end, stamped t₀ + model time.  The
 bridge ticks once per recorded pose with the newest published frame (BridgeTick, the node's own
 tick), and its command is stamped with the pose; `--compare` adds the Fig. 8 baseline bridge
 (local_model none) on the same poses.  Nothing depends on the wall clock, and the outputs' CDR
-padding is zeroed (canonical_cdr), so the same bag and parameters give byte-identical messages.  Messages are built by msg_defs.conversions and
-serialized by rclpy's serializer (no node, no context).
+padding is zeroed (canonical_cdr), so the same bag and parameters give byte-identical messages.
+Messages are built by msg_defs.conversions and serialized by rclpy's serializer (no node, no context).
 """
 from __future__ import annotations
 
@@ -32,64 +32,58 @@ def _ns(seconds: float) -> int:
 
 
 class _Session:
-    """The offline loop; `emit(topic, msg_class, time_s, data)` receives every output message in time order."""
+    """The offline loop around a FramePipeline; `emit(topic, msg_class, time_s, data)` receives every output
+    message in time order."""
 
     def __init__(self, physics: dict, bridge: dict, emit, progress, compare: bool = False):
         from haptic_bridge.tick import BridgeTick
-        from liver_sim.nodes.physics_node import build_model
-        from liver_sim.physics.tool_use import ToolUse
+        from liver_sim.physics.pipeline import FramePipeline, build_model
 
         self.p, self.b = physics, bridge
         self.model = build_model(physics)
-        self.tool_use = ToolUse(self.model, physics["tool_mode"], physics["grasp_margin_m"], physics["cut_depth_m"])
+        self.pipeline = FramePipeline(self.model, physics)
         self.tick = BridgeTick(bridge)
         #: the Fig. 8 baseline: a second bridge holding the physics wrench (local_model: none)
         self.baseline = BridgeTick({**bridge, "local_model": "none"}) if compare and bridge["local_model"] != "none" \
             else None
-        lower, upper = self.model.mesh.bounds
-        self.workspace = (lower - physics["workspace_margin_m"], upper + physics["workspace_margin_m"])
-        self.marker_every = max(1, round(physics["rate_hz"] / physics["marker_rate_hz"]))
         self.emit, self.progress = emit, progress
-        self.frames = self.commands = self.refused = 0
+        self.commands = 0
         self.peak_force_n = 0.0
 
-    def _tool_pose(self, message):
-        """(ToolPose for the physics, tip for the bridge) of a recorded pose; (None, None) when refused."""
-        from liver_sim.physics.contact import ToolPose
+    def _receive(self, message, t: float):
+        """Hand the pipeline a recorded pose received at `t`; the tip for the bridge, None when malformed."""
         from msg_defs.conversions import pose_to_arrays
 
         try:
             position, orientation = pose_to_arrays(message.pose)
-        except ValueError:
-            return None, None
-        if np.any(position < self.workspace[0]) or np.any(position > self.workspace[1]):
-            return None, position
-        return ToolPose(position, tuple(orientation)), position
+        except ValueError as exc:
+            self.pipeline.refuse(str(exc), t)
+            return None
+        self.pipeline.receive(position, orientation, t)
+        return position
 
-    def _frame(self, t0: float, pose):
+    def _frame(self, t0: float):
         """Step one frame; return (publish time s, messages, (local model, lifetime), contact force N)."""
         from rclpy.serialization import serialize_message
 
         from msg_defs import conversions
 
-        self.tool_use.before_frame(pose)
-        result = self.model.step_frame(pose)
-        changed = self.tool_use.after_frame(result.local_model) or result.topology_changed
+        frame = self.pipeline.step(t0 + self.model.time_s)
         t = t0 + self.model.time_s
         stamp, frame_id = conversions.stamp_from_seconds(t), self.p["frame_id"]
-        marker = conversions.local_model_marker(result.local_model, stamp, frame_id, self.p["local_model_lifetime_s"])
-        wrench = conversions.wrench_stamped(result.tool_force_n, stamp, frame_id)
+        marker = conversions.local_model_marker(frame.result.local_model, stamp, frame_id,
+                                                self.p["local_model_lifetime_s"])
+        wrench = conversions.wrench_stamped(frame.result.tool_force_n, stamp, frame_id)
         messages = [(self.p["nodes_topic"], "nodes",
                      serialize_message(conversions.nodes_to_pointcloud2(self.model.positions, stamp, frame_id))),
                     (self.p["contact_plane_topic"], "contact_plane", serialize_message(marker)),
                     (self.p["tool_wrench_topic"], "tool_wrench", serialize_message(wrench))]
-        if changed:  # a tear or a cut: the new surface before the node cloud that indexes it
+        if frame.surface_changed:  # the new surface before the node cloud that indexes it
             messages.insert(0, (self.p["surface_topic"], "surface", serialize_message(
                 conversions.skin_mesh_msg(self.model.mesh.skin, self.model.mesh.points))))
-        if self.frames % self.marker_every == 0:
+        if frame.marker_due:
             messages.append((self.p["marker_topic"], "marker", conversions.skin_marker_serialized(
                 self.model.positions, self.model.mesh.skin, stamp, frame_id)))
-        self.frames += 1
         model, lifetime = conversions.marker_to_local_model(marker)
         return (t, messages, (model, lifetime if lifetime > 0.0 else self.b["lifetime_s"]),
                 conversions.force_from_message("wrench_stamped", wrench))
@@ -103,23 +97,18 @@ class _Session:
         t0 = poses[0][0]
         self.emit(self.p["surface_topic"], "surface", t0, serialize_message(
             conversions.skin_mesh_msg(self.model.mesh.skin, self.model.mesh.points)))
-        physics_pose, physics_pose_time = None, -np.inf
         tip, tip_time = None, -np.inf
         pending = deque()
         local, held, source_time = None, None, -np.inf
         next_progress = t0 + 1.0
         for t, message, data in poses:
             while t0 + self.model.time_s < t:  # frames that start before this pose see the poses before it
-                start = t0 + self.model.time_s
-                fresh = start - physics_pose_time <= self.p["tool_pose_timeout_s"]
-                pending.append(self._frame(t0, physics_pose if fresh else None))
+                pending.append(self._frame(t0))
             while pending and pending[0][0] <= t:
                 source_time, messages, local, held = pending.popleft()
                 for topic, key, frame_data in messages:
                     self.emit(topic, key, source_time, frame_data)
-            physics_pose, pose_tip = self._tool_pose(message)
-            physics_pose_time = t
-            self.refused += physics_pose is None
+            pose_tip = self._receive(message, t)
             if pose_tip is not None:
                 tip, tip_time = pose_tip, t
             self.emit(self.p["tool_pose_topic"], "tool_pose", t, data)
@@ -191,11 +180,12 @@ def resimulate(bag: Path, out: Path, overrides=(), storage: str = "mcap", progre
         counts = dict(writer.counts)
     wall = time.perf_counter() - started
     simulated = poses[-1][0] - poses[0][0]
+    pipeline = session.pipeline
     summary = {"bag": str(bag), "out": str(out), "overrides": list(overrides), "poses": len(poses),
-               "refused_poses": session.refused, "frames": session.frames, "commands": session.commands,
+               "refused_poses": pipeline.refused_poses, "frames": pipeline.frames, "commands": session.commands,
                "divergences": session.model.divergences, "simulated_s": simulated, "wall_s": wall,
                "speed_vs_real_time": simulated / wall if wall > 0 else None,
                "peak_command_n": session.peak_force_n, "counts": counts}
-    progress(f"wrote {out}: {session.frames} physics frames, {session.commands} force commands "
+    progress(f"wrote {out}: {pipeline.frames} physics frames, {session.commands} force commands "
              f"(peak {session.peak_force_n:.3f} N), {simulated:.2f} s simulated in {wall:.2f} s")
     return summary

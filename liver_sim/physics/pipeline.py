@@ -1,0 +1,189 @@
+"""The physics frame pipeline, without ROS: from the tool poses received to one frame's outputs.
+
+`FramePipeline` is what the physics node and offline re-simulation both run.  A received pose is
+gated (outside the liver's bounds + `workspace_margin_m` it is refused and counted); a frame takes
+the newest pose unless it is older than `tool_pose_timeout_s` (then: no tool), steps the model
+through the tool's use (ToolUse: grasp, hold, cut), and says whether the surface must be
+republished (a tear or a cut) and whether the skin marker is due (`marker_rate_hz`), with the
+events worth a log line.  The adapters add only their I/O and clock: ROS messages, parameters and
+publishers (liver_sim.nodes.physics_node), bag I/O and deterministic offline timing
+(liver_sim.sessions.resimulate).
+
+PARAMETERS is the physics node's parameter table (liver_sim.parameters.Param); `build_model` makes
+the model it names.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from liver_sim.mesh.io import load_mesh
+from liver_sim.mesh.liver_shape import default_liver
+from liver_sim.parameters import Param, realtime_priority_parameter
+from liver_sim.physics.contact import ToolPose, ToolShape
+from liver_sim.physics.model import FrameResult, LiverModel
+from liver_sim.physics.params import INTEGRATORS, ModelParams, SpringLaw
+from liver_sim.physics.tool_use import TOOL_MODES, ToolUse
+
+DEFAULTS = ModelParams()
+PARAMETERS = {
+    "mesh_path": Param("", "volume or closed-surface mesh file (metres); empty: the embedded default liver"),
+    "target_tets": Param(1150, "tetrahedra to aim for when mesh_path is a surface", 50, 2_000_000),
+    "frame_id": Param("liver", "frame of every published position"),
+    "rate_hz": Param(DEFAULTS.frame_rate_hz, "physics frame rate (Hz)", 1.0, 1000.0),
+    "realtime_priority": realtime_priority_parameter(60),
+    "substeps": Param(DEFAULTS.substeps, "integration steps per frame", 1, 10_000),
+    "integrator": Param(DEFAULTS.integrator, "symplectic_euler or explicit_euler (Eq. 2)", choices=INTEGRATORS),
+    "capsule_lambda1_n": Param(DEFAULTS.capsule.lambda1_n, "capsule spring cubic stiffness λ1 of Eq. 1 (N)", 0.0, 1e6),
+    "capsule_lambda2_n": Param(DEFAULTS.capsule.lambda2_n, "capsule linear stiffness λ2 of Eq. 1 (N)", 0.0, 1e6),
+    "capsule_mu_ns_per_m": Param(DEFAULTS.capsule.mu_ns_per_m, "capsule viscosity μ of Eq. 1 (N·s/m)", 0.0, 1e4),
+    "parenchyma_lambda1_n": Param(DEFAULTS.parenchyma.lambda1_n, "parenchyma cubic stiffness λ1 (N)", 0.0, 1e6),
+    "parenchyma_lambda2_n": Param(DEFAULTS.parenchyma.lambda2_n, "parenchyma linear stiffness λ2 (N)", 0.0, 1e6),
+    "parenchyma_mu_ns_per_m": Param(DEFAULTS.parenchyma.mu_ns_per_m, "parenchyma viscosity μ (N·s/m)", 0.0, 1e4),
+    "density_kg_m3": Param(DEFAULTS.density_kg_m3, "tissue density for the lumped masses (kg/m³)", 1.0, 1e5),
+    "environment_damping_per_s": Param(DEFAULTS.environment_damping_per_s,
+                                       "environmental viscosity c: a −= c·v (1/s)", 0.0, 1e4),
+    "gravity_m_s2": Param(list(DEFAULTS.gravity_m_s2), "gravity vector in the liver frame (m/s²)"),
+    "fixed_nodes": Param([-1], "indices of fixed nodes; [-1]: the four nodes of the tet nearest the centroid"),
+    "contact_stiffness_n_per_m": Param(DEFAULTS.contact_stiffness_n_per_m, "penalty λ of Eq. 3 (N/m)", 0.0, 1e6),
+    "contact_damping_ns_per_m": Param(DEFAULTS.contact_damping_ns_per_m, "penalty μ of Eq. 3 (N·s/m)", 0.0, 1e4),
+    "tool_shape": Param("sphere", "rigid tool: sphere, capsule or box", choices=("sphere", "capsule", "box")),
+    "tool_radius_m": Param(ToolShape().radius_m, "sphere/capsule radius (m)", 1e-4, 0.2),
+    "tool_length_m": Param(ToolShape().length_m, "capsule shaft length along the tool +z (m)", 0.0, 1.0),
+    "tool_half_extents_m": Param(list(ToolShape().half_extents_m), "box half extents (m)"),
+    "tearing": Param(DEFAULTS.tearing, "separate tetrahedra stretched beyond the tearing strains (paper §2.6); "
+                     "the torn mesh is republished on surface_topic"),
+    "tear_strain_parenchyma": Param(DEFAULTS.tear_strain_parenchyma, "stretch across a face between two tets "
+                                    "(mean normal strain, dimensionless) above which they separate", 0.01, 10.0),
+    "tear_strain_capsule": Param(DEFAULTS.tear_strain_capsule, "the same for a face with an edge on the capsule "
+                                 "(dimensionless)", 0.01, 10.0),
+    "tool_mode": Param("press", "press: the tool pushes the surface (Eq. 3); grasp: the skin nodes it touches "
+                       "follow it until tool_mode changes; cut: each stroke in contact cuts the skin (and cut_depth_m "
+                       "of tissue under it) along the tool path when the tool leaves the surface (§3.5). May be "
+                       "changed at run time", choices=TOOL_MODES),
+    "grasp_margin_m": Param(0.005, "grasp: skin nodes this close to the tool's bounding ball are held (m)",
+                            0.0, 0.05),
+    "cut_depth_m": Param(0.005, "cut: depth of the cut below the tool path (m); under one element layer cuts "
+                         "the capsule (membrane) only", 0.0005, 0.2),
+    "local_model": Param("plane", "local model published for the haptic loop", choices=("plane", "sphere")),
+    "local_model_reach_m": Param(0.02, "publish a local model while the tool is this close to the skin (m)",
+                                 0.0, 1.0),
+    "local_model_lifetime_s": Param(0.05, "how long the bridge may trust one local model (s)", 0.001, 10.0),
+    "tool_pose_timeout_s": Param(0.5, "a tool pose older than this is ignored: no tool (s)", 0.001, 60.0),
+    "workspace_margin_m": Param(0.3, "tool poses farther than this from the liver's bounds are refused (m)",
+                                0.0, 100.0),
+    "marker_rate_hz": Param(30.0, "rate of the /liver/marker TRIANGLE_LIST (Hz)", 0.1, 150.0),
+    # the default names of msg_defs.topics.TOPICS (which needs rclpy for its QoS profiles)
+    "nodes_topic": Param("/liver/nodes", "deformed node positions (PointCloud2)"),
+    "surface_topic": Param("/liver/surface", "skin triangles (shape_msgs/Mesh)"),
+    "marker_topic": Param("/liver/marker", "deformed skin for viewers (Marker)"),
+    "contact_plane_topic": Param("/liver/contact_plane", "local model for the haptic bridge (Marker)"),
+    "tool_wrench_topic": Param("/liver/tool_wrench", "contact force on the tool (WrenchStamped)"),
+    "tool_pose_topic": Param("/tool/pose", "tool tip pose in the liver frame (PoseStamped)"),
+}
+
+
+def model_params(values: dict) -> ModelParams:
+    """The ModelParams named by the node's parameter values (validated)."""
+    fixed = tuple(values["fixed_nodes"]) if list(values["fixed_nodes"]) != [-1] else None
+    return ModelParams(
+        capsule=SpringLaw(values["capsule_lambda1_n"], values["capsule_lambda2_n"], values["capsule_mu_ns_per_m"]),
+        parenchyma=SpringLaw(values["parenchyma_lambda1_n"], values["parenchyma_lambda2_n"],
+                             values["parenchyma_mu_ns_per_m"]),
+        density_kg_m3=values["density_kg_m3"], environment_damping_per_s=values["environment_damping_per_s"],
+        gravity_m_s2=tuple(values["gravity_m_s2"]), integrator=values["integrator"],
+        frame_rate_hz=values["rate_hz"], substeps=values["substeps"], fixed_nodes=fixed,
+        contact_stiffness_n_per_m=values["contact_stiffness_n_per_m"],
+        contact_damping_ns_per_m=values["contact_damping_ns_per_m"], tearing=values["tearing"],
+        tear_strain_parenchyma=values["tear_strain_parenchyma"],
+        tear_strain_capsule=values["tear_strain_capsule"]).validate()
+
+
+def build_model(values: dict) -> LiverModel:
+    """The LiverModel (mesh, parameters, tool, local model) named by the node's parameter values, warmed up."""
+    mesh = load_mesh(values["mesh_path"], values["target_tets"]) if values["mesh_path"] else default_liver()
+    tool = ToolShape(values["tool_shape"], values["tool_radius_m"], values["tool_length_m"],
+                     tuple(values["tool_half_extents_m"]))
+    model = LiverModel(mesh, model_params(values), tool, values["local_model"], values["local_model_reach_m"])
+    model.warm_up()
+    return model
+
+
+@dataclass(frozen=True)
+class Event:
+    """Something worth a log line.  kind: 'refused' (a tool pose), 'diverged' (the model was reset),
+    'topology' (a tear or a cut changed the mesh) or 'tool' (ToolUse's events)."""
+
+    kind: str
+    text: str
+
+
+@dataclass(frozen=True)
+class Frame:
+    """One frame's outputs: the model's result; `surface_changed`: a tear or a cut changed the mesh, so
+    its surface must be republished (before the nodes that index it); `marker_due`: the skin marker is
+    published this frame; `events` since the last frame, in order."""
+
+    result: FrameResult
+    surface_changed: bool
+    marker_due: bool
+    events: tuple[Event, ...]
+
+
+class FramePipeline:
+    """The frame sequence of one model, configured by the physics node's parameter `values`.
+
+    `receive`/`refuse` take each tool pose message (time in the clock `step` is called with), `step`
+    runs a frame.  `tool_use.mode` may change between frames.  Counts: `frames`, `refused_poses`.
+    """
+
+    def __init__(self, model: LiverModel, values: dict):
+        self.model = model
+        self.tool_use = ToolUse(model, values["tool_mode"], values["grasp_margin_m"], values["cut_depth_m"])
+        lower, upper = model.mesh.bounds
+        self.workspace = (lower - values["workspace_margin_m"], upper + values["workspace_margin_m"])
+        self.pose_timeout_s = values["tool_pose_timeout_s"]
+        self.marker_every = max(1, round(values["rate_hz"] / values["marker_rate_hz"]))
+        self.frames = 0
+        self.refused_poses = 0
+        self._pose: ToolPose | None = None
+        self._pose_time_s = -np.inf
+        self._events: list[Event] = []
+
+    def receive(self, position: np.ndarray, orientation_xyzw, time_s: float) -> ToolPose | None:
+        """Take the tool pose received at `time_s`: the newest pose from then on; None when refused
+        (outside the workspace)."""
+        if np.any(position < self.workspace[0]) or np.any(position > self.workspace[1]):
+            self.refuse(f"tool position {np.round(position, 3).tolist()} m is outside the workspace", time_s)
+            return None
+        self._pose, self._pose_time_s = ToolPose(position, tuple(orientation_xyzw)), time_s
+        return self._pose
+
+    def refuse(self, reason: str, time_s: float) -> None:
+        """Count a tool pose refused for `reason` (e.g. malformed); it stands for no tool from `time_s` on."""
+        self.refused_poses += 1
+        self._pose, self._pose_time_s = None, time_s
+        self._events.append(Event("refused", f"ignored tool pose: {reason}"))
+
+    def step(self, now_s: float) -> Frame:
+        """One frame at `now_s` with the newest pose unless older than tool_pose_timeout_s (then no tool)."""
+        pose = self._pose if now_s - self._pose_time_s <= self.pose_timeout_s else None
+        result, cut = self.tool_use.step_frame(pose)
+        events, self._events = self._events, []
+        if result.divergence:
+            events.append(Event("diverged", result.divergence))
+        for cause, changed in (("torn", result.topology_changed), ("cut", cut)):
+            if changed:
+                events.append(Event("topology", self._topology_text(cause)))
+        events += [Event("tool", text) for text in self.tool_use.events]
+        self.tool_use.events.clear()
+        marker_due = self.frames % self.marker_every == 0
+        self.frames += 1
+        return Frame(result, result.topology_changed or cut, marker_due, tuple(events))
+
+    def _topology_text(self, cause: str) -> str:
+        model = self.model
+        mesh = model.mesh
+        return (f"{cause}: {len(mesh.points)} nodes, {len(mesh.tets)} tets, {len(mesh.skin)} skin triangles; "
+                f"{model.params.substeps} substeps per frame (stable below {model.stable_dt_s * 1e6:.0f} us)")

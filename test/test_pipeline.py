@@ -1,0 +1,70 @@
+"""The physics frame pipeline (no ROS): pose gate, pose timeout, tool use, surface flag, marker decimation."""
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from liver_sim.physics.pipeline import PARAMETERS, FramePipeline, build_model
+from liver_sim.scenarios import press_anchor
+from liver_sim.tool_scripts import ScriptSettings, make_script
+
+
+def values(**changes):
+    return {**{name: spec.default for name, spec in PARAMETERS.items()}, **changes}
+
+
+@pytest.fixture(scope="module")
+def defaults():
+    return values()
+
+
+def test_poses_outside_the_workspace_are_refused_and_counted(defaults):
+    pipeline = FramePipeline(build_model(defaults), defaults)
+    upper = pipeline.model.mesh.bounds[1]
+    assert pipeline.receive(upper + [0.0, 0.0, 0.29], (0, 0, 0, 1), 0.0) is not None
+    assert pipeline.receive(upper + [0.0, 0.0, 0.31], (0, 0, 0, 1), 0.001) is None
+    pipeline.refuse("malformed", 0.002)
+    assert pipeline.refused_poses == 2
+    events = pipeline.step(0.003).events
+    assert [e.kind for e in events] == ["refused", "refused"] and "outside the workspace" in events[0].text
+    assert not pipeline.step(0.01).events  # reported once
+
+
+def test_a_pose_older_than_the_timeout_means_no_tool(defaults):
+    pipeline = FramePipeline(build_model(defaults), defaults)
+    top = press_anchor(pipeline.model.mesh)
+    pipeline.receive(top, (0, 0, 0, 1), 0.0)  # the tool sphere's centre on the skin: in contact
+    assert pipeline.step(defaults["tool_pose_timeout_s"]).result.local_model.valid
+    assert not pipeline.step(defaults["tool_pose_timeout_s"] + 0.001).result.local_model.valid
+
+
+def test_the_marker_is_due_at_marker_rate_hz(defaults):
+    pipeline = FramePipeline(build_model(defaults), defaults)
+    due = [pipeline.step(0.0).marker_due for _ in range(10)]
+    assert due == [True, False, False, False, False, True, False, False, False, False]  # 150 Hz / 30 Hz
+    assert pipeline.frames == 10
+
+
+def test_a_cut_flags_the_surface_and_is_logged():
+    cut = values(tool_mode="cut", cut_depth_m=0.012)
+    pipeline = FramePipeline(build_model(cut), cut)
+    liver = pipeline.model.mesh
+    script = make_script("press_slide_release", ScriptSettings(anchor_m=tuple(press_anchor(liver)), depth_m=0.012,
+                                                               slide_m=0.06, slide_s=3.0, rest_s=0.5))
+    period = pipeline.model.frame_period_s
+    frames = []
+    for k in range(int(script.duration_s / period)):
+        pipeline.receive(script.position_at(k * period), (0, 0, 0, 1), k * period)
+        frames.append(pipeline.step(k * period))
+    changed = [f for f in frames if f.surface_changed]
+    assert len(changed) == 1 == pipeline.model.topology_version
+    assert [e.kind for e in changed[0].events] == ["topology"] and changed[0].events[0].text.startswith("cut: ")
+    assert len(pipeline.model.positions) > len(liver.points)
+
+
+def test_the_pipeline_and_the_offline_parameters_import_no_ros():
+    code = ("import sys, liver_sim.physics.pipeline, liver_sim.sessions.parameters; "
+            "print(sorted(m for m in sys.modules if m.startswith('rclpy') or m.startswith('liver_sim.nodes')))")
+    imported = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert imported.strip() == "[]"
