@@ -117,24 +117,6 @@ def round_tool_node_contacts(x, v, candidates, core_a, core_b, radius_m, inward_
                          stiffness_n_per_m, damping_ns_per_m)
 
 
-def block_pattern(node_i: np.ndarray, node_j: np.ndarray, n_nodes: int):
-    """Block CSR pattern of the spring graph: (indptr, indices, diagonal slot per node, slots (S, 4) of
-    the blocks (i,i), (j,j), (i,j), (j,i) per spring).  Columns sorted within each row."""
-    rows = np.concatenate([np.arange(n_nodes), node_i, node_j])
-    cols = np.concatenate([np.arange(n_nodes), node_j, node_i])
-    keys = np.unique(rows * n_nodes + cols)
-    indptr = np.searchsorted(keys // n_nodes, np.arange(n_nodes + 1)).astype(np.int64)
-    indices = (keys % n_nodes).astype(np.int64)
-
-    def slot(r, c):
-        return np.searchsorted(keys, r * n_nodes + c).astype(np.int64)
-
-    nodes = np.arange(n_nodes)
-    diagonal = slot(nodes, nodes)
-    slots = np.stack([diagonal[node_i], diagonal[node_j], slot(node_i, node_j), slot(node_j, node_i)], axis=1)
-    return indptr, indices, diagonal, np.ascontiguousarray(slots)
-
-
 @numba.njit(cache=True)
 def _contact_forces(x, v, y, inv_mass, h, nodes, weights, normal, offset, speed, stiffness, damping,
                     f, ky, coefficient):
@@ -182,11 +164,12 @@ def _contact_forces(x, v, y, inv_mass, h, nodes, weights, normal, offset, speed,
 
 @numba.njit(cache=True)
 def _assemble(x, v, y, inv_mass, external, gravity, c_env, h, node_i, node_j, rest, lambda1, lambda2, mu,
-              slots, diagonal, values, f, ky, assemble_matrix):
-    """Forces f at (x, v) and ky = K·y (y zero on held nodes); with assemble_matrix, also the blocks of
-    A = M·(1 + h·c_env) − h·D_springs − h²·K_springs (held rows/columns: identity)."""
-    if assemble_matrix:
-        values[:] = 0.0
+              unit, iso, axial, shift, diagonal, f, ky, assemble_matrix):
+    """Forces f at (x, v) and ky = K·y (y zero on held nodes); with assemble_matrix, also the system
+    A = M·(1 + h·c_env) − h·D_springs − h²·K_springs in matrix-free form: per spring the block
+    B = iso·I + axial·uuᵀ (unit u) that enters (i,i) and (j,j) as +B and (i,j), (j,i) as −B;
+    shift = m·(1 + h·c_env) per node (1 on held ones, whose rows and columns are the identity);
+    and the 3×3 diagonal blocks of A."""
     for n in range(x.shape[0]):
         w = inv_mass[n]
         for a in range(3):
@@ -196,26 +179,28 @@ def _assemble(x, v, y, inv_mass, external, gravity, c_env, h, node_i, node_j, re
             m = 1.0 / w
             for a in range(3):
                 f[n, a] += m * (gravity[a] - c_env * v[n, a])
-                if assemble_matrix:
-                    values[diagonal[n], a, a] = m * (1.0 + h * c_env)
+            if assemble_matrix:
+                shift[n] = m * (1.0 + h * c_env)
         elif assemble_matrix:
+            shift[n] = 1.0
+        if assemble_matrix:
+            diagonal[n] = 0.0
             for a in range(3):
-                values[diagonal[n], a, a] = 1.0
-    u = np.empty(3)  # one allocation, reused by every spring
+                diagonal[n, a, a] = shift[n]
     for s in range(node_i.shape[0]):
         i, j = node_i[s], node_j[s]
         l0 = rest[s]
-        length = 0.0
-        for a in range(3):
-            u[a] = x[j, a] - x[i, a]
-            length += u[a] * u[a]
-        length = math.sqrt(length)
+        ux = x[j, 0] - x[i, 0]
+        uy = x[j, 1] - x[i, 1]
+        uz = x[j, 2] - x[i, 2]
+        length = math.sqrt(ux * ux + uy * uy + uz * uz)
         if length <= 1e-12 * l0:
+            if assemble_matrix:
+                iso[s] = 0.0
+                axial[s] = 0.0
             continue
-        rate = 0.0
-        for a in range(3):
-            u[a] /= length
-            rate += (v[j, a] - v[i, a]) * u[a]
+        ux, uy, uz = ux / length, uy / length, uz / length
+        rate = (v[j, 0] - v[i, 0]) * ux + (v[j, 1] - v[i, 1]) * uy + (v[j, 2] - v[i, 2]) * uz
         d = (length - l0) / l0
         elastic = lambda1[s] * d * d * d + lambda2[s] * d
         tension = elastic + mu[s] * rate
@@ -224,50 +209,63 @@ def _assemble(x, v, y, inv_mass, external, gravity, c_env, h, node_i, node_j, re
         free_i = inv_mass[i] > 0.0
         free_j = inv_mass[j] > 0.0
         # Ks·(y_j − y_i), y zero on held nodes
-        along = 0.0
-        for a in range(3):
-            along += ((y[j, a] if free_j else 0.0) - (y[i, a] if free_i else 0.0)) * u[a]
-        for a in range(3):
-            f[i, a] += tension * u[a]
-            f[j, a] -= tension * u[a]
-            k_dy = (geometric * ((y[j, a] if free_j else 0.0) - (y[i, a] if free_i else 0.0))
-                    + (material - geometric) * along * u[a])
-            ky[i, a] += k_dy
-            ky[j, a] -= k_dy
+        dx = (y[j, 0] if free_j else 0.0) - (y[i, 0] if free_i else 0.0)
+        dy = (y[j, 1] if free_j else 0.0) - (y[i, 1] if free_i else 0.0)
+        dz = (y[j, 2] if free_j else 0.0) - (y[i, 2] if free_i else 0.0)
+        along = (material - geometric) * (dx * ux + dy * uy + dz * uz)
+        kx = geometric * dx + along * ux
+        ky_ = geometric * dy + along * uy
+        kz = geometric * dz + along * uz
+        f[i, 0] += tension * ux
+        f[i, 1] += tension * uy
+        f[i, 2] += tension * uz
+        f[j, 0] -= tension * ux
+        f[j, 1] -= tension * uy
+        f[j, 2] -= tension * uz
+        ky[i, 0] += kx
+        ky[i, 1] += ky_
+        ky[i, 2] += kz
+        ky[j, 0] -= kx
+        ky[j, 1] -= ky_
+        ky[j, 2] -= kz
         if not assemble_matrix:
             continue
-        iso = h * h * geometric
-        axial = h * h * (material - geometric) + h * mu[s]
+        unit[s, 0], unit[s, 1], unit[s, 2] = ux, uy, uz
+        g = h * h * geometric
+        t = h * h * (material - geometric) + h * mu[s]
+        iso[s] = g
+        axial[s] = t
         for a in range(3):
             for b in range(3):
-                block = axial * u[a] * u[b]
-                if a == b:
-                    block += iso
+                block = t * unit[s, a] * unit[s, b] + (g if a == b else 0.0)
                 if free_i:
-                    values[slots[s, 0], a, b] += block
+                    diagonal[i, a, b] += block
                 if free_j:
-                    values[slots[s, 1], a, b] += block
-                if free_i and free_j:
-                    values[slots[s, 2], a, b] -= block
-                    values[slots[s, 3], a, b] -= block
+                    diagonal[j, a, b] += block
 
 
 @numba.njit(cache=True)
-def _apply(indptr, indices, values, inv_mass, nodes, weights, normal, coefficient, p, out):
-    """out = A·p: block CSR product plus the active contacts' (h·c + h²·k)·w_a·w_b·nnᵀ (free nodes only)."""
-    for r in range(indptr.shape[0] - 1):
-        s0 = 0.0
-        s1 = 0.0
-        s2 = 0.0
-        for k in range(indptr[r], indptr[r + 1]):
-            c = indices[k]
-            p0, p1, p2 = p[c, 0], p[c, 1], p[c, 2]
-            s0 += values[k, 0, 0] * p0 + values[k, 0, 1] * p1 + values[k, 0, 2] * p2
-            s1 += values[k, 1, 0] * p0 + values[k, 1, 1] * p1 + values[k, 1, 2] * p2
-            s2 += values[k, 2, 0] * p0 + values[k, 2, 1] * p1 + values[k, 2, 2] * p2
-        out[r, 0] = s0
-        out[r, 1] = s1
-        out[r, 2] = s2
+def _apply(node_i, node_j, unit, iso, axial, shift, inv_mass, nodes, weights, normal, coefficient, p, out):
+    """out = A·p, matrix-free: shift·p, each spring's B·(p_i − p_j) to i and its opposite to j, and the
+    active contacts' (h·c + h²·k)·w_a·w_b·nnᵀ.  p must vanish on held nodes; out does there too."""
+    for n in range(p.shape[0]):
+        for a in range(3):
+            out[n, a] = shift[n] * p[n, a]
+    for s in range(node_i.shape[0]):
+        i, j = node_i[s], node_j[s]
+        dx = p[i, 0] - p[j, 0]
+        dy = p[i, 1] - p[j, 1]
+        dz = p[i, 2] - p[j, 2]
+        ux, uy, uz = unit[s, 0], unit[s, 1], unit[s, 2]
+        g = iso[s]
+        t = axial[s] * (ux * dx + uy * dy + uz * dz)
+        bx, by, bz = g * dx + t * ux, g * dy + t * uy, g * dz + t * uz
+        out[i, 0] += bx
+        out[i, 1] += by
+        out[i, 2] += bz
+        out[j, 0] -= bx
+        out[j, 1] -= by
+        out[j, 2] -= bz
     for e in range(nodes.shape[0]):
         if coefficient[e] == 0.0:
             continue
@@ -275,23 +273,26 @@ def _apply(indptr, indices, values, inv_mass, nodes, weights, normal, coefficien
         q = 0.0
         for a in range(3):
             n = nodes[e, a]
-            if n >= 0 and inv_mass[n] > 0.0:
+            if n >= 0:
                 q += weights[e, a] * (nx * p[n, 0] + ny * p[n, 1] + nz * p[n, 2])
         q *= coefficient[e]
         for a in range(3):
             n = nodes[e, a]
-            if n >= 0 and inv_mass[n] > 0.0:
+            if n >= 0:
                 g = weights[e, a] * q
                 out[n, 0] += g * nx
                 out[n, 1] += g * ny
                 out[n, 2] += g * nz
+    for n in range(p.shape[0]):
+        if inv_mass[n] == 0.0:
+            for a in range(3):
+                out[n, a] = 0.0
 
 
 @numba.njit(cache=True)
-def _block_jacobi(values, diagonal, inv_mass, nodes, weights, normal, coefficient, inverse):
+def _block_jacobi(diagonal, inv_mass, nodes, weights, normal, coefficient, inverse):
     """inverse[n] = (A_nn + Σ contacts' diagonal blocks)⁻¹ (3×3, symmetric positive definite)."""
-    for n in range(diagonal.shape[0]):
-        inverse[n] = values[diagonal[n]]
+    inverse[:] = diagonal
     for e in range(nodes.shape[0]):
         if coefficient[e] == 0.0:
             continue
@@ -322,11 +323,11 @@ def _invert_symmetric(a):
 
 
 @numba.njit(cache=True)
-def _pcg(indptr, indices, values, inv_mass, nodes, weights, normal, coefficient, preconditioner, b, z0,
-         tolerance, max_iterations, r, z, p, q):
+def _pcg(node_i, node_j, unit, iso, axial, shift, inv_mass, nodes, weights, normal, coefficient, preconditioner,
+         b, z0, tolerance, max_iterations, r, z, p, q):
     """Solve A·z = b by block-Jacobi preconditioned conjugate gradients from z0 (overwritten by z);
     stops when ‖r‖ ≤ tolerance·‖b‖.  Returns the iterations used."""
-    _apply(indptr, indices, values, inv_mass, nodes, weights, normal, coefficient, z0, q)
+    _apply(node_i, node_j, unit, iso, axial, shift, inv_mass, nodes, weights, normal, coefficient, z0, q)
     count = b.shape[0]
     b_norm2 = 0.0
     for n in range(count):
@@ -345,7 +346,7 @@ def _pcg(indptr, indices, values, inv_mass, nodes, weights, normal, coefficient,
             r_norm2 += r[n, a] * r[n, a]
     iterations = 0
     while r_norm2 > target and iterations < max_iterations:
-        _apply(indptr, indices, values, inv_mass, nodes, weights, normal, coefficient, p, q)
+        _apply(node_i, node_j, unit, iso, axial, shift, inv_mass, nodes, weights, normal, coefficient, p, q)
         pq = 0.0
         for n in range(count):
             for a in range(3):
@@ -406,7 +407,7 @@ def _advance(x, x0, v, v0, dv, inv_mass, h):
 
 @numba.njit(cache=True, nogil=True)
 def implicit_step(x, v, inv_mass, external, gravity, c_env, h, node_i, node_j, rest, lambda1, lambda2, mu,
-                  indptr, indices, slots, diagonal, values, nodes, weights, normal, offset, speed, stiffness,
+                  unit, iso, axial, shift, diagonal, nodes, weights, normal, offset, speed, stiffness,
                   damping, coefficient, preconditioner, warm, tolerance, max_iterations, newton_tolerance,
                   max_newton, work):
     """One linearised backward-Euler step of x, v in place (see the module docstring), then Newton
@@ -418,8 +419,12 @@ def implicit_step(x, v, inv_mass, external, gravity, c_env, h, node_i, node_j, r
     zero[:] = 0.0
     x0[:] = x
     v0[:] = v
+    for n in range(x.shape[0]):
+        if inv_mass[n] == 0.0:
+            for a in range(3):
+                warm[n, a] = 0.0  # held: Δv = 0, and CG's vectors vanish there (see _apply)
     _assemble(x, v, v, inv_mass, external, gravity, c_env, h, node_i, node_j, rest, lambda1, lambda2, mu,
-              slots, diagonal, values, f, ky, True)
+              unit, iso, axial, shift, diagonal, f, ky, True)
     _contact_forces(x, v, v, inv_mass, h, nodes, weights, normal, offset, speed, stiffness, damping, f, ky,
                     coefficient)
     for n in range(x.shape[0]):
@@ -429,12 +434,12 @@ def implicit_step(x, v, inv_mass, external, gravity, c_env, h, node_i, node_j, r
     newton = 0
     contact = np.zeros(3)
     while True:
-        _block_jacobi(values, diagonal, inv_mass, nodes, weights, normal, coefficient, preconditioner)
-        total_iterations += _pcg(indptr, indices, values, inv_mass, nodes, weights, normal, coefficient,
-                                 preconditioner, rhs, warm, tolerance, max_iterations, r, z, p, q)
+        _block_jacobi(diagonal, inv_mass, nodes, weights, normal, coefficient, preconditioner)
+        total_iterations += _pcg(node_i, node_j, unit, iso, axial, shift, inv_mass, nodes, weights, normal,
+                                 coefficient, preconditioner, rhs, warm, tolerance, max_iterations, r, z, p, q)
         _advance(x, x0, v, v0, warm, inv_mass, h)
         _assemble(x, v, zero, inv_mass, external, gravity, c_env, h, node_i, node_j, rest, lambda1, lambda2, mu,
-                  slots, diagonal, values, f, ky, False)
+                  unit, iso, axial, shift, diagonal, f, ky, False)
         tx, ty, tz = _contact_forces(x, v, zero, inv_mass, h, nodes, weights, normal, offset, speed, stiffness,
                                      damping, f, ky, coefficient)
         contact[0], contact[1], contact[2] = tx, ty, tz
@@ -443,17 +448,17 @@ def implicit_step(x, v, inv_mass, external, gravity, c_env, h, node_i, node_j, r
             break
         newton += 1
         _assemble(x, v, zero, inv_mass, external, gravity, c_env, h, node_i, node_j, rest, lambda1, lambda2, mu,
-                  slots, diagonal, values, f, ky, True)
+                  unit, iso, axial, shift, diagonal, f, ky, True)
         warm[:] = 0.0
     warm[:] = v - v0
     return contact, total_iterations, newton, residual
 
 
 class ImplicitEuler:
-    """Linearised backward Euler on one spring network: the block CSR pattern, built once per topology,
-    and the work arrays.  Build a new one after a topology change."""
+    """Linearised backward Euler on one spring network: its per-spring matrix blocks and work arrays.
+    Build a new one after a topology change."""
 
-    def __init__(self, springs: SpringNetwork, n_nodes: int, cg_tolerance: float = 1e-4,
+    def __init__(self, springs: SpringNetwork, n_nodes: int, cg_tolerance: float = 1e-3,
                  max_cg_iterations: int = 500, newton_tolerance_n: float = 1e-2, max_newton: int = 2):
         self.springs = springs
         self.n_nodes = int(n_nodes)
@@ -461,13 +466,17 @@ class ImplicitEuler:
         self.max_cg_iterations = int(max_cg_iterations)
         self.newton_tolerance_n = float(newton_tolerance_n)
         self.max_newton = int(max_newton)
-        self.indptr, self.indices, self.diagonal, self.slots = block_pattern(springs.node_i, springs.node_j,
-                                                                             self.n_nodes)
-        self.values = np.zeros((len(self.indices), 3, 3))
+        edges = len(springs.node_i)
+        self._unit = np.zeros((edges, 3))
+        self._iso = np.zeros(edges)
+        self._axial = np.zeros(edges)
+        self._shift = np.ones(self.n_nodes)
+        self._diagonal = np.zeros((self.n_nodes, 3, 3))
         self._preconditioner = np.zeros((self.n_nodes, 3, 3))
         self._warm = np.zeros((self.n_nodes, 3))
         self._work = np.zeros((10, self.n_nodes, 3))
         self._coefficient = np.zeros(0)
+        self._inv_mass = np.zeros(self.n_nodes)
         #: CG iterations, Newton iterations and final residual (N) of the last step.
         self.last_cg_iterations = 0
         self.last_newton_iterations = 0
@@ -480,11 +489,12 @@ class ImplicitEuler:
         contacts = contacts or Contacts.none()
         if len(self._coefficient) != len(contacts):
             self._coefficient = np.zeros(len(contacts))
+        self._inv_mass = inv_mass
         s = self.springs
         contact, self.last_cg_iterations, self.last_newton_iterations, self.last_residual_n = implicit_step(
             x, v, inv_mass, external_force, np.asarray(gravity, dtype=np.float64), float(environment_damping),
             float(dt), s.node_i, s.node_j, s.rest_length_m, s.lambda1_n, s.lambda2_n, s.mu_ns_per_m,
-            self.indptr, self.indices, self.slots, self.diagonal, self.values, contacts.nodes, contacts.weights,
+            self._unit, self._iso, self._axial, self._shift, self._diagonal, contacts.nodes, contacts.weights,
             contacts.normal, contacts.offset_m, contacts.normal_speed_m_s, contacts.stiffness_n_per_m,
             contacts.damping_ns_per_m, self._coefficient, self._preconditioner, self._warm, self.cg_tolerance,
             self.max_cg_iterations, self.newton_tolerance_n, self.max_newton, self._work)
@@ -495,9 +505,23 @@ class ImplicitEuler:
         self._warm[:] = 0.0
 
     def matrix(self) -> scipy.sparse.csr_matrix:
-        """The spring, mass and damping part of the last assembled system matrix, (3N, 3N) sparse."""
-        return scipy.sparse.bsr_matrix((self.values, self.indices, self.indptr),
-                                       shape=(3 * self.n_nodes, 3 * self.n_nodes)).tocsr()
+        """The spring, mass and damping part of the last assembled system matrix, (3N, 3N) sparse
+        (contacts excluded; held nodes' rows and columns are the identity)."""
+        springs = self.springs
+        free = self._inv_mass > 0.0
+        blocks = self._iso[:, None, None] * np.eye(3) + self._axial[:, None, None] * (
+            self._unit[:, :, None] * self._unit[:, None, :])
+        blocks = blocks * (free[springs.node_i] & free[springs.node_j])[:, None, None]
+        nodes = np.arange(self.n_nodes)
+        rows = np.concatenate([nodes, springs.node_i, springs.node_j])
+        cols = np.concatenate([nodes, springs.node_j, springs.node_i])
+        values = np.concatenate([self._diagonal, -blocks, -blocks])
+        r = (3 * rows)[:, None, None] + np.arange(3)[None, :, None]
+        c = (3 * cols)[:, None, None] + np.arange(3)[None, None, :]
+        size = 3 * self.n_nodes
+        return scipy.sparse.coo_matrix((values.ravel(), (np.broadcast_to(r, values.shape).ravel(),
+                                                          np.broadcast_to(c, values.shape).ravel())),
+                                       shape=(size, size)).tocsr()
 
     def warm_up(self) -> None:
         """Compile the kernels (numba, cached on disk) before a timed loop starts."""
