@@ -7,7 +7,7 @@ under a uniform small strain ε.  Over springs with isotropically spread directi
 Lamé constants λ = G = E/2.5, i.e. Young's modulus E and Poisson's ratio 1/4.  Giving each
 tet's six edges k·l0² = E·V_tet (per tet) meets that in every tet:
 
-    λ2 = E · Σ_{tets ∋ edge} V_tet / l0          (N; a regular tet: k = E·V/l² = (√2/12)·E·l, Lloyd et al. 2007)
+    λ2 = E · Σ_{tets ∋ edge} V_tet / l0     (N; regular tet: k = E·V/l² = (√2/12)·E·l, Lloyd et al. 2007)
 
 Capsule (skin-triangle edges, a membrane of E·t = Y, N/m).  In 2-D, ⟨(uᵀεu)²⟩ = ((tr ε)² + 2·ε:ε)/8
 gives Y = Σ k·l0²/(3·A), hence per triangle k·l0² = Y·A_tri:
@@ -92,6 +92,11 @@ def triangle_areas(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     return 0.5 * np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1)
 
 
+def _capsule(mesh: TetMesh, capsule_triangles: np.ndarray | None) -> np.ndarray:
+    """The capsule triangles (K, 3): the given ones, or the whole skin."""
+    return mesh.skin if capsule_triangles is None else np.asarray(capsule_triangles, np.int64).reshape(-1, 3)
+
+
 def edge_measures(mesh: TetMesh, rest_points: np.ndarray | None = None,
                   capsule_triangles: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Per mesh edge (mesh.edges order): rest length l0 (m), Σ V_tet over its tets (m³) and Σ A_tri over its
@@ -99,7 +104,7 @@ def edge_measures(mesh: TetMesh, rest_points: np.ndarray | None = None,
     points = mesh.points if rest_points is None else rest_points
     edges = mesh.edges
     n = len(points)
-    triangles = mesh.skin if capsule_triangles is None else np.asarray(capsule_triangles, np.int64).reshape(-1, 3)
+    triangles = _capsule(mesh, capsule_triangles)
     rest = np.linalg.norm(points[edges[:, 1]] - points[edges[:, 0]], axis=1)
     volume = _edge_sums(edges, mesh.tets, TET_EDGES, signed_volumes(points, mesh.tets), n)
     area = _edge_sums(edges, triangles, TRIANGLE_EDGES, triangle_areas(points, triangles), n)
@@ -116,8 +121,7 @@ def material_springs(mesh: TetMesh, tissue: TissueProperties | None = None, rest
     lambda2 = (tissue.parenchyma_young_modulus_pa * volume + tissue.capsule_stiffness_n_per_m * area) / rest
     mu = (tissue.parenchyma_viscosity_pa_s * volume + tissue.capsule_viscosity_ns_per_m * area) / rest ** 2
     edges = mesh.edges
-    capsule = len(unique_edges(mesh.skin if capsule_triangles is None
-                               else np.asarray(capsule_triangles, np.int64).reshape(-1, 3), TRIANGLE_EDGES))
+    capsule = len(unique_edges(_capsule(mesh, capsule_triangles), TRIANGLE_EDGES))
     return SpringNetwork(node_i=np.ascontiguousarray(edges[:, 0]), node_j=np.ascontiguousarray(edges[:, 1]),
                          rest_length_m=rest, lambda1_n=tissue.cubic_ratio * lambda2, lambda2_n=lambda2,
                          mu_ns_per_m=mu, capsule_springs=capsule, parenchyma_springs=len(edges))
@@ -126,7 +130,8 @@ def material_springs(mesh: TetMesh, tissue: TissueProperties | None = None, rest
 def equivalent_properties(mesh: TetMesh, parenchyma_lambda2_n: float, capsule_lambda2_n: float,
                           parenchyma_mu_ns_per_m: float = 0.0, capsule_mu_ns_per_m: float = 0.0) -> dict:
     """The tissue properties that uniform per-spring constants (params.SpringLaw style) amount to on `mesh`:
-    E = λ2·Σ l0/(6·V), Y = λ2·Σ l0/(3·A) over the skin edges, η = μ·Σ l0²/(6·V), η_s = μ·Σ l0²/(3·A)."""
+    E = λ2·Σ l0/(6·V), Y = λ2·Σ l0/(3·A) over the skin edges, η = μ·Σ l0²/(6·V),
+    η_s = μ·Σ l0²/(3·A)."""
     points = mesh.points
     rest = np.linalg.norm(points[mesh.edges[:, 1]] - points[mesh.edges[:, 0]], axis=1)
     skin = mesh.skin_edges
