@@ -1,0 +1,245 @@
+"""Linearised backward Euler: against a dense NumPy assembly, stability at one step per frame, energy,
+held nodes, the contact Jacobian, and a press and release against symplectic Euler at 72 substeps."""
+import numpy as np
+import pytest
+from meshes import box_mesh
+
+from liver_sim.mesh.liver_shape import default_liver
+from liver_sim.physics import implicit, kernels, reference
+from liver_sim.physics.contact import ToolPose, candidate_nodes, tool_core
+from liver_sim.physics.implicit import Contacts, ImplicitEuler, round_tool_node_contacts
+from liver_sim.physics.model import LiverModel
+from liver_sim.physics.params import ModelParams
+from liver_sim.physics.springs import build_springs
+from liver_sim.scenarios import press_anchor
+from liver_sim.tool_scripts import ScriptSettings, make_script
+
+FRAME_S = 1.0 / 150.0
+
+
+def tiny_scene(offset_m=0.002, speed_m_s=0.05):
+    """A 2×1×1 box of 12 tets, perturbed and moving, node 0 held, a 1-node and a 3-node contact."""
+    mesh = box_mesh(2, 1, 1, 0.02)
+    springs = build_springs(mesh, ModelParams())
+    rng = np.random.default_rng(3)
+    x = mesh.points + rng.normal(scale=offset_m, size=mesh.points.shape)
+    v = rng.normal(scale=speed_m_s, size=x.shape)
+    inv_mass = 1.0 / mesh.lumped_masses(1060.0)
+    inv_mass[0] = 0.0
+    v[0] = 0.0
+    top = np.flatnonzero(mesh.points[:, 2] > 0.019)
+    normal = np.array([[0.0, 0.0, -1.0], [0.1, 0.0, -1.0] / np.linalg.norm([0.1, 0.0, -1.0])])
+    nodes = np.array([[top[0], -1, -1], top[1:4]])
+    weights = np.array([[1.0, 0.0, 0.0], [0.2, 0.5, 0.3]])
+    offset = np.array([normal[e] @ (weights[e][n >= 0] @ x[n[n >= 0]]) + 0.001  # 1 mm deep
+                       for e, n in enumerate(nodes)])
+    contacts = Contacts(nodes, weights, normal, offset, np.array([0.01, -0.02]), np.array([300.0, 200.0]),
+                        np.array([1.0, 0.5]))
+    external = rng.normal(scale=0.01, size=x.shape)
+    return mesh, springs, x, v, inv_mass, contacts, external
+
+
+def dense_reference_step(springs, x, v, inv_mass, contacts, external, h, c_env, gravity):
+    """Baraff–Witkin step from a dense NumPy assembly (the module docstring's equations)."""
+    n = len(x)
+    free = inv_mass > 0.0
+    mass = np.where(free, 1.0 / np.where(free, inv_mass, 1.0), 0.0)
+    f = reference.spring_forces(x, v, springs) + external + mass[:, None] * (gravity - c_env * v)
+    A = np.zeros((3 * n, 3 * n))
+    K = np.zeros((3 * n, 3 * n))
+    for s in range(springs.edges):
+        i, j = springs.node_i[s], springs.node_j[s]
+        axis = x[j] - x[i]
+        length = np.linalg.norm(axis)
+        u = axis / length
+        d = (length - springs.rest_length_m[s]) / springs.rest_length_m[s]
+        elastic = springs.lambda1_n[s] * d ** 3 + springs.lambda2_n[s] * d
+        stiff = ((3 * springs.lambda1_n[s] * d ** 2 + springs.lambda2_n[s]) / springs.rest_length_m[s] * np.outer(u, u)
+                 + max(elastic, 0.0) / length * (np.eye(3) - np.outer(u, u)))
+        damp = springs.mu_ns_per_m[s] * np.outer(u, u)
+        for a, b, sign in ((i, i, -1), (j, j, -1), (i, j, 1), (j, i, 1)):
+            K[3 * a:3 * a + 3, 3 * b:3 * b + 3] += sign * stiff
+            A[3 * a:3 * a + 3, 3 * b:3 * b + 3] -= sign * (h * h * stiff + h * damp)
+    for e in range(len(contacts)):
+        nodes = contacts.nodes[e]
+        w = contacts.weights[e]
+        nrm = contacts.normal[e]
+        k, c = contacts.stiffness_n_per_m[e], contacts.damping_ns_per_m[e]
+        used = nodes >= 0
+        depth = contacts.offset_m[e] - nrm @ (w[used] @ x[nodes[used]])
+        rate = contacts.normal_speed_m_s[e] - nrm @ (w[used] @ v[nodes[used]])
+        predicted = depth - h * nrm @ (w[used] @ (v[nodes[used]] * free[nodes[used], None]))
+        if k * predicted + c * rate <= 0.0:
+            continue
+        for a, wa in zip(nodes[used], w[used]):
+            f[a] += wa * (k * depth + c * rate) * nrm
+            for b, wb in zip(nodes[used], w[used]):
+                K[3 * a:3 * a + 3, 3 * b:3 * b + 3] -= wa * wb * k * np.outer(nrm, nrm)
+                A[3 * a:3 * a + 3, 3 * b:3 * b + 3] += wa * wb * (h * c + h * h * k) * np.outer(nrm, nrm)
+    A += np.diag(np.repeat(mass * (1.0 + h * c_env), 3))
+    dofs = np.repeat(free, 3)
+    v_free = (v * free[:, None]).ravel()
+    b = h * (f.ravel() + h * K @ v_free)
+    dv = np.zeros(3 * n)
+    dv[dofs] = np.linalg.solve(A[np.ix_(dofs, dofs)], b[dofs])
+    v_new = v + dv.reshape(n, 3)
+    x_new = np.where(free[:, None], x + h * v_new, x)
+    return x_new, v_new
+
+
+def test_step_matches_dense_numpy_assembly():
+    mesh, springs, x, v, inv_mass, contacts, external = tiny_scene()
+    gravity = np.array([0.0, 0.0, -9.81])
+    x_ref, v_ref = dense_reference_step(springs, x, v, inv_mass, contacts, external, FRAME_S, 3.0, gravity)
+    solver = ImplicitEuler(springs, len(x), cg_tolerance=1e-13, max_newton=0)
+    solver.step(x, v, inv_mass, external, FRAME_S, 3.0, gravity, contacts)
+    np.testing.assert_allclose(v, v_ref, atol=1e-10)
+    np.testing.assert_allclose(x, x_ref, atol=1e-12)
+
+
+def test_newton_iterations_solve_the_nonlinear_step():
+    # the Jacobian leaves out compressed springs' geometric stiffness and the viscous force's turning, so the
+    # iterations converge linearly: fast near rest (here ~1 % strain), slowly for violent states
+    mesh, springs, x, v, inv_mass, contacts, external = tiny_scene(offset_m=0.0002, speed_m_s=0.005)
+    x0, v0 = x.copy(), v.copy()
+    solver = ImplicitEuler(springs, len(x), cg_tolerance=1e-12, newton_tolerance_n=1e-9, max_newton=10)
+    solver.step(x, v, inv_mass, external, FRAME_S, 3.0, np.zeros(3))
+    assert 1 <= solver.last_newton_iterations < 10 and solver.last_residual_n <= 1e-9
+    # backward Euler: M·(v − v0) = h·f(x0 + h·v, v) on every free node
+    free = inv_mass > 0.0
+    f = reference.spring_forces(x, v, springs) + external - 3.0 * v / np.where(free, inv_mass, 1.0)[:, None]
+    momentum = (v - v0) / np.where(free, inv_mass, 1.0)[:, None]
+    np.testing.assert_allclose(momentum[free], FRAME_S * f[free], atol=1e-9 * FRAME_S)
+    np.testing.assert_allclose(x[free], x0[free] + FRAME_S * v[free])
+
+
+@pytest.fixture(scope="module")
+def liver():
+    return LiverModel(default_liver())
+
+
+def perturbed(model, seed=0, scale=0.002):
+    rng = np.random.default_rng(seed)
+    x = model.mesh.points + rng.normal(scale=scale, size=model.mesh.points.shape)
+    x[model.fixed_nodes] = model.mesh.points[model.fixed_nodes]
+    return x, np.zeros_like(x)
+
+
+def test_stable_at_one_step_per_frame_where_symplectic_euler_diverges(liver):
+    p = liver.params
+    x, v = perturbed(liver)
+    solver = ImplicitEuler(liver.springs, len(x))
+    for _ in range(150):
+        solver.step(x, v, liver.inv_mass, np.zeros_like(x), FRAME_S, p.environment_damping_per_s, np.zeros(3))
+    assert np.isfinite(x).all() and np.abs(x - liver.mesh.points).max() < 0.002
+    assert np.abs(v).max() < 1e-3
+    xe, ve = perturbed(liver)
+    springs = liver.springs
+    with np.errstate(all="ignore"):
+        kernels.run_frame(xe, ve, liver.inv_mass, springs.node_i, springs.node_j, springs.rest_length_m,
+                          springs.lambda1_n, springs.lambda2_n, springs.mu_ns_per_m, np.zeros((1, len(xe), 3)), False,
+                          FRAME_S, 30, p.environment_damping_per_s, np.zeros(3), True, kernels.TOOL_NONE, np.zeros(3),
+                          np.zeros(3), 0.01, np.eye(3), np.ones(3), np.zeros(3), 0.0, 0.0, np.zeros(3),
+                          np.zeros(0, np.int64), np.zeros_like(xe), np.zeros_like(xe), np.zeros(0), np.zeros((0, 3)),
+                          np.zeros((0, 3)))
+    assert not (np.isfinite(xe).all() and np.abs(xe - liver.mesh.points).max() < 0.1)
+
+
+def energy_j(model, x, v):
+    """Kinetic energy plus the springs' elastic energy, ∫T dl = l0·(λ1·d⁴/4 + λ2·d²/2)."""
+    s = model.springs
+    d = np.linalg.norm(x[s.node_j] - x[s.node_i], axis=1) / s.rest_length_m - 1.0
+    elastic = (s.rest_length_m * (s.lambda1_n * d ** 4 / 4 + s.lambda2_n * d ** 2 / 2)).sum()
+    return elastic + 0.5 * (model.masses_kg * (v ** 2).sum(axis=1)).sum()
+
+
+def test_energy_decreases_without_external_work(liver):
+    x, v = perturbed(liver, seed=1, scale=0.003)
+    v[:] = np.random.default_rng(2).normal(scale=0.05, size=v.shape)
+    v[liver.fixed_nodes] = 0.0
+    solver = ImplicitEuler(liver.springs, len(x))
+    energies = [energy_j(liver, x, v)]
+    for _ in range(60):
+        solver.step(x, v, liver.inv_mass, np.zeros_like(x), FRAME_S, 0.0, np.zeros(3))
+        energies.append(energy_j(liver, x, v))
+    steps = np.diff(energies)
+    assert (steps <= 1e-9 * energies[0]).all()
+    assert energies[-1] < 0.05 * energies[0]
+
+
+def test_held_nodes_stay_put(liver):
+    x, v = perturbed(liver, seed=4)
+    held = np.concatenate([liver.fixed_nodes, default_liver().skin_nodes[:5]])
+    inv_mass = liver.inv_mass.copy()
+    inv_mass[held] = 0.0
+    v[held] = 0.01  # a kinematic node's velocity is the scene's: kept, and it does not move during the step
+    before = x[held].copy()
+    solver = ImplicitEuler(liver.springs, len(x))
+    for _ in range(5):
+        solver.step(x, v, inv_mass, np.zeros_like(x), FRAME_S, 3.0, np.array([0.0, 0.0, -9.81]))
+    np.testing.assert_array_equal(x[held], before)
+    np.testing.assert_array_equal(v[held], 0.01)
+
+
+def test_contact_jacobian_matches_finite_differences():
+    mesh, springs, x, v, inv_mass, contacts, external = tiny_scene()
+    inv_mass = np.ones(len(x))
+    arrays = (contacts.nodes, contacts.weights, contacts.normal, contacts.offset_m, contacts.normal_speed_m_s,
+              contacts.stiffness_n_per_m, contacts.damping_ns_per_m)
+
+    def force(xs, vs):
+        f = np.zeros_like(xs)
+        implicit._contact_forces(xs, vs, np.zeros_like(xs), inv_mass, 0.0, *arrays, f, np.zeros_like(xs),
+                                 np.zeros(len(contacts)))
+        return f
+
+    def operator(coefficient, p):
+        """The solver's contact term of A·p with per-element coefficient (springs and mass left out)."""
+        out = np.zeros_like(p)
+        none = np.zeros(0, np.int64)
+        implicit._apply(none, none, np.zeros((0, 3)), np.zeros(0), np.zeros(0), np.zeros(len(p)), inv_mass,
+                        contacts.nodes, contacts.weights, contacts.normal, coefficient, p, out)
+        return out
+
+    direction = np.random.default_rng(5).normal(size=x.shape)
+    eps = 1e-7
+    dfdx = (force(x + eps * direction, v) - force(x - eps * direction, v)) / (2 * eps)
+    dfdv = (force(x, v + eps * direction) - force(x, v - eps * direction)) / (2 * eps)
+    assert np.abs(dfdx).max() > 1.0  # both contacts active
+    np.testing.assert_allclose(-operator(contacts.stiffness_n_per_m, direction), dfdx, atol=1e-6)
+    np.testing.assert_allclose(-operator(contacts.damping_ns_per_m, direction), dfdv, atol=1e-6)
+    ky = np.zeros_like(x)
+    implicit._contact_forces(x, v, direction, inv_mass, 0.0, *arrays, np.zeros_like(x), ky, np.zeros(len(contacts)))
+    np.testing.assert_allclose(ky, dfdx, atol=1e-6)
+
+
+def test_press_and_release_matches_symplectic_euler_at_72_substeps():
+    mesh = default_liver()
+    explicit, model = LiverModel(mesh), LiverModel(mesh)
+    assert explicit.params.substeps == 72
+    p, tool = model.params, model.tool
+    settings = ScriptSettings(anchor_m=tuple(press_anchor(mesh)), tool_radius_m=tool.radius_m, depth_m=0.01,
+                              clearance_m=0.005, approach_s=0.1, press_s=0.3, hold_s=0.2, withdraw_s=0.1, rest_s=0.3)
+    script = make_script("press_release", settings)
+    solver = ImplicitEuler(model.springs, len(mesh.points))
+    x, v = model.positions, model.velocities
+    centre = mesh.points.mean(axis=0)
+    previous = None
+    worst_position = worst_force = peak = 0.0
+    for frame in range(int(round(script.duration_s / FRAME_S))):
+        pose = ToolPose(script.position_at((frame + 1) * FRAME_S))
+        expected = -explicit.step_frame(pose).tool_force_n
+        core, _ = tool_core(tool, pose)  # the tool at the end of the frame, as the explicit kernel's last substep
+        velocity = np.zeros(3) if previous is None else (core - previous) / FRAME_S
+        previous = core
+        candidates = candidate_nodes(x, mesh.skin_nodes, tool, pose, 0.02 + np.linalg.norm(velocity) * FRAME_S)
+        contacts = round_tool_node_contacts(x, v, candidates, core, core, tool.radius_m, centre, velocity, FRAME_S,
+                                            p.contact_stiffness_n_per_m, p.contact_damping_ns_per_m)
+        force = solver.step(x, v, model.inv_mass, model.external_forces_n, FRAME_S, p.environment_damping_per_s,
+                            np.zeros(3), contacts)
+        worst_position = max(worst_position, np.abs(x - explicit.positions).max())
+        worst_force = max(worst_force, np.abs(force - expected).max())
+        peak = max(peak, np.linalg.norm(expected))
+    assert peak > 0.3  # a real press
+    assert worst_position < 0.2e-3
+    assert worst_force < 0.01

@@ -1,0 +1,114 @@
+"""Tissue properties → spring coefficients: the formulas, the read-back of the current defaults, a bar that
+recovers E, and mesh independence of a stretched liver (static equilibria by the implicit solver)."""
+import math
+
+import numpy as np
+import pytest
+from meshes import box_mesh
+
+from liver_sim.mesh.liver_shape import build_liver, default_liver
+from liver_sim.physics import reference
+from liver_sim.physics.implicit import ImplicitEuler
+from liver_sim.physics.materials import (CUBIC_RATIO, TissueProperties, edge_measures, equivalent_properties,
+                                         material_springs)
+from liver_sim.physics.params import ModelParams
+from liver_sim.physics.springs import build_springs
+from liver_sim.traction import cylinder_mesh
+
+
+def test_regular_tetrahedron_gets_lloyds_stiffness():
+    # one regular tet of edge l: k = λ2/l = (√2/12)·E·l (Lloyd et al. 2007); no capsule
+    from liver_sim.mesh import TetMesh
+    l = 0.01
+    points = np.array([[1, 1, 1], [1, -1, -1], [-1, 1, -1], [-1, -1, 1]], float) * l / math.sqrt(8)
+    mesh = TetMesh.from_arrays(points, np.array([[0, 1, 2, 3]]))
+    if np.linalg.det(points[1:] - points[0]) < 0:
+        mesh = TetMesh.from_arrays(points, np.array([[0, 2, 1, 3]]))
+    tissue = TissueProperties(parenchyma_young_modulus_pa=3000.0, capsule_stiffness_n_per_m=0.0)
+    springs = material_springs(mesh, tissue)
+    np.testing.assert_allclose(springs.lambda2_n / springs.rest_length_m, math.sqrt(2) / 12 * 3000.0 * l)
+    np.testing.assert_allclose(springs.lambda1_n, CUBIC_RATIO * springs.lambda2_n)
+
+
+def test_edge_measures_sum_to_six_volumes_and_three_areas():
+    mesh = box_mesh(3, 2, 2, 0.01)
+    rest, volume, area = edge_measures(mesh)
+    assert volume.sum() == pytest.approx(6 * mesh.volume)
+    assert area.sum() == pytest.approx(3 * 2 * (0.03 * 0.02 + 0.03 * 0.02 + 0.02 * 0.02))
+    assert (area[~np.isin(np.arange(len(rest)), np.flatnonzero(area))] == 0).all()
+
+
+def test_current_defaults_read_back_as_known_moduli():
+    params = ModelParams()
+    moduli = equivalent_properties(default_liver(), params.parenchyma.lambda2_n, params.capsule.lambda2_n)
+    assert moduli["parenchyma_young_modulus_pa"] == pytest.approx(2.1e3, rel=0.03)
+    assert moduli["capsule_stiffness_n_per_m"] == pytest.approx(585.0, rel=0.03)
+
+
+def test_material_springs_read_back_their_properties_on_average():
+    # uniform springs with the material springs' mean λ2·l0 read back as the tissue's E (same formula, inverted)
+    mesh = default_liver()
+    tissue = TissueProperties(capsule_stiffness_n_per_m=0.0, capsule_viscosity_ns_per_m=0.0)
+    springs = material_springs(mesh, tissue)
+    e = (springs.lambda2_n * springs.rest_length_m).sum() / (6 * mesh.volume)
+    assert e == pytest.approx(tissue.parenchyma_young_modulus_pa)
+    eta = (springs.mu_ns_per_m * springs.rest_length_m ** 2).sum() / (6 * mesh.volume)
+    assert eta == pytest.approx(tissue.parenchyma_viscosity_pa_s)
+
+
+def test_validate_names_the_parameter():
+    with pytest.raises(ValueError, match="parenchyma_young_modulus_pa"):
+        TissueProperties(parenchyma_young_modulus_pa=-1.0).validate()
+
+
+def static_reaction(mesh, springs, pulled, fixed, displacement):
+    """Static equilibrium with `fixed` nodes held at rest and `pulled` nodes moved by `displacement` (m):
+    the force the springs pull `pulled` back with (N), from backward-Euler steps of 1 s (quasi-static)."""
+    x = mesh.points.copy()
+    x[pulled] += displacement
+    v = np.zeros_like(x)
+    inv_mass = 1.0 / mesh.lumped_masses(1060.0)
+    inv_mass[np.concatenate([pulled, fixed])] = 0.0
+    solver = ImplicitEuler(springs, len(x), cg_tolerance=1e-10, max_cg_iterations=20_000, newton_tolerance_n=0.0,
+                           max_newton=0)
+    for _ in range(60):
+        solver.step(x, v, inv_mass, np.zeros_like(x), 1.0, 0.0, np.zeros(3))
+        if np.abs(v).max() < 1e-9:
+            break
+    assert np.abs(v).max() < 1e-7
+    return reference.spring_forces(x, np.zeros_like(x), springs)[pulled].sum(axis=0)
+
+
+def test_bar_recovers_young_modulus():
+    mesh = cylinder_mesh(0.005)
+    z = mesh.points[:, 2]
+    length = z.max() - z.min()
+    top, bottom = np.flatnonzero(z > z.max() - 1e-6), np.flatnonzero(z < z.min() + 1e-6)
+    tissue = TissueProperties(capsule_stiffness_n_per_m=0.0, capsule_viscosity_ns_per_m=0.0)
+    strain = 0.002
+    force = static_reaction(mesh, material_springs(mesh, tissue), bottom, top, np.array([0.0, 0.0, -strain * length]))
+    area = mesh.volume / length
+    measured = force[2] / (area * strain)
+    assert measured == pytest.approx(tissue.parenchyma_young_modulus_pa, rel=0.15)
+
+
+@pytest.fixture(scope="module")
+def fine_liver():
+    return build_liver(10_000)
+
+
+def liver_stretch(mesh, springs, strain=0.01, grip_m=0.03):
+    """Reaction (N) of a liver whose nodes within grip_m of its left (−x) end are held while those within
+    grip_m of its right end are moved right by strain × the length between the grips."""
+    x = mesh.points[:, 0]
+    left, right = np.flatnonzero(x < x.min() + grip_m), np.flatnonzero(x > x.max() - grip_m)
+    span = (x.max() - grip_m) - (x.min() + grip_m)
+    return static_reaction(mesh, springs, right, left, np.array([strain * span, 0.0, 0.0]))[0]
+
+
+def test_stretch_is_mesh_independent_with_material_springs(fine_liver):
+    coarse, fine = default_liver(), fine_liver
+    material = [liver_stretch(m, material_springs(m)) for m in (coarse, fine)]
+    raw = [liver_stretch(m, build_springs(m, ModelParams())) for m in (coarse, fine)]
+    assert material[1] == pytest.approx(material[0], rel=0.25)
+    assert raw[1] / raw[0] > 2.0  # per-spring constants: the finer mesh is far stiffer
