@@ -1,4 +1,4 @@
-"""Rendering the local model at 1 kHz (paper §2.5, P11): glide between physics updates, penalty force,
+"""Rendering the local model at 1 kHz (paper §2.5; P11 of docs/paper.md): glide between physics updates, penalty force,
 passivity bounds.
 
 The physics (150 Hz) approximates the surface near the tool by a plane or a sphere

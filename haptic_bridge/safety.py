@@ -1,4 +1,4 @@
-"""What stands between the force computation and the haptic device (DESIGN "Haptic safety").
+"""What stands between the force computation and the haptic device (docs/contract.md, "Haptic safety").
 
 The device never receives NaN/inf, a force above `max_force`, a change faster
 than the rate limit, or a force computed from stale data: when the local model
@@ -15,7 +15,7 @@ from liver_sim.checks import positive
 
 #: The PHANToM's peak force (N); no configuration may exceed it.
 PHANTOM_MAX_FORCE_N = 3.3
-#: DESIGN default for the force clamp (N).
+#: Default force clamp (N), docs/contract.md.
 DEFAULT_MAX_FORCE_N = 2.0
 #: Gains within this of 0 or 1 are snapped there, so ramps end exactly.
 _GAIN_SNAP = 1e-9
@@ -102,7 +102,7 @@ class Watchdog:
 class SafeForceOutput:
     """The last stage before the device: F_out = finite(clamp(rate_limit(clamp(gain·F)))).
 
-    `max_force` (N) must lie in (0, 3.3] (PHANToM limit; DESIGN default 2.0).
+    `max_force` (N) must lie in (0, 3.3] (PHANToM limit; default 2.0).
     The target is clamped before the rate limiter so the limiter's state never
     winds up above the clamp (releasing a stiff contact is not delayed); the
     final clamp and finiteness check guard the wire. `max_rate_n_per_s`·`ramp_time_s`

@@ -1,5 +1,5 @@
 """One tick of the haptic loop without ROS: tool tip + newest local model (or physics wrench) → the
-safe force command for the device (paper §2.5, P11; DESIGN "Haptic safety").
+safe force command for the device (paper §2.5, P11 of docs/paper.md; docs/contract.md, "Haptic safety").
 
 The `haptic_bridge` node runs a BridgeTick at rate_hz on live messages; `liver-sim resimulate`
 runs the same BridgeTick on recorded tool poses.  Parameters: haptic_bridge.parameters.PARAMETERS.

@@ -1,4 +1,4 @@
-"""Figures of a run from what arrived when: loop rates, period errors, force smoothness (R4, Fig. 8)."""
+"""Figures of a run from what arrived when: loop rates, period errors, force smoothness (R4 of docs/paper.md, Fig. 8)."""
 from __future__ import annotations
 
 import numpy as np

@@ -1,4 +1,4 @@
-"""`liver-sim bench physics`: step cost of the model for the default liver and larger livers (R2).
+"""`liver-sim bench physics`: step cost of the model for the default liver and larger livers (R2 of docs/paper.md).
 
 One step = every spring's Eq. 1 force plus one integration of every node (no tool), timed with
 the serial kernel, the parallel kernel on all threads, and the plain-NumPy oracle, which also

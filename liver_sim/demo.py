@@ -1,5 +1,5 @@
 """`liver-sim demo --offline`: the scripted press-and-release on the default liver, in one process
-without ROS (B1–B3).
+without ROS (behaviours B1–B3 of docs/paper.md).
 
 Writes to the output folder: summary.json and summary.md (the figures), force.png (force and
 displacement over time) and liver_press.png (the deformed liver at peak press).
@@ -81,10 +81,10 @@ def _markdown(summary: dict) -> str:
         f"- simulated {summary['simulated_s']:.2f} s in {summary['wall_s']:.2f} s "
         f"({summary['realtime_factor']:.1f}x real time)",
         f"- peak force on the tool: {summary['peak_force_n']:.3f} N",
-        f"- peak displacement: {summary['peak_displacement_m'] * 1e3:.1f} mm (B1: see liver_press.png)",
+        f"- peak displacement: {summary['peak_displacement_m'] * 1e3:.1f} mm (B1, local deformation: see liver_press.png)",
         f"- half recovery after the tool left: {summary['half_recovery_s']:.2f} s; 90 % of the shape back after "
-        f"{summary['shape_recovery_90pct_s']:.2f} s (B3)",
-        f"- residual displacement at the end: {summary['final_displacement_m'] * 1e3:.3f} mm (B2)",
+        f"{summary['shape_recovery_90pct_s']:.2f} s (B3, slow return)",
+        f"- residual displacement at the end: {summary['final_displacement_m'] * 1e3:.3f} mm (B2, return to shape)",
         f"- divergences: {len(summary['divergences'])}",
         "",
     ])

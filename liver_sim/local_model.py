@@ -1,4 +1,4 @@
-"""The local model of the touched surface (paper §2.5, P10–P11): a plane or a sphere near the tool.
+"""The local model of the touched surface (paper §2.5; P10–P11 of docs/paper.md): a plane or a sphere near the tool.
 
 The physics (150 Hz) fits it at the end of each frame; the wire carries it as a Marker; between
 physics updates the haptic loop renders it analytically. Everything here works on 3-vectors in

@@ -1,4 +1,4 @@
-"""The simulated PHANToM without ROS (P12), and the parameters of the `phantom_sim` node that runs it.
+"""The simulated PHANToM without ROS (paper P12, docs/paper.md), and the parameters of the `phantom_sim` node that runs it.
 
 `PhantomSim` stands in for the device: a point mass at the stylus tip held by a virtual hand — a
 spring-damper pulling it towards a hand target that plays a `tool_scripts` script — and pushed

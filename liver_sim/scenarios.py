@@ -1,4 +1,4 @@
-"""Tool scripts played offline on the model, and what they record (B1–B3).
+"""Tool scripts played offline on the model, and what they record (behaviours B1–B3 of docs/paper.md).
 
 `press_release` lowers a sphere tool onto the top of the liver, presses, holds, withdraws and
 waits (the `press_release` script of liver_sim.tool_scripts), recording the force, the tool and

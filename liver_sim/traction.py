@@ -1,4 +1,4 @@
-"""The virtual traction test of §3.2 (R1, Figs. 4–5).
+"""The virtual traction test of §3.2 (R1 of docs/paper.md, Figs. 4–5).
 
 A cylinder of tets, top fixed, equal axial forces on all bottom nodes, relaxed to static
 equilibrium at several force levels; its global force–elongation curve is set beside the

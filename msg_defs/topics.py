@@ -1,4 +1,4 @@
-"""DESIGN.md's topics table as data: default name, message type and QoS of each topic.
+"""The topics table of docs/contract.md as data: default name, message type and QoS of each topic.
 
 The names are defaults (nodes declare them as parameters); the QoS profile of a row suits both its
 publishers and its subscribers.

@@ -1,4 +1,4 @@
-"""R3: the default liver's behaviour under a scripted press and release (B1–B3)."""
+"""R3 of docs/paper.md: the default liver's behaviour under a scripted press and release (B1–B3)."""
 import numpy as np
 import pytest
 

@@ -1,4 +1,4 @@
-"""Cutting along the tool path (paper §3.5, P14, R5): the cut follows the path, the mesh stays sound."""
+"""Cutting along the tool path (paper §3.5; P14, R5 of docs/paper.md): the cut follows the path, the mesh stays sound."""
 import numpy as np
 import pytest
 import scipy.sparse

@@ -1,4 +1,4 @@
-"""P13: tearing (paper §2.6) by face separation and node duplication, and topology changes of the model."""
+"""P13 of docs/paper.md: tearing (paper §2.6) by face separation and node duplication, and topology changes of the model."""
 import math
 
 import numpy as np

@@ -1,4 +1,4 @@
-"""R1 (Figs. 4–5): the cylinder's global force–elongation curve has the connector law's shape."""
+"""R1 of docs/paper.md (Figs. 4–5): the cylinder's global force–elongation curve has the connector law's shape."""
 import csv
 
 import numpy as np

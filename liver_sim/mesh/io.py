@@ -1,4 +1,4 @@
-"""Mesh files in and out (DESIGN "Meshes in").
+"""Mesh files in and out (docs/contract.md, "Files").
 
 :func:`load_mesh` reads volume meshes (Gmsh ``.msh`` 2.2/4.1 and the old v1 format,
 VTK ``.vtu``/``.vtk``, Medit ``.mesh``) and closed surfaces (``.stl``, ``.obj``,

@@ -1,4 +1,4 @@
-"""The embedded default liver: a procedural shape, tetrahedralised by isosurface stuffing (paper P1).
+"""The embedded default liver: a procedural shape, tetrahedralised by isosurface stuffing (paper P1, docs/paper.md).
 
 Frame ``liver`` (metres), patient axes as in DICOM LPS:
 

@@ -1,4 +1,4 @@
-"""Validated tetrahedral meshes: the geometric component of the model (paper §2.1, P1).
+"""Validated tetrahedral meshes: the geometric component of the model (paper §2.1; P1 of docs/paper.md).
 
 A :class:`TetMesh` holds node positions in metres and positively oriented
 tetrahedra.  The skin (Glisson's capsule) is always derived from the tets: it is

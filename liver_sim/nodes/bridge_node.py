@@ -1,7 +1,7 @@
 """`haptic_bridge`: the 1 kHz haptic loop between the physics (150 Hz) and the device driver.
 
 Each tick of a RateLoop (own thread) turns the newest tool pose and local model into a contact
-force (paper §2.5, P11) — or, with `local_model: none`, holds the newest physics contact wrench
+force (paper §2.5, P11 of docs/paper.md) — or, with `local_model: none`, holds the newest physics contact wrench
 (the "without local model" baseline of Fig. 8, R4) — maps it into the device frame and sends it
 through SafeForceOutput (clamp, rate limit, watchdog) to the driver's force topic.  Subscription
 callbacks only validate and store snapshots.  The command is stamped with the stamp of the input

@@ -1,4 +1,4 @@
-"""`phantom_sim`: a simulated PHANToM for use without hardware (P12).
+"""`phantom_sim`: a simulated PHANToM for use without hardware (paper P12, docs/paper.md).
 
 A RateLoop at `rate_hz` (1 kHz) steps `liver_sim.phantom.PhantomSim` — a stylus with mass held by a
 virtual hand playing a `tool_scripts` script — and publishes the stylus on /phantom/measured_cp

@@ -1,4 +1,4 @@
-"""The rigid tool (P9), its candidate skin elements, and the haptic local model of the touched surface (P11).
+"""The rigid tool (paper P9, docs/paper.md), its candidate skin elements, and the haptic local model of the touched surface (P11).
 
 The tool tip is the pose's position; the tool frame's +z axis points back along the shaft.
 - sphere: a ball of `radius_m` centred on the tip;

@@ -1,4 +1,4 @@
-"""Cutting along the tool's swept path (paper §3.5, P14, R5): split the crossed tets, open the cut.
+"""Cutting along the tool's swept path (paper §3.5; P14, R5 of docs/paper.md): split the crossed tets, open the cut.
 
 The blade is the tool-tip path (P, 3), in the deformed frame, swept along one fixed blade direction d
 (by default the inward normal of the skin around the path, made perpendicular to the path's chord):

@@ -37,7 +37,7 @@ def scaled_masses(masses_kg: np.ndarray, min_fraction: float) -> np.ndarray:
     """Lumped masses raised to at least `min_fraction` × their mean, then rescaled to the same total.
 
     Mass scaling for the explicit step: the stable time step goes with √m of the lightest nodes,
-    which isosurface stuffing makes small at the skin; the organ's mass (P2) is unchanged.
+    which isosurface stuffing makes small at the skin; the organ's mass (paper P2, docs/paper.md) is unchanged.
     """
     floored = np.maximum(masses_kg, min_fraction * masses_kg.mean())
     return floored * (masses_kg.sum() / floored.sum())

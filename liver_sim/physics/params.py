@@ -1,4 +1,4 @@
-"""Model constants: the spring laws of the capsule and the parenchyma, and the scene (P2–P8, P10).
+"""Model constants: the spring laws of the capsule and the parenchyma, and the scene (paper P2–P8, P10: docs/paper.md).
 
 Every quantity is in SI units; the field names carry them.  `validate()` refuses
 out-of-range values with a ValueError that names the parameter.

@@ -1,4 +1,4 @@
-"""The spring-damper network built on a tet mesh (P3) and its stability bound.
+"""The spring-damper network built on a tet mesh (paper P3, docs/paper.md) and its stability bound.
 
 Parenchyma springs sit on every tet edge, capsule springs on every capsule-triangle
 edge (the skin, less faces opened by tears and cuts); such an edge carries both.  Two Eq. 1 springs on one edge with one

@@ -1,4 +1,4 @@
-"""What the tool does besides pressing (P13, P14): grasp what it touches, or cut along each stroke.
+"""What the tool does besides pressing (paper P13, P14: docs/paper.md): grasp what it touches, or cut along each stroke.
 
 `ToolUse.step_frame` runs one LiverModel frame with the tool in its mode: grasp or let go before it,
 hold the grasped nodes during it, follow a cutting stroke after it and cut when the tool leaves the

@@ -1,4 +1,4 @@
-"""Changing the model's topology (paper §2.6, §3.5; P13, P14): what a tear or a cut hands the model.
+"""Changing the model's topology (paper §2.6, §3.5; P13, P14 of docs/paper.md): what a tear or a cut hands the model.
 
 A topology change maps the old nodes onto new ones: every new node's state (position, velocity) is
 a weighted sum of old nodes' states (`node_sources`, `node_weights`): a node duplicated by a tear

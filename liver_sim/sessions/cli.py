@@ -15,7 +15,7 @@ def add_record_command(commands) -> None:
     """``liver-sim record [--topics …] [--storage mcap|sqlite3] [--out DIR] [--duration S] [--marker]``."""
     parser = commands.add_parser("record", help="record the product's topics into a rosbag2 bag until Ctrl-C")
     parser.add_argument("--topics", nargs="+", metavar="TOPIC",
-                        help="topics to record (default: every topic of DESIGN.md but /liver/marker, and the "
+                        help="topics to record (default: every topic of docs/contract.md but /liver/marker, and the "
                              "Fig. 8 baseline force)")
     parser.add_argument("--marker", action="store_true", help="also record /liver/marker (30 Hz skin triangles)")
     parser.add_argument("--storage", choices=STORAGES, default="mcap", help="bag storage (default: %(default)s)")

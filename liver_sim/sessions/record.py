@@ -26,7 +26,7 @@ PROGRESS_PERIOD_S = 5.0
 
 
 def default_topics(marker: bool = False) -> list[str]:
-    """DESIGN.md's topics (and the Fig. 8 baseline force); /liver/marker only when asked for."""
+    """The topics of docs/contract.md (and the Fig. 8 baseline force); /liver/marker only when asked for."""
     from msg_defs.topics import BASELINE_FORCE_TOPIC, TOPICS
 
     names = [t.name for key, t in TOPICS.items() if marker or key != "marker"]
@@ -34,7 +34,7 @@ def default_topics(marker: bool = False) -> list[str]:
 
 
 def known_topics() -> dict:
-    """{name: (message class, QosSpec)} of the product's topics; force commands as DESIGN's default
+    """{name: (message class, QosSpec)} of the product's topics; force commands as the contract's default
     WrenchStamped (`force_output: wrench_stamped`)."""
     from geometry_msgs.msg import WrenchStamped
     from rclpy.qos import DurabilityPolicy, ReliabilityPolicy
@@ -87,7 +87,7 @@ def offered_qos(node, topic: str) -> QosSpec | None:
 class Recorder:
     """Raw subscriptions of `topics` on a hidden node, drained into `writer` by `drain()`.
 
-    Product topics are subscribed at once with DESIGN.md's QoS (deep history); other topics once the
+    Product topics are subscribed at once with their QoS of docs/contract.md (deep history); other topics once the
     graph shows their type, with the QoS their publishers offer.
     """
 

@@ -1,8 +1,8 @@
 """`liver-sim replay`: republish a bag's messages (serialized, as recorded) with their original timing.
 
 Message k goes out at start + (t_k − t_0)/rate on an absolute schedule, so a slow publish delays
-the next messages without shifting the rest.  Product topics keep DESIGN.md's QoS, other topics
-reliable (transient local when the bag says their publishers offered it).
+the next messages without shifting the rest.  Product topics keep their QoS of docs/contract.md;
+other topics are published reliable, volatile, keep-last 10.
 """
 from __future__ import annotations
 
