@@ -6,7 +6,7 @@ from meshes import box_mesh
 
 from liver_sim.mesh.liver_shape import default_liver
 from liver_sim.physics import implicit, kernels, reference
-from liver_sim.physics.contact import ToolPose, candidate_nodes, tool_core
+from liver_sim.physics.contact import ToolPose, candidate_nodes, tool_core, tool_state
 from liver_sim.physics.implicit import Contacts, ImplicitEuler, round_tool_node_contacts
 from liver_sim.physics.model import LiverModel
 from liver_sim.physics.params import ModelParams
@@ -135,13 +135,11 @@ def test_stable_at_one_step_per_frame_where_symplectic_euler_diverges(liver):
     assert np.abs(v).max() < 1e-3
     xe, ve = perturbed(liver)
     springs = liver.springs
+    settings = kernels.StepSettings(FRAME_S, 30, p.environment_damping_per_s, np.zeros(3), True)
+    no_tool = tool_state(liver.tool, None, None, p, 0.0, xe, liver.mesh.skin_nodes, np.zeros(3))
+    work = kernels.WorkArrays(np.zeros_like(xe), np.zeros((1, len(xe), 3)), False)
     with np.errstate(all="ignore"):
-        kernels.run_frame(xe, ve, liver.inv_mass, springs.node_i, springs.node_j, springs.rest_length_m,
-                          springs.lambda1_n, springs.lambda2_n, springs.mu_ns_per_m, np.zeros((1, len(xe), 3)), False,
-                          FRAME_S, 30, p.environment_damping_per_s, np.zeros(3), True, kernels.TOOL_NONE, np.zeros(3),
-                          np.zeros(3), 0.01, np.eye(3), np.ones(3), np.zeros(3), 0.0, 0.0, np.zeros(3),
-                          np.zeros(0, np.int64), np.zeros_like(xe), np.zeros_like(xe), np.zeros(0), np.zeros((0, 3)),
-                          np.zeros((0, 3)))
+        kernels.run_frame(xe, ve, liver.inv_mass, np.zeros_like(xe), liver._spring_arrays, settings, no_tool, work)
     assert not (np.isfinite(xe).all() and np.abs(xe - liver.mesh.points).max() < 0.1)
 
 
