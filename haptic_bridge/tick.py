@@ -79,11 +79,16 @@ def safe_output(p: dict) -> SafeForceOutput:
                          f"max_force_n={p['max_force_n']:g}, ramp_time_s={p['ramp_time_s']:g}: {exc}") from None
 
 
+#: A penetration rate beyond this (m/s) is no motion of a hand-held stylus but a jump of the inputs.
+MAX_DEPTH_RATE_M_S = 10.0
+
+
 class DepthRate:
     """Rate (m/s) of the penetration depth: finite difference over the tick, one-pole low-passed.
 
-    A non-finite depth is dropped (the rate stays); a difference that overflows restarts the filter at the
-    new depth with rate 0, so no sample, however large, leaves NaN or inf behind.
+    A non-finite depth is dropped (the rate stays); a jump faster than MAX_DEPTH_RATE_M_S (or one that
+    overflows) restarts the filter at the new depth with rate 0, so no sample, however large, leaves NaN,
+    inf or a slowly decaying huge rate behind: the next good sample renders.
     """
 
     def __init__(self, period_s: float, cutoff_hz: float):
@@ -101,8 +106,10 @@ class DepthRate:
             return self.rate
         raw = (depth - self.depth) / self.period_s
         self.depth = depth
-        rate = self.rate + self.alpha * (raw - self.rate)
-        self.rate = rate if math.isfinite(rate) else 0.0
+        if not abs(raw) <= MAX_DEPTH_RATE_M_S:
+            self.rate = 0.0
+        else:
+            self.rate += self.alpha * (raw - self.rate)
         return self.rate
 
 
