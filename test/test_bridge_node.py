@@ -354,6 +354,13 @@ def wait_for_exit(rig: Rig, bridge: subprocess.Popen) -> None:
     rig.spin_for(0.5)
 
 
+def terminate_to_zero(rig: Rig, bridge: subprocess.Popen) -> None:
+    """SIGTERM the bridge; its last command on the wire is zero."""
+    bridge.send_signal(signal.SIGTERM)
+    wait_for_exit(rig, bridge)
+    assert bridge.returncode == 0 and not rig.forces[-1].any()
+
+
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
 def test_a_signal_in_contact_leaves_zero_as_the_last_command_after_a_soft_start(rig_factory, ros_env, sig):
     rig = rig_factory()
@@ -396,11 +403,9 @@ def test_a_loop_that_raises_or_stalls_yields_zero_and_an_error_diagnostic(rig_fa
         rig.tool = INSIDE  # the loop is back: a soft start to the contact force
         rig.wait_for_force(CONTACT, bridge)
         assert int(rig.loop_status()[f"{kind}s"]) > 0
-        bridge.send_signal(signal.SIGTERM)
-        wait_for_exit(rig, bridge)
+        terminate_to_zero(rig, bridge)
     finally:
         stop(bridge)
-    assert not rig.forces[-1].any()
     assert_safe(rig.forces)
 
 
@@ -472,9 +477,7 @@ def test_a_managed_bridge_zeroes_the_force_on_deactivate(rig_factory, ros_env):
         assert len(rig.forces) == count, "nothing after the zero while inactive"
         change(Transition.TRANSITION_ACTIVATE)
         rig.wait_for_force(CONTACT, bridge)
-        bridge.send_signal(signal.SIGTERM)
-        wait_for_exit(rig, bridge)
+        terminate_to_zero(rig, bridge)
     finally:
         stop(bridge)
-    assert not rig.forces[-1].any()
     assert_safe(rig.forces)
