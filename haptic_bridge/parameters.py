@@ -1,7 +1,9 @@
 """The haptic bridge's parameters (no ROS): declared by the `haptic_bridge` node, read by BridgeTick and by
-the offline sessions (liver_sim.sessions), so both refuse the same values."""
+the offline sessions (liver_sim.sessions), so both refuse the same values.
+
+The device map is not among them: the bridge takes the one `liver_tool` publishes on device_map_topic
+(latched), so the map that places the tool and the map that turns the force can never differ."""
 from haptic_bridge.safety import DEFAULT_MAX_FORCE_N, PHANTOM_MAX_FORCE_N
-from liver_sim.geometry.device_map import DEVICE_MAP_PARAMETERS
 from liver_sim.parameters import Param, realtime_priority_parameter
 from msg_defs.conversions import FORCE_OUTPUT_FORMATS
 from msg_defs.topics import TOPICS
@@ -30,9 +32,27 @@ PARAMETERS = {
                          "(PHANToM peak)", 0.01, PHANTOM_MAX_FORCE_N),
     "max_force_rate_n_per_s": Param(400.0, "largest change of the commanded force (N/s); at least "
                                     "max_force_n/ramp_time_s", 1.0, 100000.0),
-    "lifetime_s": Param(0.05, "age (s) beyond which the tool pose, the physics wrench, or a local model "
-                        "without its own lifetime is stale", 0.001, 10.0),
+    "lifetime_s": Param(0.05, "age (s) since reception beyond which the tool pose, the physics wrench or a "
+                        "local model is stale (a marker's own lifetime may only shorten it)", 0.001, 10.0),
     "ramp_time_s": Param(0.01, "time (s) for the watchdog to ramp the force to zero on stale data", 0.001, 0.01),
+    "soft_start_s": Param(0.2, "time (s) over which the force rises from zero after start and after every "
+                          "recovery (fresh data again, a stall or error of the loop, a new device map)", 0.1, 10.0),
+    "stall_bound_s": Param(0.005, "the supervisor publishes zero when the loop has not ticked for this long (s) "
+                           "and holds it until the loop is back", 0.002, 0.1),
+    "workspace_centre_m": Param([0.0, 0.0, 0.0], "centre of the plausible workspace around the liver (m, liver "
+                                "frame)"),
+    "workspace_radius_m": Param(0.4, "a tool tip, plane point or sphere centre farther than this from "
+                                "workspace_centre_m is refused as implausible (m)", 0.01, 10.0),
+    "contact_stiffness_n_per_m": Param(300.0, "liver_physics' contact_stiffness_n_per_m: the stiffness rendered "
+                                       "with local_model none, for its passivity check", 0.0, 1e6),
+    "contact_damping_ns_per_m": Param(1.0, "liver_physics' contact_damping_ns_per_m: the damping rendered with "
+                                      "local_model none, for its passivity check", 0.0, 1e4),
+    "physics_rate_hz": Param(150.0, "liver_physics' rate_hz: with local_model none the force is held for a "
+                             "physics period, the T of its passivity check", 1.0, 5000.0),
+    "drives_device": Param(True, "false: force_topic drives no device (a comparison bridge); a rendering that "
+                           "is not passive is then reported, not refused"),
+    "device_map_topic": Param(TOPICS["device_map"].name, "the device map liver_tool publishes (latched); no "
+                              "force is rendered before it arrives"),
     "force_output": Param("wrench_stamped", "message type of the force command", choices=FORCE_OUTPUT_FORMATS),
     "force_topic": Param(TOPICS["servo_cf"].name, "force command to the device driver"),
     "tool_pose_topic": Param(TOPICS["tool_pose"].name, "tool tip pose in the liver frame (PoseStamped)"),
@@ -40,5 +60,4 @@ PARAMETERS = {
     "tool_wrench_topic": Param(TOPICS["tool_wrench"].name, "physics contact force on the tool, liver frame "
                                "(WrenchStamped); rendered with local_model: none"),
     "device_frame_id": Param("phantom_base", "frame_id of the force command"),
-    **DEVICE_MAP_PARAMETERS,
 }

@@ -3,7 +3,9 @@
 The device never receives NaN/inf, a force above `max_force`, a change faster
 than the rate limit, or a force computed from stale data: when the local model
 or the tool pose outlives its lifetime the force ramps to exactly zero within
-`ramp_time_s` and stays there until fresh data arrive.
+`ramp_time_s` and stays there until fresh data arrive. It then rises again over
+the soft-start time (`rise_time_s`), as it does after start and after every
+restart (a stall or an error of the loop, a new device map).
 """
 from __future__ import annotations
 
@@ -67,17 +69,30 @@ class Watchdog:
     """Force gain in [0, 1] from the age of the newest local model and tool pose.
 
     Called once per tick of `period_s`. Fresh (both ages ≤ their lifetime): the
-    gain rises by `period_s`/`ramp_time_s` per tick up to 1; stale (either age
-    beyond its lifetime, NaN or inf): it falls by the same step to exactly 0,
-    reached within ceil(`ramp_time_s`/`period_s`) ticks, and stays there.
+    gain rises by `period_s`/`rise_time_s` per tick up to 1 (soft start; `rise_time_s`
+    defaults to `ramp_time_s`); stale (either age beyond its lifetime, NaN or inf):
+    it falls by `period_s`/`ramp_time_s` to exactly 0, reached within
+    ceil(`ramp_time_s`/`period_s`) ticks, and stays there.
     `state` is 'ok', 'ramping_down', 'stale' or 'ramping_up' (for diagnostics);
-    it starts 'stale', with gain 0, until fresh data arrive.
+    it starts 'stale', with gain 0, until fresh data arrive; :meth:`restart` returns there.
     """
 
-    def __init__(self, lifetime_s: float = 0.05, ramp_time_s: float = 0.01, period_s: float = 0.001):
+    def __init__(self, lifetime_s: float = 0.05, ramp_time_s: float = 0.01, period_s: float = 0.001,
+                 rise_time_s: float | None = None):
+        self.period_s = positive(period_s, "period_s")
+        self.configure(lifetime_s, ramp_time_s, ramp_time_s if rise_time_s is None else rise_time_s)
+        self.restart()
+
+    def configure(self, lifetime_s: float, ramp_time_s: float, rise_time_s: float) -> None:
+        """New lifetime, ramp-down and soft-start times (s), effective from the next tick."""
         self.lifetime_s = positive(lifetime_s, "lifetime_s")
         self.ramp_time_s = positive(ramp_time_s, "ramp_time_s")
-        self._step = positive(period_s, "period_s") / self.ramp_time_s
+        self.rise_time_s = positive(rise_time_s, "rise_time_s")
+        self._down = self.period_s / self.ramp_time_s
+        self._up = self.period_s / self.rise_time_s
+
+    def restart(self) -> None:
+        """Gain 0, state 'stale': the force starts again from zero with a soft start."""
         self.gain = 0.0
         self.state = "stale"
 
@@ -89,7 +104,7 @@ class Watchdog:
         """
         model_lifetime = self.lifetime_s if model_lifetime_s is None else model_lifetime_s
         fresh = model_age_s <= model_lifetime and pose_age_s <= self.lifetime_s
-        gain = self.gain + self._step if fresh else self.gain - self._step
+        gain = self.gain + self._up if fresh else self.gain - self._down
         if gain >= 1.0 - _GAIN_SNAP:
             self.gain, self.state = 1.0, "ok" if fresh else "ramping_down"
         elif gain <= _GAIN_SNAP:
@@ -110,16 +125,34 @@ class SafeForceOutput:
     """
 
     def __init__(self, max_force: float = DEFAULT_MAX_FORCE_N, max_rate_n_per_s: float = 400.0,
-                 period_s: float = 0.001, lifetime_s: float = 0.05, ramp_time_s: float = 0.01):
-        self.max_force = positive(max_force, "max_force")
-        if self.max_force > PHANTOM_MAX_FORCE_N:
-            raise ValueError(f"max_force must be <= {PHANTOM_MAX_FORCE_N} N (PHANToM limit), got {max_force!r}")
-        self.watchdog = Watchdog(lifetime_s, ramp_time_s, period_s)
+                 period_s: float = 0.001, lifetime_s: float = 0.05, ramp_time_s: float = 0.01,
+                 soft_start_s: float | None = None):
+        self.watchdog = Watchdog(lifetime_s, ramp_time_s, period_s, soft_start_s)
         self.limiter = RateLimiter(max_rate_n_per_s, period_s)
-        if self.limiter.max_step_n * (ramp_time_s / period_s) < self.max_force * (1.0 - 1e-9):
+        self.configure(max_force, max_rate_n_per_s, lifetime_s, ramp_time_s,
+                       ramp_time_s if soft_start_s is None else soft_start_s)
+
+    def configure(self, max_force: float, max_rate_n_per_s: float, lifetime_s: float, ramp_time_s: float,
+                  soft_start_s: float) -> None:
+        """Check and take new limits, effective from the next :meth:`step`; ValueError naming the first bad
+        one leaves the old limits in place. A lower clamp bounds the very next command."""
+        max_force = positive(max_force, "max_force")
+        if max_force > PHANTOM_MAX_FORCE_N:
+            raise ValueError(f"max_force must be <= {PHANTOM_MAX_FORCE_N} N (PHANToM limit), got {max_force!r}")
+        max_step = positive(max_rate_n_per_s, "max_rate_n_per_s") * self.watchdog.period_s
+        if max_step * (positive(ramp_time_s, "ramp_time_s") / self.watchdog.period_s) < max_force * (1.0 - 1e-9):
             raise ValueError(f"max_rate_n_per_s must be >= max_force/ramp_time_s = "
-                             f"{self.max_force / ramp_time_s:g} N/s so the force can reach 0 "
+                             f"{max_force / ramp_time_s:g} N/s so the force can reach 0 "
                              f"within ramp_time_s, got {max_rate_n_per_s!r}")
+        self.watchdog.configure(lifetime_s, ramp_time_s, soft_start_s)
+        self.max_force = max_force
+        self.limiter.max_step_n = max_step
+        self.limiter.last = clamp_norm(self.limiter.last, max_force)  # no wind-up above a lowered clamp
+
+    def restart(self) -> None:
+        """Zero force now, then a soft start once the inputs are fresh (after a stall or an error)."""
+        self.watchdog.restart()
+        self.limiter.reset()
 
     @property
     def state(self) -> str:

@@ -15,36 +15,101 @@ from haptic_bridge.safety import SafeForceOutput
 from liver_sim.geometry.device_map import DeviceMap
 from liver_sim.local_model import LocalModel, penetration
 
+_ZERO = np.zeros(3)
+_ZERO.setflags(write=False)
 
-def check_passivity(p: dict) -> None:
-    """Refuse a stiffness the device cannot render passively at rate_hz (Colgate: b > K·T/2 + |B|).
 
-    At the device a liver-side stiffness K and damping B are felt as K·scale and B·scale.
+def passivity_problem(p: dict, scale: float = 1.0) -> str | None:
+    """Why the force `p` renders is not passive at the device (Colgate: b > K·T/2 + |B|), or None.
+
+    Every mode is checked with what it renders: the local model's K, B at rate_hz; with `local_model: none`
+    the physics penalty (contact_stiffness_n_per_m, contact_damping_ns_per_m) held between physics frames,
+    so at T = 1/physics_rate_hz. At the device a liver-side K and B are felt as K·scale and B·scale
+    (`scale`: the device map's).
     """
-    stiffness, scale = p["stiffness_n_per_m"], p["device_scale"]
-    limit = max_passive_stiffness(p["device_damping_ns_per_m"], 1.0 / p["rate_hz"], p["damping_ns_per_m"] * scale)
-    if stiffness * scale >= limit and stiffness + p["damping_ns_per_m"] > 0.0:
-        raise ValueError(
-            f"parameter stiffness_n_per_m={stiffness:g} is not passive: with device_damping_ns_per_m="
-            f"{p['device_damping_ns_per_m']:g}, damping_ns_per_m={p['damping_ns_per_m']:g}, "
-            f"device_scale={scale:g} and rate_hz={p['rate_hz']:g}, Colgate's b > K·T/2 + B allows "
-            f"stiffness_n_per_m < {limit / scale:g} N/m")
+    if p["local_model"] == "none":
+        names, rate_name = ("contact_stiffness_n_per_m", "contact_damping_ns_per_m"), "physics_rate_hz"
+    else:
+        names, rate_name = ("stiffness_n_per_m", "damping_ns_per_m"), "rate_hz"
+    stiffness, damping, rate = p[names[0]], p[names[1]], p[rate_name]
+    limit = max_passive_stiffness(p["device_damping_ns_per_m"], 1.0 / rate, damping * scale)
+    if stiffness * scale < limit or stiffness + damping <= 0.0:
+        return None
+    return (f"parameter {names[0]}={stiffness:g} is not passive with local_model {p['local_model']}: with "
+            f"device_damping_ns_per_m={p['device_damping_ns_per_m']:g}, {names[1]}={damping:g}, device scale "
+            f"{scale:g} and {rate_name}={rate:g}, Colgate's b > K·T/2 + B allows {names[0]} < {limit / scale:g} N/m")
+
+
+def check_passivity(p: dict, scale: float = 1.0) -> None:
+    """ValueError with :func:`passivity_problem`'s reason when the rendering is not passive."""
+    problem = passivity_problem(p, scale)
+    if problem:
+        raise ValueError(problem)
+
+
+#: Parameters a running bridge takes from its next tick on (each change checked like a start-up value).
+RUNTIME_PARAMETERS = frozenset({
+    "max_force_n", "max_force_rate_n_per_s", "lifetime_s", "ramp_time_s", "soft_start_s", "stiffness_n_per_m",
+    "damping_ns_per_m", "device_damping_ns_per_m", "depth_rate_cutoff_hz", "model_glide_s",
+    "contact_stiffness_n_per_m", "contact_damping_ns_per_m"})
+
+
+def checked_change(p: dict, changes: dict, scale: float = 1.0) -> dict:
+    """The parameters `p` with `changes` applied, checked as a start would check them (passivity with the
+    device map's `scale` unless `drives_device` is false, the rate limit against the clamp); ValueError with
+    the reason for a name outside RUNTIME_PARAMETERS or an unsafe combination."""
+    fixed = sorted(set(changes) - RUNTIME_PARAMETERS)
+    if fixed:
+        raise ValueError(f"{', '.join(fixed)}: read at start only; restart haptic_bridge to change "
+                         f"{'it' if len(fixed) == 1 else 'them'}")
+    candidate = {**p, **changes}
+    if candidate.get("drives_device", True):
+        check_passivity(candidate, scale)
+    safe_output(candidate)  # refuses a rate limit too low for the new clamp and ramp
+    return candidate
+
+
+def safe_output(p: dict) -> SafeForceOutput:
+    """The SafeForceOutput of the parameters `p`; ValueError naming the parameters that conflict."""
+    try:
+        return SafeForceOutput(p["max_force_n"], p["max_force_rate_n_per_s"], 1.0 / p["rate_hz"], p["lifetime_s"],
+                               p["ramp_time_s"], p["soft_start_s"])
+    except ValueError as exc:
+        raise ValueError(f"parameter max_force_rate_n_per_s={p['max_force_rate_n_per_s']:g} with "
+                         f"max_force_n={p['max_force_n']:g}, ramp_time_s={p['ramp_time_s']:g}: {exc}") from None
+
+
+#: A penetration rate beyond this (m/s) is no motion of a hand-held stylus but a jump of the inputs.
+MAX_DEPTH_RATE_M_S = 10.0
 
 
 class DepthRate:
-    """Rate (m/s) of the penetration depth: finite difference over the tick, one-pole low-passed."""
+    """Rate (m/s) of the penetration depth: finite difference over the tick, one-pole low-passed.
+
+    A non-finite depth is dropped (the rate stays); a jump faster than MAX_DEPTH_RATE_M_S (or one that
+    overflows) restarts the filter at the new depth with rate 0, so no sample, however large, leaves NaN,
+    inf or a slowly decaying huge rate behind: the next good sample renders.
+    """
 
     def __init__(self, period_s: float, cutoff_hz: float):
         self.period_s = period_s
-        self.alpha = 1.0 - math.exp(-2.0 * math.pi * cutoff_hz * period_s) if cutoff_hz > 0.0 else 1.0
+        self.set_cutoff(cutoff_hz)
         self.depth = 0.0
         self.rate = 0.0
 
+    def set_cutoff(self, cutoff_hz: float) -> None:
+        self.alpha = 1.0 - math.exp(-2.0 * math.pi * cutoff_hz * self.period_s) if cutoff_hz > 0.0 else 1.0
+
     def update(self, depth: float) -> float:
         """The filtered rate after this tick's `depth` (m)."""
+        if not math.isfinite(depth):
+            return self.rate
         raw = (depth - self.depth) / self.period_s
         self.depth = depth
-        self.rate += self.alpha * (raw - self.rate)
+        if not abs(raw) <= MAX_DEPTH_RATE_M_S:
+            self.rate = 0.0
+        else:
+            self.rate += self.alpha * (raw - self.rate)
         return self.rate
 
 
@@ -53,24 +118,39 @@ class BridgeTick:
     (`local_model` plane/sphere, rendered through a ModelGlide of `model_glide_s`) or the held physics
     contact force (`local_model: none`, Fig. 8 baseline).
 
-    Refuses (ValueError naming the parameter) a non-passive stiffness, a bad device map, and a rate
-    limit too low for the watchdog ramp.
+    `device_map` maps the force into the device frame (default: the identity, as offline); None renders zero
+    until :meth:`set_device_map`. Refuses (ValueError naming the parameter) a non-passive local-model stiffness
+    and a rate limit too low for the watchdog ramp; the node also checks the passivity of `none`
+    (:func:`check_passivity`), which offline baselines that drive no device skip.
     """
 
-    def __init__(self, p: dict):
-        check_passivity(p)
+    def __init__(self, p: dict, device_map: DeviceMap | None = DeviceMap()):
+        if p["local_model"] != "none":
+            check_passivity(p, 1.0 if device_map is None else device_map.scale)
         self.p = p
         self.mode = p["local_model"]
-        self.device_map = DeviceMap.from_parameters(p)
-        period = 1.0 / p["rate_hz"]
-        try:
-            self.safety = SafeForceOutput(p["max_force_n"], p["max_force_rate_n_per_s"], period,
-                                          p["lifetime_s"], p["ramp_time_s"])
-        except ValueError as exc:
-            raise ValueError(f"parameter max_force_rate_n_per_s={p['max_force_rate_n_per_s']:g} with "
-                             f"max_force_n={p['max_force_n']:g}, ramp_time_s={p['ramp_time_s']:g}: {exc}") from None
-        self.depth_rate = DepthRate(period, p["depth_rate_cutoff_hz"])
+        self.device_map = device_map
+        self.safety = safe_output(p)
+        self.depth_rate = DepthRate(1.0 / p["rate_hz"], p["depth_rate_cutoff_hz"])
         self.glide = ModelGlide(p["model_glide_s"])
+
+    def configure(self, p: dict) -> None:
+        """Take parameters checked by :func:`checked_change`, from this tick on (called by the loop)."""
+        self.safety.configure(p["max_force_n"], p["max_force_rate_n_per_s"], p["lifetime_s"], p["ramp_time_s"],
+                              p["soft_start_s"])
+        self.depth_rate.set_cutoff(p["depth_rate_cutoff_hz"])
+        self.glide.duration_s = p["model_glide_s"]
+        self.p = p
+
+    def set_device_map(self, device_map: DeviceMap) -> None:
+        """Render through `device_map` from now on, restarting from zero force (soft start)."""
+        self.device_map = device_map
+        self.safety.restart()
+
+    def restart(self) -> None:
+        """Zero force now, a soft start from the next fresh inputs (after a stall or an error of the loop)."""
+        self.safety.restart()
+        self.depth_rate = DepthRate(self.depth_rate.period_s, self.p["depth_rate_cutoff_hz"])
 
     def render(self, model: LocalModel | None, tip: np.ndarray | None) -> np.ndarray:
         """Local-model force on the tool (N, liver frame); zero without a model or a tip."""
@@ -84,13 +164,17 @@ class BridgeTick:
     def step(self, now_s: float, tip: np.ndarray | None, pose_age_s: float, source, source_age_s: float) -> np.ndarray:
         """The (3,) command (N, device frame) of the tick at `now_s` (s, any clock that ticks in seconds).
 
-        `source` is the newest input with its age `source_age_s` (s): with local_model none the physics
-        force (3,) N, else (local model or None, lifetime s); None before any arrived.
+        `source` is the newest input with its age `source_age_s` (s, from its reception): with local_model none
+        the physics force (3,) N, else (local model or None, lifetime s), the lifetime capped at `lifetime_s`;
+        None before any arrived.
         """
         if self.mode == "none":
-            force = source if source is not None else np.zeros(3)
+            force = source if source is not None else _ZERO
             lifetime = self.p["lifetime_s"]
         else:
             model, lifetime = source if source is not None else (None, self.p["lifetime_s"])
             force = self.render(self.glide.update(model, now_s), tip)
-        return self.safety.step(self.device_map.liver_to_device_force(force), source_age_s, pose_age_s, lifetime)
+        if self.device_map is None:  # no map yet: nothing is fresh
+            return self.safety.step(_ZERO, math.inf, math.inf)
+        return self.safety.step(self.device_map.liver_to_device_force(force), source_age_s, pose_age_s,
+                                min(lifetime, self.p["lifetime_s"]))

@@ -3,7 +3,9 @@
 Each subcommand is an ``add_*_command(subparsers)`` function that declares its
 arguments and sets ``handler`` to a function ``handler(args) -> int``; list it in
 :data:`COMMANDS`.  A refused input ends the command with exit status 2 and
-``liver-sim: error: <file>: <defect>`` on stderr.
+``liver-sim: error: <file>: <defect>`` on stderr.  A command that starts ROS (:func:`starts_ros`)
+keeps DDS on this machine unless ``--discovery-range`` or ROS_AUTOMATIC_DISCOVERY_RANGE says otherwise,
+and says its domain and range first.
 """
 from __future__ import annotations
 
@@ -17,6 +19,7 @@ from liver_sim.mesh.io import (CAPSULE_REGION, PARENCHYMA_REGION, WRITE_SUFFIXES
                                load_mesh, write_mesh)
 from liver_sim.mesh.liver_shape import build_liver, default_liver
 from liver_sim.mesh.tetmesh import TetMesh
+from liver_sim.processes import DISCOVERY_RANGES, keep_dds_local
 from liver_sim.sessions.bag import STORAGES
 from liver_sim.sessions.cli import (add_bench_record_parser, add_record_command, add_replay_command, add_report_command,
                                    add_resimulate_command)
@@ -241,10 +244,19 @@ def build_parser() -> argparse.ArgumentParser:
     """The ``liver-sim`` argument parser with every subcommand in :data:`COMMANDS`."""
     parser = argparse.ArgumentParser(prog=PROG, description="Human liver simulation "
                                      "(Boux de Casson et al.): meshes, traction tests, demos.")
+    parser.add_argument("--discovery-range", choices=DISCOVERY_RANGES, default=None,
+                        help="DDS discovery range of the commands that start ROS (default: "
+                             "$ROS_AUTOMATIC_DISCOVERY_RANGE if set, else LOCALHOST: nothing leaves this machine)")
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for add_command in COMMANDS:
         add_command(commands)
     return parser
+
+
+def starts_ros(args) -> bool:
+    """Whether the parsed command starts ROS (a context or node processes)."""
+    return (args.command in ("record", "replay") or (args.command == "demo" and not args.offline)
+            or (args.command == "bench" and args.bench in ("loop", "record")))
 
 
 def _terminate(signum, _frame) -> None:
@@ -262,6 +274,10 @@ def main(argv=None) -> int:
     except SystemExit as exc:  # --help or a usage error, already reported by argparse
         return exc.code if isinstance(exc.code, int) else EXIT_REFUSED
     try:
+        if starts_ros(args):
+            # stdout, beside the command's progress; stderr when stdout carries JSON
+            print(f"{PROG}: {keep_dds_local(args.discovery_range)}", flush=True,
+                  file=sys.stderr if getattr(args, "json", False) else sys.stdout)
         return args.handler(args)
     except ValueError as exc:  # MeshError, or a refusal of the stuffing; both name the source
         print(f"{PROG}: error: {exc}", file=sys.stderr)

@@ -57,7 +57,7 @@ def closed_loop_plan(compare_without_local_model: bool = False, extra: dict | No
     plan.force_topics["local_model"] = ("/phantom/servo_cf", "wrench_stamped")
     if compare_without_local_model:
         plan.commands["haptic_bridge_none"] = command_line(
-            "haptic_bridge", {"local_model": "none", "force_topic": BASELINE_FORCE_TOPIC},
+            "haptic_bridge", {"local_model": "none", "force_topic": BASELINE_FORCE_TOPIC, "drives_device": False},
             node_name="haptic_bridge_without_local_model")
         plan.force_topics["without_local_model"] = (BASELINE_FORCE_TOPIC, "wrench_stamped")
     return plan

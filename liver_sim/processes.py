@@ -11,8 +11,31 @@ import subprocess
 import sys
 from pathlib import Path
 
+#: Discovery ranges of ROS 2 (ROS_AUTOMATIC_DISCOVERY_RANGE).
+DISCOVERY_RANGES = ("LOCALHOST", "SUBNET", "OFF", "SYSTEM_DEFAULT")
+#: The range of every `liver-sim` command that starts ROS unless told otherwise: a demo or a replay next
+#: to a rig must not reach its device.
+DEFAULT_DISCOVERY_RANGE = "LOCALHOST"
+
 NODE_MODULES = {"liver_physics": "liver_sim.nodes.physics_node", "haptic_bridge": "liver_sim.nodes.bridge_node",
                 "liver_tool": "liver_sim.nodes.tool_node", "phantom_sim": "liver_sim.nodes.phantom_node"}
+
+
+def keep_dds_local(discovery_range: str | None = None, environ=os.environ) -> str:
+    """Set ROS_AUTOMATIC_DISCOVERY_RANGE for this process and every node it starts: `discovery_range` when
+    given (the user's opt-out), else the environment's when set explicitly, else DEFAULT_DISCOVERY_RANGE.
+    Returns the line to log: the domain and the range, and who chose it."""
+    if discovery_range is not None:
+        if discovery_range not in DISCOVERY_RANGES:
+            raise ValueError(f"discovery range {discovery_range!r} must be one of {', '.join(DISCOVERY_RANGES)}")
+        environ["ROS_AUTOMATIC_DISCOVERY_RANGE"], origin = discovery_range, "--discovery-range"
+    elif environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE"):
+        origin = "environment"
+    else:
+        environ["ROS_AUTOMATIC_DISCOVERY_RANGE"], origin = DEFAULT_DISCOVERY_RANGE, "liver-sim default"
+    domain = environ.get("ROS_DOMAIN_ID") or "0 (unset)"
+    return (f"ROS_DOMAIN_ID={domain}, ROS_AUTOMATIC_DISCOVERY_RANGE={environ['ROS_AUTOMATIC_DISCOVERY_RANGE']} "
+            f"({origin})")
 
 
 def config_dir() -> Path:

@@ -1,5 +1,5 @@
 """The `liver_tool` node's parameters (no ROS): where the tool pose comes from (device, script or static),
-the script's settings and the device map it shares with phantom_sim and haptic_bridge."""
+the script's settings and the device map: declared here, published latched for haptic_bridge."""
 from liver_sim.geometry.device_map import DEVICE_MAP_PARAMETERS
 from liver_sim.parameters import Param, realtime_priority_parameter
 from liver_sim.tool_scripts import IDENTITY_XYZW, SCRIPT_PARAMETERS, ScriptSettings
@@ -15,6 +15,7 @@ PARAMETERS = {
     "frame_id": Param("liver", "frame of the published tool pose"),
     "tool_pose_topic": Param(TOPICS["tool_pose"].name, "tool tip pose out, liver frame (PoseStamped)"),
     "measured_cp_topic": Param(TOPICS["measured_cp"].name, "device stylus pose in, device frame (PoseStamped)"),
+    "device_map_topic": Param(TOPICS["device_map"].name, "the device map out, latched, for haptic_bridge"),
     "workspace_radius_m": Param(0.5, "device samples farther than this from the device origin are dropped (m)",
                                 0.01, 10.0),
     "static_position_m": Param([_SCRIPT.anchor_m[0], _SCRIPT.anchor_m[1],

@@ -18,10 +18,11 @@ from geometry_msgs.msg import Point, Pose, PoseStamped, Quaternion, Vector3, Wre
 from numpy.lib.recfunctions import structured_to_unstructured
 from sensor_msgs.msg import PointCloud2, PointField
 from shape_msgs.msg import Mesh, MeshTriangle
-from std_msgs.msg import ColorRGBA, Float64MultiArray, Header
+from std_msgs.msg import ColorRGBA, Float64MultiArray, Header, MultiArrayDimension
 from visualization_msgs.msg import Marker
 
 from liver_sim.checks import positive
+from liver_sim.geometry.device_map import DeviceMap
 from liver_sim.geometry.rotations import quaternion_from_z_axis, quaternion_to_matrix
 from liver_sim.local_model import LocalModel
 from msg_defs import cdr
@@ -56,12 +57,16 @@ def _finite(value, shape: tuple, name: str, dtype=np.float64) -> np.ndarray:
 
 
 def _unit_quaternion(value, name: str) -> np.ndarray:
-    """A finite, non-zero (x, y, z, w) quaternion, normalised, or ValueError naming `name`."""
+    """A finite, non-zero (x, y, z, w) quaternion, normalised, or ValueError naming `name`.
+
+    Scaled by its largest component before the norm, so that neither huge (1e200) nor tiny (1e-200)
+    components overflow or underflow into a zero quaternion."""
     q = _finite(value, (4,), name)
-    norm = float(np.linalg.norm(q))
-    if not norm > 0.0:
+    largest = float(np.abs(q).max())
+    if not largest > 0.0:
         raise ValueError(f"{name} must be a non-zero quaternion (x, y, z, w), got {q.tolist()}")
-    return q / norm
+    q = q / largest
+    return q / float(np.linalg.norm(q))
 
 
 def _skin(skin, n_points: int, name: str) -> np.ndarray:
@@ -346,6 +351,35 @@ def marker_to_local_model(msg: Marker) -> tuple[LocalModel | None, float]:
     if msg.type == Marker.CUBE:
         return LocalModel.plane(position, quaternion_to_matrix(orientation)[:, 2]), lifetime_s
     return LocalModel.sphere(position, positive(msg.scale.x, "Marker.scale.x") / 2.0), lifetime_s
+
+
+# ---------------------------------------------------------------- the device map
+
+#: Labels and lengths of the device map's fields in its Float64MultiArray (layout.dim, in this order).
+DEVICE_MAP_LAYOUT = (("rotation_xyzw", 4), ("translation_m", 3), ("scale", 1))
+
+
+def device_map_message(device_map: DeviceMap) -> Float64MultiArray:
+    """The map p_liver = scale·R·p_device + t as [qx, qy, qz, qw, tx, ty, tz, scale], its fields labelled in
+    layout.dim (TransformStamped has no scale; one message keeps the three consistent)."""
+    from liver_sim.geometry.rotations import matrix_to_quaternion
+
+    data = [*matrix_to_quaternion(device_map.rotation).tolist(), *device_map.translation.tolist(), device_map.scale]
+    dims = [MultiArrayDimension(label=label, size=size, stride=size) for label, size in DEVICE_MAP_LAYOUT]
+    message = Float64MultiArray(data=data)
+    message.layout.dim = dims
+    return message
+
+
+def device_map_from_message(msg: Float64MultiArray) -> DeviceMap:
+    """The DeviceMap of a :func:`device_map_message`; refuses another layout, non-finite values, a zero
+    quaternion and a scale ≤ 0, naming the field."""
+    layout = tuple((d.label, d.size) for d in msg.layout.dim)
+    if layout != DEVICE_MAP_LAYOUT:
+        raise ValueError(f"device map layout must be {list(DEVICE_MAP_LAYOUT)}, got {list(layout)}")
+    values = _finite(list(msg.data), (8,), "device map data")
+    return DeviceMap(_unit_quaternion(values[:4], "device map rotation_xyzw"), values[4:7],
+                     positive(values[7], "device map scale"))
 
 
 # ---------------------------------------------------------------- forces

@@ -12,6 +12,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, WrenchStamped
 from sensor_msgs.msg import PointCloud2
 from shape_msgs.msg import Mesh
+from std_msgs.msg import Float64MultiArray
 from visualization_msgs.msg import Marker
 
 
@@ -47,6 +48,8 @@ TOPICS = {
     "tool_pose": Topic("/tool/pose", PoseStamped, 1, reliable=False),
     "measured_cp": Topic("/phantom/measured_cp", PoseStamped, 1, reliable=False),
     "servo_cf": Topic("/phantom/servo_cf", None, 1),
+    # the device map liver_tool uses, for the bridge (msg_defs.conversions.device_map_message)
+    "device_map": Topic("/tool/device_map", Float64MultiArray, 1, transient_local=True),
     # "default" in the table: rclpy's usual keep-last 10, reliable, volatile.
     "diagnostics": Topic("/diagnostics", DiagnosticArray, 10),
 }

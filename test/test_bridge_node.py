@@ -1,8 +1,9 @@
 """haptic_bridge as a real process, talked to over DDS on loopback in a domain of its own.
 
-The test side plays the physics and the tool: it refreshes a local model (or a physics wrench)
-and the tool pose every 10 ms, and listens to the force command. Every wait is bounded; nothing
-asserts on timing. The bridge is stopped (SIGINT, then SIGKILL) in `finally`.
+The test side plays the physics and the tool: it publishes the device map (latched, as liver_tool
+does), refreshes a local model (or a physics wrench) and the tool pose every 10 ms, and listens to the
+force command. Every wait is bounded; nothing asserts on timing. The bridge is stopped (SIGINT, then
+SIGKILL) in `finally`.
 """
 import math
 import signal
@@ -18,6 +19,7 @@ from geometry_msgs.msg import PoseStamped
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.signals import SignalHandlerOptions
 
+from liver_sim.geometry.device_map import DeviceMap
 from liver_sim.geometry.rotations import quaternion_to_matrix
 from liver_sim.local_model import LocalModel
 from msg_defs import conversions
@@ -50,10 +52,12 @@ def local_model(kind: str) -> LocalModel:
     return LocalModel("sphere", True, origin, UP, np.array([0.0, 0.0, -0.1]), 0.1, 0.0, True)
 
 
-def start_bridge(env: dict, **params) -> subprocess.Popen:
-    args = [sys.executable, "-m", "liver_sim.nodes.bridge_node", "--ros-args", "--params-file", str(CONFIG)]
+def start_bridge(env: dict, program: list[str] | None = None, **params) -> subprocess.Popen:
+    args = (program or [sys.executable, "-m", "liver_sim.nodes.bridge_node"]) + ["--ros-args", "--params-file",
+                                                                               str(CONFIG)]
     for name, v in params.items():
-        text = "[" + ",".join(repr(float(x)) for x in v) + "]" if isinstance(v, list) else str(v)
+        text = ("[" + ",".join(repr(float(x)) for x in v) + "]" if isinstance(v, list)
+                else str(v).lower() if isinstance(v, bool) else str(v))
         args += ["-p", f"{name}:={text}"]
     return subprocess.Popen(args, cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             start_new_session=True)
@@ -72,7 +76,7 @@ def stop(process: subprocess.Popen) -> None:
 class Rig:
     """The test side: a node in its own context publishing the inputs every 10 ms and keeping the forces."""
 
-    def __init__(self, force_output: str = "wrench_stamped"):
+    def __init__(self, force_output: str = "wrench_stamped", rotation_xyzw=(0.0, 0.0, 0.0, 1.0)):
         self.context = rclpy.Context()
         rclpy.init(context=self.context, signal_handler_options=SignalHandlerOptions.NO)
         self.node = rclpy.create_node("test_haptic_bridge", context=self.context)
@@ -80,6 +84,7 @@ class Rig:
         self.executor.add_node(self.node)
         self.force_output = force_output
         self.forces, self.stamps, self.pose_stamps, self.diagnostics = [], [], set(), []
+        self.arrivals = []    # monotonic s at which each force command arrived
         self.tool = None      # tip position (m) published as the tool pose, or None
         self.nan_pose = False
         self.model = None     # a LocalModel published as the contact marker, or None
@@ -92,8 +97,12 @@ class Rig:
         self.node.create_subscription(TOPICS["diagnostics"].type, TOPICS["diagnostics"].name,
                                       self.diagnostics.append, TOPICS["diagnostics"].qos)
         self.node.create_timer(PUBLISH_PERIOD_S, self._publish)
+        self._map = self.node.create_publisher(TOPICS["device_map"].type, TOPICS["device_map"].name,
+                                               TOPICS["device_map"].qos)
+        self._map.publish(conversions.device_map_message(DeviceMap(rotation_xyzw)))
 
     def _on_force(self, message) -> None:
+        self.arrivals.append(time.monotonic())
         self.forces.append(conversions.force_from_message(self.force_output, message))
         if self.force_output == "wrench_stamped":
             self.stamps.append((message.header.stamp.sec, message.header.stamp.nanosec))
@@ -141,6 +150,27 @@ class Rig:
                     return {kv.key: kv.value for kv in status.values}
         return None
 
+    def loop_level(self) -> tuple[int, str] | None:
+        """(level, message) of the bridge's newest loop status, or None."""
+        for array in reversed(self.diagnostics):
+            for status in array.status:
+                if status.name == LOOP:
+                    return int.from_bytes(status.level, "little") if isinstance(status.level, bytes) \
+                        else int(status.level), status.message
+        return None
+
+    def spin_for(self, seconds: float) -> None:
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            self.executor.spin_once(timeout_sec=0.005)
+
+    def call(self, client, request, bridge: subprocess.Popen):
+        """The response of a service of the bridge."""
+        assert client.wait_for_service(timeout_sec=WAIT_S), f"no service {client.srv_name}"
+        future = client.call_async(request)
+        self.wait_until(future.done, f"the answer of {client.srv_name}", bridge)
+        return future.result()
+
     def close(self) -> None:
         self.executor.shutdown()
         self.node.destroy_node()
@@ -171,9 +201,9 @@ def assert_safe(forces: list, max_force: float = MAX_FORCE_N) -> None:
 
 @pytest.mark.parametrize("kind", ["plane", "sphere"])
 def test_local_model_force_in_the_device_frame(rig_factory, ros_env, kind):
-    rig = rig_factory()
+    rig = rig_factory(rotation_xyzw=QUARTER_TURN_X)
     rig.model, rig.tool = local_model(kind), ABOVE
-    bridge = start_bridge(ros_env, local_model=kind, device_rotation_xyzw=QUARTER_TURN_X)
+    bridge = start_bridge(ros_env, local_model=kind)
     try:
         rig.wait_until(lambda: len(rig.pose_stamps) > 10 and len(rig.forces) > 100, "force commands", bridge)
         rig.wait_for_force(np.zeros(3), bridge)
@@ -192,9 +222,9 @@ def test_local_model_force_in_the_device_frame(rig_factory, ros_env, kind):
 
 @pytest.mark.parametrize("force_output", ["wrench_stamped", "wrench", "vector3", "float64_array"])
 def test_every_force_output_carries_the_same_force(rig_factory, ros_env, force_output):
-    rig = rig_factory(force_output=force_output)
+    rig = rig_factory(force_output=force_output, rotation_xyzw=QUARTER_TURN_X)
     rig.model, rig.tool = local_model("plane"), INSIDE
-    bridge = start_bridge(ros_env, force_output=force_output, device_rotation_xyzw=QUARTER_TURN_X)
+    bridge = start_bridge(ros_env, force_output=force_output)
     try:
         rig.wait_for_force(EXPECTED_INSIDE, bridge)
     finally:
@@ -218,9 +248,9 @@ def test_omni_feedback_without_omni_msgs_is_refused(ros_env):
 
 
 def test_watchdog_zeroes_the_force_on_a_stale_model_and_recovers(rig_factory, ros_env):
-    rig = rig_factory()
+    rig = rig_factory(rotation_xyzw=QUARTER_TURN_X)
     rig.model, rig.tool = local_model("plane"), INSIDE
-    bridge = start_bridge(ros_env, device_rotation_xyzw=QUARTER_TURN_X)
+    bridge = start_bridge(ros_env)
     try:
         rig.wait_for_force(EXPECTED_INSIDE, bridge)
         rig.wait_until(lambda: (rig.loop_status() or {}).get("watchdog") == "ok", "diagnostics: watchdog ok",
@@ -269,7 +299,9 @@ def test_bad_input_is_counted_and_ignored(rig_factory, ros_env, bad_input, count
 
 @pytest.mark.parametrize("params, named", [({"max_force_n": 5.0}, "max_force_n"),
                                            ({"stiffness_n_per_m": 2000.0}, "stiffness_n_per_m"),
-                                           ({"local_model": "cube"}, "local_model")])
+                                           ({"local_model": "cube"}, "local_model"),
+                                           ({"local_model": "none"}, "contact_stiffness_n_per_m"),
+                                           ({"soft_start_s": 0.01}, "soft_start_s")])
 def test_refused_parameters_end_the_process_naming_them(ros_env, params, named):
     bridge = start_bridge(ros_env, **params)
     try:
@@ -281,15 +313,171 @@ def test_refused_parameters_end_the_process_naming_them(ros_env, params, named):
 
 
 def test_without_local_model_the_physics_wrench_is_held(rig_factory, ros_env):
-    rig = rig_factory()
+    rig = rig_factory(rotation_xyzw=QUARTER_TURN_X)
     wrench = np.array([0.3, -0.4, 1.2])  # N on the tool, liver frame
     rig.wrench, rig.tool = wrench, ABOVE
     rig.model = local_model("plane")  # ignored in this mode
-    bridge = start_bridge(ros_env, local_model="none", device_rotation_xyzw=QUARTER_TURN_X)
+    bridge = start_bridge(ros_env, local_model="none", device_damping_ns_per_m=2.5)  # passive: b > K·T/2 + B = 2
     try:
         rig.wait_for_force(ROTATION.T @ wrench, bridge)
         rig.wrench = None  # the physics stops: the held wrench goes stale
         rig.wait_until(lambda: rig.forces and not rig.forces[-1].any(), "the watchdog's zero force", bridge)
+    finally:
+        stop(bridge)
+    assert_safe(rig.forces)
+
+
+# ---------------------------------------------------------------- zero on every exit (issue 13)
+
+CONTACT = STIFFNESS_N_PER_M * 0.005 * UP  # 1.5 N, identity device map
+#: A bridge process whose tick misbehaves while the tool is DEEP (z below 7.5 mm): FAULT runs first.
+FAULTY_BRIDGE = """
+import sys, time
+import haptic_bridge.tick as tick
+step = tick.BridgeTick.step
+def faulty(self, now_s, tip, *rest):
+    if tip is not None and tip[2] < 0.0075:
+        FAULT
+    return step(self, now_s, tip, *rest)
+tick.BridgeTick.step = faulty
+from liver_sim.nodes.bridge_node import main
+sys.exit(main())
+"""
+
+
+def wait_for_exit(rig: Rig, bridge: subprocess.Popen) -> None:
+    """Spin until the bridge has exited, then half a second more for anything still in flight."""
+    deadline = time.monotonic() + WAIT_S
+    while bridge.poll() is None:
+        assert time.monotonic() < deadline, "the bridge did not exit"
+        rig.executor.spin_once(timeout_sec=0.005)
+    rig.spin_for(0.5)
+
+
+def terminate_to_zero(rig: Rig, bridge: subprocess.Popen) -> None:
+    """SIGTERM the bridge; its last command on the wire is zero."""
+    bridge.send_signal(signal.SIGTERM)
+    wait_for_exit(rig, bridge)
+    assert bridge.returncode == 0 and not rig.forces[-1].any()
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
+def test_a_signal_in_contact_leaves_zero_as_the_last_command_after_a_soft_start(rig_factory, ros_env, sig):
+    rig = rig_factory()
+    rig.model, rig.tool = local_model("plane"), INSIDE
+    bridge = start_bridge(ros_env)
+    try:
+        rig.wait_until(lambda: rig.forces and rig.forces[-1].any(), "the first force", bridge)
+        first = len(rig.forces) - 1
+        rig.wait_for_force(CONTACT, bridge)
+        reached = next(i for i in range(first, len(rig.forces)) if np.linalg.norm(rig.forces[i]) > 0.95 * 1.5)
+        assert rig.arrivals[reached] - rig.arrivals[first] >= 0.1, "soft start: 0.2 s from zero to full force"
+        in_contact = len(rig.forces)
+        bridge.send_signal(sig)
+        wait_for_exit(rig, bridge)
+    finally:
+        stop(bridge)
+    assert bridge.returncode == 0
+    assert np.linalg.norm(rig.forces[in_contact - 1]) > 1.4, "in contact when the signal came"
+    assert not rig.forces[-1].any(), f"last command on the wire {rig.forces[-1].tolist()} N, not zero"
+    assert_safe(rig.forces)
+
+
+@pytest.mark.parametrize("fault, kind, cause", [("raise RuntimeError('injected fault')", "error", "injected fault"),
+                                                ("time.sleep(0.05)", "stall", "no tick")])
+def test_a_loop_that_raises_or_stalls_yields_zero_and_an_error_diagnostic(rig_factory, ros_env, fault, kind, cause):
+    rig = rig_factory()
+    rig.model, rig.tool = local_model("plane"), INSIDE
+    bridge = start_bridge(ros_env, [sys.executable, "-c", FAULTY_BRIDGE.replace("FAULT", fault)])
+    try:
+        rig.wait_for_force(CONTACT, bridge)
+        rig.tool = DEEP  # from now on every tick raises, or sleeps 50 ms (10× the stall bound)
+        rig.wait_until(lambda: rig.forces and not rig.forces[-1].any(), "zero from the supervisor", bridge)
+        first_zero = len(rig.forces) - 1
+        del rig.diagnostics[:]
+        rig.wait_until(lambda: (rig.loop_level() or (0, ""))[0] == 2, "an ERROR diagnostic", bridge)
+        level, message = rig.loop_level()
+        assert kind in message and cause in message and "T" in message.split(" at ")[1][:11], message
+        rig.spin_for(0.3)
+        assert all(not f.any() for f in rig.forces[first_zero:]), "held at zero while the loop fails"
+        rig.tool = INSIDE  # the loop is back: a soft start to the contact force
+        rig.wait_for_force(CONTACT, bridge)
+        assert int(rig.loop_status()[f"{kind}s"]) > 0
+        terminate_to_zero(rig, bridge)
+    finally:
+        stop(bridge)
+    assert_safe(rig.forces)
+
+
+def test_a_lowered_clamp_through_the_parameter_service_is_obeyed(rig_factory, ros_env):
+    from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
+    from rcl_interfaces.srv import SetParameters
+
+    def request(name, value):
+        return SetParameters.Request(parameters=[Parameter(name=name, value=ParameterValue(
+            type=ParameterType.PARAMETER_DOUBLE, double_value=value))])
+
+    rig = rig_factory()
+    rig.model, rig.tool = local_model("plane"), INSIDE
+    bridge = start_bridge(ros_env)
+    client = rig.node.create_client(SetParameters, "/haptic_bridge/set_parameters")
+    try:
+        rig.wait_for_force(CONTACT, bridge)
+        result = rig.call(client, request("max_force_n", 0.05), bridge).results[0]
+        answered = time.monotonic()
+        assert result.successful, result.reason
+        rig.spin_for(0.5)
+        after = [f for f, t in zip(rig.forces, rig.arrivals) if t > answered + 0.01]
+        assert len(after) > 20 and max(np.linalg.norm(after, axis=1)) <= 0.05 + 1e-9
+        refused = rig.call(client, request("rate_hz", 500.0), bridge).results[0]
+        assert not refused.successful and "restart" in refused.reason
+        unsafe = rig.call(client, request("stiffness_n_per_m", 5000.0), bridge).results[0]
+        assert not unsafe.successful and "passive" in unsafe.reason
+    finally:
+        stop(bridge)
+    assert_safe(rig.forces)
+
+
+def test_no_device_map_no_force(rig_factory, ros_env):
+    rig = rig_factory()
+    rig.model, rig.tool = local_model("plane"), INSIDE
+    rig.node.destroy_publisher(rig._map)  # nobody publishes the map
+    bridge = start_bridge(ros_env, device_map_topic="/tool/device_map_of_nobody")
+    try:
+        rig.wait_until(lambda: len(rig.forces) > 100 and rig.loop_status() is not None, "commands", bridge)
+        assert all(not f.any() for f in rig.forces)
+        assert "waiting for the device map" in rig.loop_level()[1]
+    finally:
+        stop(bridge)
+
+
+def test_a_managed_bridge_zeroes_the_force_on_deactivate(rig_factory, ros_env):
+    from lifecycle_msgs.msg import Transition
+    from lifecycle_msgs.srv import ChangeState
+
+    rig = rig_factory()
+    rig.model, rig.tool = local_model("plane"), INSIDE
+    bridge = start_bridge(ros_env, [sys.executable, "-m", "liver_sim.nodes.bridge_node", "--managed"])
+    client = rig.node.create_client(ChangeState, "/haptic_bridge/change_state")
+
+    def change(transition: int) -> None:
+        assert rig.call(client, ChangeState.Request(transition=Transition(id=transition)), bridge).success
+
+    try:
+        change(Transition.TRANSITION_CONFIGURE)
+        rig.spin_for(0.3)
+        assert not rig.forces, "no command before activate"
+        change(Transition.TRANSITION_ACTIVATE)
+        rig.wait_for_force(CONTACT, bridge)
+        change(Transition.TRANSITION_DEACTIVATE)
+        rig.spin_for(0.5)
+        assert not rig.forces[-1].any(), "deactivate leaves zero on the wire"
+        count = len(rig.forces)
+        rig.spin_for(0.3)
+        assert len(rig.forces) == count, "nothing after the zero while inactive"
+        change(Transition.TRANSITION_ACTIVATE)
+        rig.wait_for_force(CONTACT, bridge)
+        terminate_to_zero(rig, bridge)
     finally:
         stop(bridge)
     assert_safe(rig.forces)

@@ -1,4 +1,5 @@
 """msg_defs: numpy ↔ ROS message round trips, refusals naming the field, and one trip over loopback DDS."""
+import math
 import struct
 import time
 
@@ -397,6 +398,7 @@ def test_topics_follow_the_design_table():
         "measured_cp": ("/phantom/measured_cp", ReliabilityPolicy.BEST_EFFORT, DurabilityPolicy.VOLATILE, 1),
         "servo_cf": ("/phantom/servo_cf", ReliabilityPolicy.RELIABLE, DurabilityPolicy.VOLATILE, 1),
         "diagnostics": ("/diagnostics", ReliabilityPolicy.RELIABLE, DurabilityPolicy.VOLATILE, 10),
+        "device_map": ("/tool/device_map", ReliabilityPolicy.RELIABLE, DurabilityPolicy.TRANSIENT_LOCAL, 1),
     }
     assert set(TOPICS) == set(expected)
     for key, (name, reliability, durability, depth) in expected.items():
@@ -447,3 +449,34 @@ def test_pointcloud_and_serialized_marker_cross_loopback_dds(ros_domain_id, rng)
     assert received["nodes"].header.frame_id == "liver"
     corners = np.array([(p.x, p.y, p.z) for p in received["marker"].points])
     np.testing.assert_array_equal(corners, positions[skin].reshape(-1, 3))
+
+
+# ---------------------------------------------------------------- the device map, quaternions at the limits
+
+def test_device_map_round_trips_and_refuses_a_bad_message():
+    from liver_sim.geometry.device_map import DeviceMap
+
+    original = DeviceMap([0.0, math.sin(0.4), 0.0, math.cos(0.4)], [0.1, -0.2, 0.3], 0.5)
+    message = conv.device_map_message(original)
+    back = conv.device_map_from_message(message)
+    np.testing.assert_allclose(back.rotation, original.rotation, atol=1e-12)
+    np.testing.assert_array_equal(back.translation, original.translation)
+    assert back.scale == 0.5
+    message.data[7] = -1.0
+    with pytest.raises(ValueError, match="scale"):
+        conv.device_map_from_message(message)
+    message.data[7], message.data[4] = 0.5, float("nan")
+    with pytest.raises(ValueError, match="finite"):
+        conv.device_map_from_message(message)
+    message.layout.dim = message.layout.dim[:2]
+    with pytest.raises(ValueError, match="layout"):
+        conv.device_map_from_message(message)
+
+
+@pytest.mark.parametrize("component", [1e200, 1e-200, 1.7e308])
+def test_quaternions_of_huge_or_tiny_components_normalise(component):
+    pose = conv.pose_stamped([0.0, 0.0, 0.0], (component, component, 0.0, 0.0), 0.0, "liver")
+    _, q = conv.pose_to_arrays(pose)
+    np.testing.assert_allclose(q, [math.sqrt(0.5), math.sqrt(0.5), 0.0, 0.0])
+    with pytest.raises(ValueError, match="non-zero"):
+        conv.pose_stamped([0.0, 0.0, 0.0], (0.0, 0.0, 0.0, 0.0), 0.0, "liver")

@@ -258,3 +258,48 @@ def test_bad_parameters_end_the_node_with_status_2(ros_env, executable, params, 
     result = subprocess.run(command(executable, params), env=ros_env, capture_output=True, text=True, timeout=30)
     assert result.returncode == 2, result.stderr
     assert named in result.stderr
+
+
+def set_parameter(ros: Ros, node: str, name: str, v, process: subprocess.Popen):
+    """The SetParametersResult of setting `name` on `node` through its parameter service."""
+    from rclpy.parameter import Parameter
+    from rcl_interfaces.srv import SetParameters
+
+    client = ros.node.create_client(SetParameters, f"/{node}/set_parameters")
+    assert client.wait_for_service(timeout_sec=WAIT_S)
+    future = client.call_async(SetParameters.Request(parameters=[Parameter(name, value=v).to_parameter_msg()]))
+    ros.wait_until(future.done, f"{node} answering set_parameters {name}", process)
+    return future.result().results[0]
+
+
+def test_liver_tool_publishes_its_device_map_latched_and_refuses_to_change_it(ros, ros_env):
+    params = {"source": "static", "device_rotation_xyzw": QUARTER_TURN_Z, "device_translation_m": [0.1, -0.2, 0.05],
+              "device_scale": 2.0}
+    process = start("liver_tool", params, ros_env)
+    try:
+        poses = ros.collect("tool_pose")
+        ros.wait_until(lambda: len(poses) > 10, "the tool running", process)
+        maps = ros.collect("device_map")  # subscribed late: the latched map still arrives
+        ros.wait_until(lambda: len(maps) > 0, "the latched device map", process)
+        device_map = conversions.device_map_from_message(maps[-1])
+        np.testing.assert_allclose(device_map.device_to_liver(np.array([0.01, 0.0, 0.0])), [0.1, -0.18, 0.05],
+                                   atol=1e-12)
+        assert device_map.scale == 2.0
+        refused = set_parameter(ros, "liver_tool", "device_scale", 1.0, process)
+        assert not refused.successful and "restart liver_tool" in refused.reason
+        applied = set_parameter(ros, "liver_tool", "workspace_radius_m", 0.3, process)
+        assert applied.successful
+        out_of_range = set_parameter(ros, "liver_tool", "workspace_radius_m", 50.0, process)
+        assert not out_of_range.successful and out_of_range.reason
+    finally:
+        stop(process)
+
+
+def test_phantom_sim_changes_its_timeout_and_refuses_the_rest_with_a_reason(ros, ros_env):
+    process = start("phantom_sim", {**SHORT_SCRIPT, "realtime_priority": 0}, ros_env)
+    try:
+        assert set_parameter(ros, "phantom_sim", "command_timeout_s", 0.02, process).successful
+        refused = set_parameter(ros, "phantom_sim", "max_force_n", 1.0, process)
+        assert not refused.successful and "restart phantom_sim" in refused.reason
+    finally:
+        stop(process)

@@ -307,3 +307,70 @@ def test_recorder_follows_the_published_type_and_records_other_topics(ros_env, t
     assert {t: len(m) for t, m in read.items()} == json.loads(published.stdout.splitlines()[-1])
     assert read["/phantom/servo_cf"][0][0] == "geometry_msgs/msg/Vector3"  # a bridge with force_output: vector3
     assert [m.data for _, _, m in read["/custom/topic"]] == [str(k) for k in range(300)]
+
+
+def test_replay_leaves_out_device_commands_unless_remapped():
+    from liver_sim.sessions.replay import output_topics
+
+    recorded = ["/liver/tool_wrench", "/phantom/servo_cf", "/phantom/servo_cf_without_local_model"]
+    said = []
+    assert output_topics(recorded, None, said.append) == {"/liver/tool_wrench": "/liver/tool_wrench"}
+    assert "left out the device commands" in said[0]
+    assert output_topics(recorded, "/replayed/servo_cf") == {
+        "/liver/tool_wrench": "/liver/tool_wrench", "/phantom/servo_cf": "/replayed/servo_cf",
+        "/phantom/servo_cf_without_local_model": "/replayed/servo_cf_without_local_model"}
+    with pytest.raises(ValueError, match="never replayed"):
+        output_topics(["/phantom/servo_cf"], None)
+    with pytest.raises(ValueError, match="no device"):
+        output_topics(recorded, "/phantom/servo_cf")
+
+
+def test_replay_puts_nothing_on_the_device_topic(ros_env, tmp_path, ros_domain_id):
+    import rclpy
+    from geometry_msgs.msg import WrenchStamped
+    from rclpy.qos import QoSProfile
+
+    bag = tmp_path / "commands"
+    with BagWriter(bag) as writer:
+        for k in range(100):
+            t = 10.0 + k / 100
+            data = serialize_message(conversions.wrench_stamped([0.0, 0.0, 1.0], t, "phantom_base"))
+            writer.write("/phantom/servo_cf", WRENCH, round(t * 1e9), data)
+            writer.write("/liver/tool_wrench", WRENCH, round(t * 1e9), data)
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    heard = {"/phantom/servo_cf": [], "/liver/tool_wrench": [], "/replayed/servo_cf": []}
+    outputs = []
+    try:
+        node = rclpy.create_node("replay_device_listener", context=context)
+        for topic, messages in heard.items():
+            node.create_subscription(WrenchStamped, topic, messages.append, QoSProfile(depth=1000), raw=True)
+        executor = rclpy.executors.SingleThreadedExecutor(context=context)
+        executor.add_node(node)
+        for extra in ([], ["--remap-device-commands", "/replayed/servo_cf"]):
+            replay = subprocess.Popen(cli_command_line("replay", str(bag), "--rate", "4", "--delay", "3", *extra),
+                                      env=ros_env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+            deadline = time.monotonic() + 60
+            while replay.poll() is None and time.monotonic() < deadline:
+                executor.spin_once(timeout_sec=0.05)
+            for _ in range(20):
+                executor.spin_once(timeout_sec=0.05)
+            outputs.append(replay.communicate(timeout=10)[0])
+            assert replay.returncode == 0, outputs[-1]
+    finally:
+        context.try_shutdown()
+    assert heard["/phantom/servo_cf"] == [], "a replay drove the device topic"
+    assert len(heard["/liver/tool_wrench"]) == 200 and len(heard["/replayed/servo_cf"]) == 100
+    assert "ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST" in outputs[0] and "ROS_DOMAIN_ID=" in outputs[0]
+    assert "left out the device commands /phantom/servo_cf" in outputs[0]
+
+
+def test_ros_commands_keep_dds_on_this_machine_unless_told():
+    from liver_sim.processes import keep_dds_local
+
+    env = {}
+    assert "LOCALHOST (liver-sim default)" in keep_dds_local(None, env) and env["ROS_AUTOMATIC_DISCOVERY_RANGE"] == \
+        "LOCALHOST"
+    env = {"ROS_AUTOMATIC_DISCOVERY_RANGE": "SUBNET", "ROS_DOMAIN_ID": "42"}
+    assert keep_dds_local(None, env) == "ROS_DOMAIN_ID=42, ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET (environment)"
+    assert "SUBNET (--discovery-range)" in keep_dds_local("SUBNET", {})

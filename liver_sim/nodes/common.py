@@ -7,6 +7,7 @@ Loops with a rate to keep run in their own thread (rclpy timers jitter by millis
 from __future__ import annotations
 
 import os
+import signal
 import sys
 import threading
 import time
@@ -16,10 +17,11 @@ from collections import deque
 import numpy as np
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
 from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException
 from rclpy.experimental import EventsExecutor
+from rclpy.signals import SignalHandlerOptions
 
 from liver_sim.parameters import Param, check_parameter
 
@@ -41,9 +43,10 @@ class Latest:
         self._value = None
         self._received = -np.inf
 
-    def set(self, value) -> None:
+    def set(self, value, received: float | None = None) -> None:
+        """Keep `value`, received at monotonic `received` (s; default: now)."""
         with self._lock:
-            self._value, self._received = value, time.monotonic()
+            self._value, self._received = value, time.monotonic() if received is None else received
 
     def get(self):
         """(value, monotonic arrival time); (None, -inf) before the first value."""
@@ -107,18 +110,19 @@ class RateLoop(threading.Thread):
     (a SCHED_FIFO thread wakes on time, and sleeps to the deadline itself).
     A step that starts more than a period late is an overrun. A loop at most CATCH_UP_PERIODS
     behind runs its missed ticks at once, so that a short stall costs no ticks; further behind,
-    it skips to the newest deadline rather than run a burst. An exception in a step is printed and
-    counted (`errors`); the loop goes on. `clock` and `sleep` are time.monotonic and time.sleep
-    unless a test gives its own.
+    it skips to the newest deadline rather than run a burst. An exception in a step is counted
+    (`errors`) and handed to `on_error(now, exc)` (default: printed); the loop goes on. `clock` and
+    `sleep` are time.monotonic and time.sleep unless a test gives its own.
     """
 
-    def __init__(self, rate_hz: float, step, name: str, clock=time.monotonic, sleep=time.sleep):
+    def __init__(self, rate_hz: float, step, name: str, clock=time.monotonic, sleep=time.sleep, on_error=None):
         super().__init__(name=name, daemon=True)
         self.period_s = 1.0 / rate_hz
         self.step = step
         self.stats = LoopStats(self.period_s)
         self.errors = 0
         self._clock, self._sleep = clock, sleep
+        self._on_error = on_error
         self._stopping = threading.Event()
 
     def stop(self) -> None:
@@ -145,11 +149,14 @@ class RateLoop(threading.Thread):
             previous = now
             try:
                 self.step(now)
-            except Exception:  # a node keeps running; at shutdown the context goes first
+            except Exception as exc:  # a node keeps running; at shutdown the context goes first
                 if not rclpy.ok():
                     return
                 self.errors += 1
-                traceback.print_exc()
+                if self._on_error is None:
+                    traceback.print_exc()
+                else:
+                    self._on_error(now, exc)
             tick += 1
             due = int((clock() - start) / self.period_s)
             if due - tick > CATCH_UP_PERIODS:
@@ -160,9 +167,11 @@ class LoopInputs:
     """Subscriptions that a rate loop reads itself, bypassing the executor's per-message cost.
 
     They belong to a hidden node (`_<node>_loop`, not spun by any executor); `poll()`, called from
-    the loop, takes every waiting message of each subscription and hands the newest to its callback,
-    or, for a subscription made with `every=True`, each message with its rmw info (a dict with
-    `source_timestamp` and `received_timestamp`, system-clock ns, and `publication_sequence_number`).
+    the loop, takes every waiting message of each subscription and hands the newest to its callback
+    (with `received=True`, as callback(message, monotonic s at which DDS received it), so that ages count
+    from reception, not from the poll), or, for a subscription made with `every=True`, each message with its
+    rmw info (a dict with `source_timestamp` and `received_timestamp`, system-clock ns, and
+    `publication_sequence_number`).
     """
 
     def __init__(self, node):
@@ -171,24 +180,41 @@ class LoopInputs:
                                        enable_rosout=False)
         self._inputs = []
 
-    def subscribe(self, msg_type, topic: str, qos, callback, raw: bool = False, every: bool = False) -> None:
+    def subscribe(self, msg_type, topic: str, qos, callback, raw: bool = False, every: bool = False,
+                  received: bool = False):
+        """Subscribe; returns the subscription (its get_publisher_count() tells whether anyone publishes)."""
         subscription = self._node.create_subscription(msg_type, topic, callback, qos, raw=raw)
-        self._inputs.append((subscription, callback, every))
+        self._inputs.append((subscription, callback, every, received))
+        return subscription
 
     def poll(self) -> None:
-        for subscription, callback, every in self._inputs:
+        for subscription, callback, every, received in self._inputs:
             newest = None
             with subscription.handle:
                 while (taken := subscription.handle.take_message(subscription.msg_type, subscription.raw)):
                     if every:
                         callback(*taken)
                     else:
-                        newest = taken[0]
-            if newest is not None:
-                callback(newest)
+                        newest = taken
+            if newest is None:
+                continue
+            if received:
+                callback(newest[0], received_monotonic(newest[1]))
+            else:
+                callback(newest[0])
 
     def destroy(self) -> None:
         self._node.destroy_node()
+
+
+def received_monotonic(info: dict) -> float:
+    """Monotonic time (s) at which DDS received a message, from its rmw info's `received_timestamp`
+    (system clock ns); now when the middleware gives none."""
+    stamp = info.get("received_timestamp", 0) if info else 0
+    now = time.monotonic_ns()
+    if not stamp:
+        return now * 1e-9
+    return min(stamp + (now - time.time_ns()), now) * 1e-9
 
 
 def apply_realtime_priority(node, priority: int) -> None:
@@ -222,11 +248,45 @@ def declare_parameters(node, params: dict[str, Param]) -> dict:
     return values
 
 
+def on_parameter_changes(node, params: dict[str, Param], apply) -> None:
+    """Answer every set_parameters on `node`: each value is checked as at start (check_parameter), then
+    `apply(changes)` ({name: value}) applies them and returns None, or returns why it refuses them all.
+    The answer says what happened (logged too): never a silent success. Register after declaring."""
+    def callback(parameters) -> SetParametersResult:
+        changes = {}
+        try:
+            for parameter in parameters:
+                if parameter.name not in params:
+                    raise ValueError(f"{parameter.name} is not a parameter of {node.get_name()}")
+                changes[parameter.name] = check_parameter(parameter.name, params[parameter.name], parameter.value)
+            refused = apply(changes)
+        except ValueError as exc:
+            refused = str(exc)
+        if refused:
+            node.get_logger().warning(f"refused {changes or [p.name for p in parameters]}: {refused}")
+            return SetParametersResult(successful=False, reason=refused)
+        node.get_logger().info(f"applied {changes}")
+        return SetParametersResult(successful=True, reason=f"applied {', '.join(changes)}")
+    node.add_on_set_parameters_callback(callback)
+
+
+def read_at_start(node_name: str, runtime=frozenset()):
+    """An `apply` for :func:`on_parameter_changes` that refuses every name outside `runtime`: such
+    parameters are read once at start."""
+    def refuse(changes: dict) -> str | None:
+        fixed = sorted(set(changes) - set(runtime))
+        if fixed:
+            return f"{', '.join(fixed)}: read at start only; restart {node_name} to change it"
+        return None
+    return refuse
+
+
 def diagnostic_status(name: str, stats: dict, level_ok: bool, message: str,
-                      extra: dict | None = None) -> DiagnosticStatus:
-    """One DiagnosticStatus with the loop statistics (and `extra`) as key/value pairs."""
-    status = DiagnosticStatus(name=name, hardware_id="liver_sim", message=message,
-                              level=DiagnosticStatus.OK if level_ok else DiagnosticStatus.WARN)
+                      extra: dict | None = None, error: bool = False) -> DiagnosticStatus:
+    """One DiagnosticStatus with the loop statistics (and `extra`) as key/value pairs: OK, WARN when not
+    `level_ok`, ERROR when `error`."""
+    level = DiagnosticStatus.ERROR if error else DiagnosticStatus.OK if level_ok else DiagnosticStatus.WARN
+    status = DiagnosticStatus(name=name, hardware_id="liver_sim", message=message, level=level)
     fields = dict(stats)
     fields.update(extra or {})
     status.values = [KeyValue(key=key, value=f"{value:.6g}" if isinstance(value, float) else str(value))
@@ -252,35 +312,40 @@ def publish_diagnostics(node, publisher, statuses: list[DiagnosticStatus]) -> No
     publisher.publish(message)
 
 
-def spin(executor, context=None) -> None:
-    """Run the executor until its context shuts down.
+def spin(executor, context=None, stop: threading.Event | None = None) -> None:
+    """Run the executor until its context shuts down or `stop` is set.
 
     `EventsExecutor.spin()` of the rclpy 7.1 wheels neither runs callbacks nor returns on SIGINT
     here, so the executor is driven with spin_once.
     """
     ok = (context.ok if context is not None else rclpy.ok)
     try:
-        while ok():
+        while ok() and not (stop is not None and stop.is_set()):
             executor.spin_once(timeout_sec=0.1)
     except ExternalShutdownException:
         pass
 
 
 def run_node(make_node, args=None) -> int:
-    """Entry point of a node process: create it, spin an EventsExecutor until shutdown, clean up.
+    """Entry point of a node process: create it, spin an EventsExecutor until SIGINT or SIGTERM, clean up.
 
-    A refused parameter ends the process with status 2 and a message naming it.  The interpreter
-    hands the GIL over every GIL_SWITCH_INTERVAL_S so that a rate loop and the executor thread do
-    not hold each other up for Python's default 5 ms.
+    The process handles SIGINT and SIGTERM itself (rclpy's handlers would shut the context down first):
+    a signal ends the spin, then `node.close()` runs while the context is still up — the bridge sends its
+    zero force there — and only then does the context go.  A refused parameter ends the process with
+    status 2 and a message naming it.  The interpreter hands the GIL over every GIL_SWITCH_INTERVAL_S so
+    that a rate loop and the executor thread do not hold each other up for Python's default 5 ms.
     """
     sys.setswitchinterval(GIL_SWITCH_INTERVAL_S)
-    rclpy.init(args=args)
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    stop = threading.Event()
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(signum, lambda *_: stop.set())
     node = None
     try:
         node = make_node()
         executor = EventsExecutor()
         executor.add_node(node)
-        spin(executor)
+        spin(executor, stop=stop)
     except ValueError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

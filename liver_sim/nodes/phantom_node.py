@@ -4,7 +4,9 @@ A RateLoop at `rate_hz` (1 kHz) steps `liver_sim.phantom.PhantomSim` — a stylu
 virtual hand playing a `tool_scripts` script — and publishes the stylus on /phantom/measured_cp
 (frame `phantom_base`, stamped with the sample's time). The newest force command from
 /phantom/servo_cf (format `force_output`) pushes the stylus; a command older than
-`command_timeout_s`, or a malformed one, counts as zero, as a real driver's safety would do.
+`command_timeout_s` (counted from its reception), or a malformed one, counts as zero, as a real
+driver's safety would do. A running node changes only `command_timeout_s`; every other parameter
+change is refused with the reason.
 Its parameters are liver_sim.phantom.PARAMETERS.
 """
 from __future__ import annotations
@@ -16,7 +18,7 @@ from rclpy.node import Node
 
 from liver_sim.geometry.device_map import DeviceMap
 from liver_sim.nodes.common import (Latest, LoopInputs, RateLoop, apply_realtime_priority, declare_parameters,
-                                    loop_status, publish_diagnostics, run_node)
+                                    loop_status, on_parameter_changes, publish_diagnostics, read_at_start, run_node)
 from liver_sim.phantom import PARAMETERS, PhantomSim, StylusParams
 from liver_sim.tool_scripts import IDENTITY_XYZW, script_from
 from msg_defs import conversions
@@ -42,8 +44,10 @@ class PhantomNode(Node):
                                                   TOPICS["diagnostics"].qos)
         self._inputs = LoopInputs(self)  # read by the 1 kHz loop itself, not by the executor
         self._inputs.subscribe(conversions.force_message_type(p["force_output"]), p["servo_cf_topic"],
-                               TOPICS["servo_cf"].qos, self._on_command, raw=True)
+                               TOPICS["servo_cf"].qos, self._on_command, raw=True, received=True)
         self.create_timer(1.0, self._publish_diagnostics)
+        self._refuse = read_at_start("phantom_sim", {"command_timeout_s"})
+        on_parameter_changes(self, PARAMETERS, self._apply)
         self._loop = RateLoop(p["rate_hz"], self._step, "phantom_sim")
         self._start = None
         self._clock_origin_s = 0.0
@@ -61,14 +65,20 @@ class PhantomNode(Node):
         self._loop.stop()
         self._inputs.destroy()
 
-    def _on_command(self, data: bytes) -> None:
+    def _apply(self, changes: dict) -> str | None:
+        refused = self._refuse(changes)
+        if refused is None:
+            self.p = {**self.p, **changes}  # command_timeout_s: read by the next tick
+        return refused
+
+    def _on_command(self, data: bytes, received: float) -> None:
         try:
             force = conversions.force_from_bytes(self.p["force_output"], data)
         except ValueError as exc:
             self.bad_commands += 1
             self.get_logger().warning(f"force command taken as zero: {exc}", throttle_duration_sec=1.0)
             force = _ZERO
-        self._command.set(force)
+        self._command.set(force, received)
 
     def _step(self, now: float) -> None:
         self._inputs.poll()

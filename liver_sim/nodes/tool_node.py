@@ -6,19 +6,24 @@
 - source=script: a RateLoop at `rate_hz` plays a `liver_sim.tool_scripts` script;
 - source=static: a RateLoop at `rate_hz` holds `static_position_m`, `static_orientation_xyzw`.
 
+Whatever the source, the device map is published once, latched (transient local), on `device_map_topic`:
+haptic_bridge turns its forces with this map and no other, so the two can never disagree. A running node
+changes only `workspace_radius_m`; every other parameter change is refused with the reason.
+
 The parameters are liver_sim.tool_parameters.PARAMETERS; the script and device-map ones are shared with
 `phantom_sim`, so both nodes can be given the same values.
 """
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 
 import numpy as np
 from rclpy.node import Node
 
 from liver_sim.geometry.device_map import DeviceMap
 from liver_sim.nodes.common import (LoopStats, RateLoop, apply_realtime_priority, declare_parameters, loop_status,
-                                    publish_diagnostics, run_node)
+                                    on_parameter_changes, publish_diagnostics, read_at_start, run_node)
 from liver_sim.parameters import quaternion_parameter, vector_parameter
 from liver_sim.tool_parameters import PARAMETERS
 from liver_sim.tool_scripts import IDENTITY_XYZW, ScriptedTrajectory, script_from
@@ -40,11 +45,14 @@ class ToolNode(Node):
                                                 TOPICS["tool_pose"].qos)
         self._diagnostics = self.create_publisher(TOPICS["diagnostics"].type, TOPICS["diagnostics"].name,
                                                   TOPICS["diagnostics"].qos)
+        self._map_publisher = self.create_publisher(TOPICS["device_map"].type, p["device_map_topic"],
+                                                    TOPICS["device_map"].qos)
+        self._map_publisher.publish(conversions.device_map_message(device_map))
+        self._device_map = device_map
         self.published = 0
         self.rejected = 0
         self._loop = None
         if p["source"] == "device":
-            self._device_map = device_map
             self._arrivals = LoopStats(1.0 / p["rate_hz"])
             self._last_arrival = None
             self.create_subscription(TOPICS["measured_cp"].type, p["measured_cp_topic"], self._on_device,
@@ -63,8 +71,11 @@ class ToolNode(Node):
             self._start = None
             self._loop = RateLoop(p["rate_hz"], self._step, "liver_tool")
         self.create_timer(1.0, self._publish_diagnostics)
+        self._refuse = read_at_start("liver_tool", {"workspace_radius_m"})
+        on_parameter_changes(self, PARAMETERS, self._apply)
         rate = "as the device" if self._loop is None else f"{p['rate_hz']:g} Hz"
-        self.get_logger().info(f"liver_tool: {origin} → {p['tool_pose_topic']} (frame {p['frame_id']}, {rate})")
+        self.get_logger().info(f"liver_tool: {origin} → {p['tool_pose_topic']} (frame {p['frame_id']}, {rate}); "
+                               f"device map latched on {p['device_map_topic']}")
         apply_realtime_priority(self, p["realtime_priority"])  # before the loop starts: it inherits it
         if self._loop is not None:
             self._loop.start()
@@ -72,6 +83,13 @@ class ToolNode(Node):
     def close(self) -> None:
         if self._loop is not None:
             self._loop.stop()
+
+    def _apply(self, changes: dict) -> str | None:
+        refused = self._refuse(changes)
+        if refused is None:  # workspace_radius_m: the next device sample is checked against it
+            self._device_map = replace(self._device_map, workspace_radius_m=changes["workspace_radius_m"])
+            self.p = {**self.p, **changes}
+        return refused
 
     def _on_device(self, data: bytes) -> None:
         now = time.monotonic()

@@ -39,7 +39,7 @@ def record(args) -> int:
 
 
 def add_replay_command(commands) -> None:
-    """``liver-sim replay BAG [--rate R] [--topics …] [--delay S]``."""
+    """``liver-sim replay BAG [--rate R] [--topics …] [--delay S] [--remap-device-commands TOPIC]``."""
     parser = commands.add_parser("replay", help="republish a bag's topics with their original timing")
     parser.add_argument("bag", type=Path, metavar="BAG", help="rosbag2 bag folder")
     parser.add_argument("--rate", type=float, default=1.0, help="playback speed factor (default: 1)")
@@ -47,13 +47,16 @@ def add_replay_command(commands) -> None:
                         "e.g. /phantom/measured_cp to drive liver_tool with a past session's device")
     parser.add_argument("--delay", type=float, default=1.0,
                         help="seconds to wait for subscribers before the first message (default: 1)")
+    parser.add_argument("--remap-device-commands", metavar="TOPIC", default=None,
+                        help="replay the recorded device commands (/phantom/servo_cf…) on TOPIC; without it they "
+                             "are never replayed, so that no device is driven by a recording")
     parser.set_defaults(handler=replay)
 
 
 def replay(args) -> int:
     from liver_sim.sessions.replay import run_replay
 
-    run_replay(args.bag, args.rate, args.topics, args.delay, _progress)
+    run_replay(args.bag, args.rate, args.topics, args.delay, _progress, args.remap_device_commands)
     return 0
 
 

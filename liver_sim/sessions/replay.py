@@ -3,6 +3,11 @@
 Message k goes out at start + (t_k − t_0)/rate on an absolute schedule, so a slow publish delays
 the next messages without shifting the rest.  Product topics keep their QoS of docs/contract.md;
 other topics are published reliable, volatile, keep-last 10.
+
+Device commands (DEVICE_COMMAND_TOPICS) are never republished on their own topics: a replay next to a
+rig would drive its device past the bridge's clamp, rate limit and watchdog.  They are left out, or, with
+`remap_device_commands`, published on that topic instead (the baseline's on that topic +
+"_without_local_model").
 """
 from __future__ import annotations
 
@@ -14,25 +19,51 @@ from pathlib import Path
 
 from liver_sim.sessions.bag import bag_info, read_messages
 from liver_sim.sessions.record import _rclpy_qos, known_topics, message_class
+from msg_defs.topics import BASELINE_FORCE_TOPIC, TOPICS
 
 REPLAY_NODE = "liver_sim_replay"
+#: Recorded force commands: a replay never publishes them where a device driver listens.
+DEVICE_COMMAND_TOPICS = (TOPICS["servo_cf"].name, BASELINE_FORCE_TOPIC)
+
+
+def output_topics(wanted: list[str], remap_device_commands: str | None, progress=print) -> dict[str, str]:
+    """{recorded topic: topic to publish it on} for the `wanted` topics: device commands left out, or moved
+    to `remap_device_commands`; ValueError when the commands are asked for by name without a remap, or the
+    remap is itself a device command topic."""
+    commands = [t for t in wanted if t in DEVICE_COMMAND_TOPICS]
+    if remap_device_commands is None:
+        out = {t: t for t in wanted if t not in commands}
+        if commands:
+            progress(f"left out the device commands {', '.join(commands)} (--remap-device-commands TOPIC "
+                     "replays them on another topic)")
+        if not out:
+            raise ValueError(f"{', '.join(commands)}: device commands are never replayed on their own topic; "
+                             "give --remap-device-commands TOPIC to replay them on another topic")
+        return out
+    if remap_device_commands in DEVICE_COMMAND_TOPICS or remap_device_commands in wanted:
+        raise ValueError(f"--remap-device-commands {remap_device_commands}: must be a topic no device and no "
+                         "other replayed topic uses")
+    servo = TOPICS["servo_cf"].name
+    return {t: remap_device_commands + t.removeprefix(servo) if t in commands else t for t in wanted}
 
 
 def run_replay(bag: Path, rate: float = 1.0, topics: list[str] | None = None, delay_s: float = 1.0,
-               progress=print) -> dict[str, int]:
+               progress=print, remap_device_commands: str | None = None) -> dict[str, int]:
     """Publish the bag's messages (only `topics` if given) at `rate` × their recorded pace after `delay_s`
-    (time for subscribers to match); stop early on SIGINT/SIGTERM.  Returns {topic: messages published}."""
+    (time for subscribers to match), device commands only on `remap_device_commands` (see
+    :func:`output_topics`); stop early on SIGINT/SIGTERM.  Returns {recorded topic: messages published}."""
     import rclpy
     from rclpy.signals import SignalHandlerOptions
 
     if not rate > 0.0:
         raise ValueError(f"--rate must be > 0, got {rate!r}")
     info = bag_info(bag)
-    wanted = sorted(info.topics) if topics is None else topics
+    out_topics = output_topics(sorted(info.topics) if topics is None else topics, remap_device_commands, progress)
+    wanted = list(out_topics)
     messages = read_messages(bag, wanted)  # streamed: a long session need not fit in memory
     first = next(messages, None)
     if first is None:
-        raise ValueError(f"{bag}: holds no messages on {', '.join(wanted)}")
+        raise ValueError(f"{bag}: holds no messages on {', '.join(out_topics.values())}")
     stop = threading.Event()
     previous = {sig: signal.signal(sig, lambda *_: stop.set()) for sig in (signal.SIGINT, signal.SIGTERM)}
     context = rclpy.Context()
@@ -46,11 +77,11 @@ def run_replay(bag: Path, rate: float = 1.0, topics: list[str] | None = None, de
             msgtype = info.topics[topic][0]
             spec = known[topic][1] if topic in known else None
             qos = _rclpy_qos(spec, spec.depth) if spec else 10
-            publishers[topic] = node.create_publisher(message_class(msgtype), topic, qos)
+            publishers[topic] = node.create_publisher(message_class(msgtype), out_topics[topic], qos)
         t0 = first.timestamp_ns
         span = (info.start_ns + info.duration_ns - t0) * 1e-9 / rate
         progress(f"replaying {sum(info.topics[t][1] for t in wanted)} messages of {bag} ({span:.1f} s at rate "
-                 f"{rate:g}) on {', '.join(wanted)}")
+                 f"{rate:g}) on {', '.join(out_topics.values())}")
         stop.wait(delay_s)
         start = time.monotonic()
         next_progress = start + 5.0
