@@ -14,10 +14,10 @@ from pathlib import Path
 
 import numpy as np
 
+from liver_sim.bench import stable_params
 from liver_sim.mesh.io import load_mesh
 from liver_sim.mesh.liver_shape import default_liver
 from liver_sim.mesh.tetmesh import TetMesh
-from liver_sim.bench import stable_params
 from liver_sim.physics.model import LiverModel
 from liver_sim.physics.params import ModelParams
 from liver_sim.physics.pipeline import PARAMETERS as PHYSICS_PARAMETERS
@@ -37,7 +37,7 @@ class DemoMesh:
 
     @property
     def name(self) -> str:
-        """What titles call it ("the default liver", "Default liver at ...")."""
+        """What titles call it: "default liver" or the file's name."""
         return "default liver" if self.path is None else self.path.name
 
     @property
@@ -293,7 +293,7 @@ def run_demo(out_dir: Path, duration_s: float | None = None, progress=print, rec
                    out_dir / "liver_press.png")
     else:
         figures = TOPOLOGY_FIGURES
-        _plot_topology(snapshot, f"{spec.title} ({liver.name})", mesh, out_dir)
+        _plot_topology(snapshot, spec.title, mesh, out_dir)
     progress(f"physics {summary['physics']['rate_hz']:.1f} Hz, haptic {summary['haptic']['rate_hz']:.1f} Hz "
              f"(period error p99 {1e3 * (summary['haptic']['period_error_p99_s'] or 0):.2f} ms), peak force "
              f"{summary['peak_haptic_force_n']:.2f} N"
