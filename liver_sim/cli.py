@@ -11,12 +11,13 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import signal
 import sys
 from pathlib import Path
 
-from liver_sim.mesh.io import (CAPSULE_REGION, PARENCHYMA_REGION, WRITE_SUFFIXES, checked_output_path,
-                               load_mesh, write_mesh)
+from liver_sim.mesh.io import (CAPSULE_REGION, ORGAN_SIZE_RANGE_M, PARENCHYMA_REGION, WRITE_SUFFIXES,
+                               checked_output_path, load_mesh, write_mesh)
 from liver_sim.mesh.liver_shape import build_liver, default_liver
 from liver_sim.mesh.tetmesh import TetMesh
 from liver_sim.processes import DISCOVERY_RANGES, keep_dds_local
@@ -40,6 +41,25 @@ def positive_int(text: str) -> int:
     return value
 
 
+def positive_float(text: str) -> float:
+    """argparse type: a finite number > 0."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not (math.isfinite(value) and value > 0.0):
+        raise argparse.ArgumentTypeError(f"{value} is not a finite number > 0")
+    return value
+
+
+def add_scale_argument(parser) -> None:
+    """--scale FACTOR: the factor from the mesh file's units to metres."""
+    parser.add_argument("--scale", type=positive_float, default=1.0, metavar="FACTOR",
+                        help="multiply the file's coordinates by FACTOR to get metres, before anything else "
+                             "(0.01: file in centimetres, 0.001: millimetres; default: 1, metres). A mesh "
+                             f"not {ORGAN_SIZE_RANGE_M[0]:g}-{ORGAN_SIZE_RANGE_M[1]:g} m across is refused")
+
+
 def add_mesh_command(commands) -> None:
     """``liver-sim mesh info|build``: describe or convert a mesh (default: the built-in liver)."""
     mesh_parser = commands.add_parser("mesh", help="describe or write tetrahedral meshes")
@@ -52,6 +72,7 @@ def add_mesh_command(commands) -> None:
         parser.add_argument("--target-tets", type=positive_int, metavar="N",
                             help="tet count aimed at when tetrahedralising a surface or the "
                                  "built-in liver (volume meshes are used as they are)")
+        add_scale_argument(parser)
 
     info = actions.add_parser("info", help="print size, volume, quality and hash of a mesh")
     add_source_arguments(info)
@@ -66,9 +87,12 @@ def add_mesh_command(commands) -> None:
 
 
 def mesh_from_args(args) -> TetMesh:
-    """The mesh named by PATH, or the built-in liver (rebuilt when --target-tets is given)."""
+    """The mesh named by PATH in metres (its coordinates × --scale), or the built-in liver (rebuilt when
+    --target-tets is given)."""
     if args.path is not None:
-        return load_mesh(args.path, args.target_tets)
+        return load_mesh(args.path, args.target_tets, args.scale)
+    if args.scale != 1.0:
+        raise ValueError("--scale applies to a mesh file (PATH); the built-in liver is in metres")
     if args.target_tets is not None:
         return build_liver(args.target_tets)
     return default_liver()
@@ -204,16 +228,21 @@ def bench_loop(args) -> int:
 
 
 def add_demo_command(commands) -> None:
-    """``liver-sim demo [--scenario press|tear|cut] [--duration S] [--out DIR] [--offline] [--record [--storage …]]``:
-    the closed-loop demo."""
+    """``liver-sim demo [--scenario press|tear|cut] [--mesh PATH [--scale F]] [--duration S] [--out DIR] [--offline]
+    [--record [--storage …]]``: the closed-loop demo."""
     parser = commands.add_parser("demo", help="the four nodes in closed loop with a simulated PHANToM "
-                                              "pressing the default liver (--offline: the model alone, no ROS)")
+                                              "pressing the default liver or --mesh (--offline: the model alone, "
+                                              "no ROS)")
     parser.add_argument("--scenario", choices=("press", "tear", "cut"), default="press",
                         help="press: press, slide and release (default); tear: grasp and pull until the liver "
                              "tears; cut: cut the liver along the tool path; tear and cut draw it before and after")
     parser.add_argument("--duration", type=float, default=None,
                         help="seconds to run (default: 14 s for press, 12 s for tear and cut; offline: the "
                              "script's 4.85 s)")
+    parser.add_argument("--mesh", type=Path, default=None, metavar="PATH",
+                        help="run on this volume mesh (.msh .vtu .vtk .mesh) or closed surface (.stl .obj .ply "
+                             ".off) instead of the default liver; the simulated hand presses its top")
+    add_scale_argument(parser)
     parser.add_argument("--out", type=Path, default=Path("out/demo"), help="output folder (default: %(default)s)")
     parser.add_argument("--offline", action="store_true", help="scripted press-and-release in this process, no ROS")
     parser.add_argument("--record", action="store_true", help="record the run with `liver-sim record` into OUT/session")
@@ -222,16 +251,19 @@ def add_demo_command(commands) -> None:
 
 
 def demo(args) -> int:
-    from liver_sim.demo import run_demo, run_offline_demo
+    from liver_sim.demo import DemoMesh, run_demo, run_offline_demo
 
     progress = lambda line: print(line, flush=True)  # noqa: E731
+    if args.mesh is None and args.scale != 1.0:
+        raise ValueError("--scale applies to --mesh PATH; the default liver is in metres")
+    liver = DemoMesh(args.mesh, args.scale)
     if args.offline:
         if args.record or args.scenario != "press":
             raise ValueError("--record and --scenario run the node network; --offline is the press without ROS")
-        run_offline_demo(args.out, args.duration, progress)
+        run_offline_demo(args.out, args.duration, progress, liver)
     else:
         run_demo(args.out, args.duration, progress, record_storage=args.storage if args.record else None,
-                 scenario=args.scenario)
+                 scenario=args.scenario, liver=liver)
     return 0
 
 

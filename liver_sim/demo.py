@@ -1,5 +1,6 @@
-"""`liver-sim demo --offline`: the scripted press-and-release on the default liver, in one process
-without ROS (behaviours B1–B3 of docs/paper.md).
+"""`liver-sim demo`: the closed loop of the four nodes (`run_demo`) and, with --offline, the scripted
+press-and-release in one process without ROS (`run_offline_demo`; behaviours B1–B3 of docs/paper.md),
+on the default liver or a user's mesh (--mesh PATH, its coordinates × --scale in metres).
 
 Writes to the output folder: summary.json and summary.md (the figures), force.png (force and
 displacement over time) and liver_press.png (the deformed liver at peak press).
@@ -13,25 +14,78 @@ from pathlib import Path
 
 import numpy as np
 
+from liver_sim.bench import stable_params
+from liver_sim.mesh.io import load_mesh
 from liver_sim.mesh.liver_shape import default_liver
+from liver_sim.mesh.tetmesh import TetMesh
 from liver_sim.physics.model import LiverModel
-from liver_sim.scenarios import offline_press_release, press_release, recovery_time_s
+from liver_sim.physics.params import ModelParams
+from liver_sim.physics.pipeline import PARAMETERS as PHYSICS_PARAMETERS
+from liver_sim.scenarios import offline_press_release, press_anchor, press_release, recovery_time_s
 from liver_sim.tool_scripts import ScriptSettings
 
 PLOTTED_FIGURES = ("force.png", "liver_press.png")
 
 
-def run_offline_demo(out_dir: Path, duration_s: float | None = None, progress=print) -> dict:
-    """Run the press-and-release, write the summary and pictures into out_dir, return the summary."""
-    mesh = default_liver()
-    model = LiverModel(mesh)
+@dataclass(frozen=True)
+class DemoMesh:
+    """The liver a demo runs on: `path` None for the default liver, else a mesh file whose coordinates ×
+    `scale` are metres, loaded as the physics node loads it (mesh_path, mesh_scale, target_tets)."""
+
+    path: Path | None = None
+    scale: float = 1.0
+
+    @property
+    def name(self) -> str:
+        """What titles call it: "default liver" or the file's name."""
+        return "default liver" if self.path is None else self.path.name
+
+    @property
+    def title(self) -> str:
+        """`name` at the start of a title."""
+        return self.name[:1].upper() + self.name[1:]
+
+    def load(self) -> TetMesh:
+        """The mesh in metres; MeshError (a ValueError naming the file) when refused."""
+        if self.path is None:
+            return default_liver()
+        return load_mesh(self.path, PHYSICS_PARAMETERS["target_tets"].default, self.scale)
+
+    def model_params(self, mesh: TetMesh) -> ModelParams:
+        """The default model parameters, with the substeps raised to `mesh`'s stability bound for a user's mesh
+        (its elements may be smaller or lighter than the default liver's)."""
+        return ModelParams() if self.path is None else stable_params(mesh)
+
+    def physics_parameters(self, mesh: TetMesh) -> dict:
+        """The physics node's parameters that load this mesh and step it stably (none for the default liver)."""
+        if self.path is None:
+            return {}
+        return {"mesh_path": str(self.path.resolve()), "mesh_scale": self.scale,
+                "substeps": self.model_params(mesh).substeps}
+
+    def device_parameters(self, mesh: TetMesh) -> dict:
+        """The script anchor and device map that make the simulated hand press the top of `mesh` with the
+        same device-frame moves as on the default liver (none for the default liver)."""
+        if self.path is None:
+            return {}
+        anchor = press_anchor(mesh)
+        shift = anchor - np.asarray(ScriptSettings().anchor_m)  # the device origin follows the press point
+        return {"anchor_m": [round(float(v), 6) for v in anchor],
+                "device_translation_m": [round(float(v), 6) for v in shift]}
+
+
+def run_offline_demo(out_dir: Path, duration_s: float | None = None, progress=print,
+                     liver: DemoMesh = DemoMesh()) -> dict:
+    """Run the press-and-release on `liver`, write the summary and pictures into out_dir, return the summary."""
+    mesh = liver.load()
+    model = LiverModel(mesh, liver.model_params(mesh))
     script = offline_press_release(mesh, model.tool.radius_m)
     if duration_s is not None:
         active = script.approach_s + script.press_s + script.hold_s + script.withdraw_s
         if duration_s <= active:
             raise ValueError(f"--duration must exceed {active:.2f} s (approach, press, hold, withdraw)")
         script = replace(script, rest_s=duration_s - active)
-    progress(f"liver: {len(mesh.points)} nodes, {len(mesh.tets)} tets, {len(mesh.skin)} skin triangles, "
+    progress(f"{liver.name}: {len(mesh.points)} nodes, {len(mesh.tets)} tets, {len(mesh.skin)} skin triangles, "
              f"{mesh.volume * 1e3:.2f} L; {model.springs.springs} springs; "
              f"dt {model.params.dt_s * 1e6:.0f} us ({model.params.substeps} substeps at "
              f"{model.params.frame_rate_hz:g} Hz), stable below {model.stable_dt_s * 1e6:.0f} us")
@@ -42,7 +96,7 @@ def run_offline_demo(out_dir: Path, duration_s: float | None = None, progress=pr
     data = trace.arrays()
     force = np.linalg.norm(data["tool_force_n"], axis=1)
     summary = {
-        "mesh": mesh.summary(),
+        "mesh": {**mesh.summary(), "scale": liver.scale},
         "parameters": {k: (asdict(v) if hasattr(v, "__dataclass_fields__") else v)
                        for k, v in vars(model.params).items()},
         "tool": asdict(model.tool),
@@ -59,11 +113,11 @@ def run_offline_demo(out_dir: Path, duration_s: float | None = None, progress=pr
     }
     out_dir.mkdir(parents=True, exist_ok=True)
     (out_dir / "summary.json").write_text(json.dumps(summary, indent=2, default=float) + "\n")
-    (out_dir / "summary.md").write_text(_markdown(summary))
-    _plot_force(data, script, out_dir / "force.png")
+    (out_dir / "summary.md").write_text(_markdown(summary, liver.name))
+    _plot_force(data, script, liver.name, out_dir / "force.png")
     peak = int(np.argmax(force))
     plot_liver(mesh.points, mesh.skin, trace.peak_positions_m, data["tool_position_m"][peak], model.tool.radius_m,
-               f"Default liver at peak press ({force[peak]:.2f} N)", out_dir / "liver_press.png")
+               f"{liver.title} at peak press ({force[peak]:.2f} N)", out_dir / "liver_press.png")
     progress(f"peak force {summary['peak_force_n']:.2f} N, peak displacement "
              f"{summary['peak_displacement_m'] * 1e3:.1f} mm, residual {summary['final_displacement_m'] * 1e3:.2f} mm "
              f"after {script.rest_s:.1f} s; {summary['realtime_factor']:.1f}x real time")
@@ -71,10 +125,10 @@ def run_offline_demo(out_dir: Path, duration_s: float | None = None, progress=pr
     return summary
 
 
-def _markdown(summary: dict) -> str:
+def _markdown(summary: dict, name: str) -> str:
     mesh = summary["mesh"]
     return "\n".join([
-        "# Press-and-release on the default liver",
+        f"# Press-and-release on the {name}",
         "",
         f"- mesh: {mesh['nodes']} nodes, {mesh['tetrahedra']} tets, {mesh['skin_triangles']} skin triangles, "
         f"{mesh['volume_m3'] * 1e3:.2f} L, min dihedral {mesh['min_dihedral_deg']:.1f} deg",
@@ -90,7 +144,7 @@ def _markdown(summary: dict) -> str:
     ])
 
 
-def _plot_force(data: dict, script: ScriptSettings, path: Path) -> None:
+def _plot_force(data: dict, script: ScriptSettings, name: str, path: Path) -> None:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -105,7 +159,7 @@ def _plot_force(data: dict, script: ScriptSettings, path: Path) -> None:
     twin = ax.twinx()
     twin.plot(t, data["max_displacement_m"] * 1e3, color="tab:blue", label="largest node displacement (mm)")
     twin.set_ylabel("displacement (mm)", color="tab:blue")
-    ax.set_title("Press and release on the default liver")
+    ax.set_title(f"Press and release on the {name}")
     lines = ax.get_legend_handles_labels()[0] + twin.get_legend_handles_labels()[0]
     ax.legend(lines, [line.get_label() for line in lines], loc="upper right", fontsize=8)
     fig.tight_layout()
@@ -178,8 +232,9 @@ TOPOLOGY_FIGURES = ("force.png", "before.png", "after.png")
 
 
 def run_demo(out_dir: Path, duration_s: float | None = None, progress=print, record_storage: str | None = None,
-             scenario: str = "press") -> dict:
-    """The main job: the four nodes in closed loop with the simulated PHANToM playing `scenario`.
+             scenario: str = "press", liver: DemoMesh = DemoMesh()) -> dict:
+    """The main job: the four nodes in closed loop with the simulated PHANToM playing `scenario` on `liver`
+    (the physics node loads the same file; the hand presses the top of it).
 
     Writes summary.json/.md, force.png, and liver_press.png (press) or before.png and after.png (tear,
     cut), and the nodes' logs in logs/. With `record_storage` (mcap or sqlite3), `liver-sim record`
@@ -193,8 +248,11 @@ def run_demo(out_dir: Path, duration_s: float | None = None, progress=print, rec
         raise ValueError(f"--scenario must be one of {', '.join(SCENARIOS)}, got {scenario!r}")
     spec = SCENARIOS[scenario]
     duration_s = spec.duration_s if duration_s is None else duration_s
-    mesh = default_liver()
-    plan = closed_loop_plan(extra={"liver_physics": spec.physics, "phantom_sim": spec.hand})
+    mesh = liver.load()  # refused here, before any node starts, if the physics node would refuse it
+    device = liver.device_parameters(mesh)
+    plan = closed_loop_plan(extra={"liver_physics": {**spec.physics, **liver.physics_parameters(mesh)},
+                                   "phantom_sim": {**device, **spec.hand},
+                                   "liver_tool": {k: v for k, v in device.items() if k != "anchor_m"}})
     if record_storage:
         plan.observers["recorder"] = recorder_command(out_dir / "session", record_storage)
     progress(f"{spec.title}: starting the node network (the same command lines work in four terminals):")
@@ -206,6 +264,7 @@ def run_demo(out_dir: Path, duration_s: float | None = None, progress=print, rec
     haptic_norm = np.linalg.norm(haptic_force, axis=1)
     summary = {
         "scenario": scenario,
+        "mesh": {"source": mesh.source, "scale": liver.scale, "sha256": mesh.sha256},
         "duration_s": duration_s,
         "physics": rate_figures(snapshot["nodes_arrival_s"], 150.0),
         "haptic": rate_figures(arrival, 1000.0),
@@ -225,12 +284,12 @@ def run_demo(out_dir: Path, duration_s: float | None = None, progress=print, rec
         summary["final_displacement_m"] = float(np.linalg.norm(last_nodes - mesh.points, axis=1).max())
     out_dir.mkdir(parents=True, exist_ok=True)
     (out_dir / "summary.json").write_text(json.dumps(summary, indent=2, default=float) + "\n")
-    (out_dir / "summary.md").write_text(_network_markdown(summary, spec.title))
-    _plot_network_forces(snapshot, spec.title, out_dir / "force.png")
+    (out_dir / "summary.md").write_text(_network_markdown(summary, f"{spec.title} ({liver.name})"))
+    _plot_network_forces(snapshot, f"{spec.title} ({liver.name})", out_dir / "force.png")
     if scenario == "press":
         figures = PLOTTED_FIGURES
         plot_liver(mesh.points, mesh.skin, peak_nodes, None, 0.0,
-                   f"Default liver at peak press ({summary['peak_physics_force_n']:.2f} N)",
+                   f"{liver.title} at peak press ({summary['peak_physics_force_n']:.2f} N)",
                    out_dir / "liver_press.png")
     else:
         figures = TOPOLOGY_FIGURES

@@ -20,3 +20,13 @@ def box_mesh(nx: int, ny: int, nz: int, spacing_m: float) -> TetMesh:
 def kinetic_energy_j(model) -> float:
     """½·Σ m·|v|² (J) of a LiverModel."""
     return 0.5 * float((model.masses_kg * (model.velocities ** 2).sum(axis=1)).sum())
+
+
+def write_sphere_surface(path, radius, centre=(0.0, 0.0, 0.0), subdivisions=3):
+    """A closed icosphere surface of `radius` about `centre`, in the file's units, written to `path` (by extension)."""
+    import trimesh
+
+    sphere = trimesh.creation.icosphere(subdivisions=subdivisions, radius=radius)
+    sphere.apply_translation(centre)
+    sphere.export(path)
+    return path

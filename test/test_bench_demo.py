@@ -4,7 +4,9 @@ import json
 import pytest
 
 from liver_sim.bench import TOPOLOGY_TARGETS, run_physics_bench, run_topology_bench
-from liver_sim.demo import PLOTTED_FIGURES, run_offline_demo
+from liver_sim.demo import PLOTTED_FIGURES, DemoMesh, run_offline_demo
+from liver_sim.mesh.tetmesh import MeshError
+from meshes import write_sphere_surface
 
 PNG = b"\x89PNG\r\n\x1a\n"
 
@@ -48,3 +50,18 @@ def test_offline_demo_writes_summary_and_pictures(tmp_path):
 def test_offline_demo_refuses_a_duration_shorter_than_the_script(tmp_path):
     with pytest.raises(ValueError, match="--duration"):
         run_offline_demo(tmp_path, duration_s=1.0, progress=lambda line: None)
+
+
+def test_offline_demo_presses_a_users_mesh_in_its_units_where_it_lies(tmp_path):
+    path = write_sphere_surface(tmp_path / "organ_cm.stl", 6.0, centre=(30.0, -20.0, 10.0), subdivisions=2)
+    with pytest.raises(MeshError, match="--scale 0.01 "):
+        run_offline_demo(tmp_path / "unitless", progress=lambda line: None, liver=DemoMesh(path))
+    summary = run_offline_demo(tmp_path / "out", duration_s=2.5, progress=lambda line: None,
+                               liver=DemoMesh(path, 0.01))
+    assert summary["mesh"]["source"] == str(path) and summary["mesh"]["scale"] == 0.01
+    assert summary["mesh"]["size_m"] == pytest.approx([0.12] * 3, rel=0.08)
+    assert summary["peak_force_n"] > 0.2 and not summary["divergences"]  # the tool met the sphere's top
+    assert summary["peak_displacement_m"] > 0.005
+    for name in PLOTTED_FIGURES:
+        assert (tmp_path / "out" / name).read_bytes()[:8] == PNG
+    assert "organ_cm.stl" in (tmp_path / "out" / "summary.md").read_text()

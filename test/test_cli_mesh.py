@@ -17,14 +17,26 @@ REPO = Path(__file__).resolve().parents[1]
 SIDE, HEIGHT = 0.06, 0.04  # m: right-triangle legs and height of the prism fixture
 
 
+PRISM_POINTS = np.array([[0, 0, 0], [SIDE, 0, 0], [0, SIDE, 0], [0, 0, HEIGHT], [SIDE, 0, HEIGHT], [0, SIDE, HEIGHT]])
+PRISM_TETS = np.array([[0, 1, 2, 5], [0, 1, 5, 4], [0, 4, 5, 3]])
+
+
 @pytest.fixture
 def prism(tmp_path):
     """A right triangular prism (6 nodes, 3 tets, 8 skin triangles) written by meshio as .vtu."""
-    points = np.array([[0, 0, 0], [SIDE, 0, 0], [0, SIDE, 0],
-                       [0, 0, HEIGHT], [SIDE, 0, HEIGHT], [0, SIDE, HEIGHT]])
-    tets = np.array([[0, 1, 2, 5], [0, 1, 5, 4], [0, 4, 5, 3]])
     path = tmp_path / "prism.vtu"
-    meshio.write(path, meshio.Mesh(points, [("tetra", tets)]))
+    meshio.write(path, meshio.Mesh(PRISM_POINTS, [("tetra", PRISM_TETS)]))
+    return path
+
+
+@pytest.fixture
+def prism_cm(tmp_path):
+    """The prism in centimetres (6 x 6 x 4 units, unitless), as Gmsh 2.2 from another simulator."""
+    path = tmp_path / "prism_cm.msh"
+    tags = [np.ones(len(PRISM_TETS), dtype=int)]
+    meshio.write(path, meshio.Mesh(PRISM_POINTS * 100, [("tetra", PRISM_TETS)],
+                                   cell_data={"gmsh:physical": tags, "gmsh:geometrical": tags}),
+                 file_format="gmsh22", binary=False)
     return path
 
 
@@ -111,6 +123,43 @@ def test_build_refuses_unknown_output_format(capsys, prism, tmp_path):
 def test_target_tets_must_be_positive(capsys, prism):
     assert main(["mesh", "info", str(prism), "--target-tets", "0"]) == 2
     assert "--target-tets: 0 is not positive" in capsys.readouterr().err
+
+
+def test_a_unitless_mesh_is_refused_with_its_size_and_the_scale_to_use(capsys, prism_cm, tmp_path):
+    assert_refused(capsys, ["mesh", "info", str(prism_cm)],
+                   f"{prism_cm}: implausible size for an organ: 6 x 6 x 4 m across, 72 m^3")
+    out = tmp_path / "never.msh"
+    assert main(["mesh", "build", str(prism_cm), "--out", str(out)]) == 2
+    assert "--scale 0.01 " in capsys.readouterr().err and not out.exists()
+
+
+def test_info_scale_turns_the_file_units_into_metres(capsys, prism_cm):
+    info = run_json(capsys, prism_cm, "--scale", "0.01")
+    assert info["size_m"] == pytest.approx([SIDE, SIDE, HEIGHT])
+    assert info["volume_m3"] == pytest.approx(SIDE * SIDE / 2 * HEIGHT)
+    assert main(["mesh", "info", str(prism_cm), "--scale", "0.01"]) == 0
+    assert "size            0.06 x 0.06 x 0.04 m" in capsys.readouterr().out
+
+
+def test_build_scale_writes_the_mesh_in_metres(capsys, prism, prism_cm, tmp_path):
+    out = tmp_path / "metres.vtu"
+    assert main(["mesh", "build", str(prism_cm), "--scale", "0.01", "--out", str(out)]) == 0
+    capsys.readouterr()
+    written = load_mesh(out)  # no scale: the file is in metres now
+    np.testing.assert_allclose(written.points, load_mesh(prism).points, atol=1e-12)
+    assert written.volume == pytest.approx(SIDE * SIDE / 2 * HEIGHT)
+
+
+@pytest.mark.parametrize("value, reason", [("0", "--scale: 0.0 is not a finite number > 0"),
+                                           ("-1", "--scale: -1.0 is not a finite number > 0"),
+                                           ("cm", "--scale: 'cm' is not a number")])
+def test_scale_must_be_a_positive_number(capsys, prism_cm, value, reason):
+    assert main(["mesh", "info", str(prism_cm), f"--scale={value}"]) == 2
+    assert reason in capsys.readouterr().err
+
+
+def test_scale_without_a_file_is_refused(capsys):
+    assert_refused(capsys, ["mesh", "info", "--scale", "0.01"], "--scale applies to a mesh file")
 
 
 def test_module_entry_point_in_a_subprocess(prism, garbage):

@@ -10,6 +10,7 @@ import trimesh
 from liver_sim.mesh import io as mesh_io
 from liver_sim.mesh.io import SurfaceSignedDistance, load_mesh, write_mesh
 from liver_sim.mesh.tetmesh import MeshError, TetMesh, signed_volumes
+from meshes import write_sphere_surface
 
 EDGE = 0.1  # m, cube side
 SPHERE_RADIUS = 0.05  # m
@@ -239,6 +240,47 @@ def test_refuses_folded_tets(tmp_path):
     tets = np.array([[0, 1, 2, 3], [0, 1, 2, 4]])  # both on the same side of face 0-1-2
     path = write_meshio(tmp_path / "folded.msh", points, [("tetra", tets)], file_format="gmsh22", binary=False)
     assert_refused(path, "inverted or folded elements beyond repair")
+
+
+@pytest.mark.parametrize("factor, suggested", [(100.0, "0.01"), (1000.0, "0.001"), (0.1, "10")])
+def test_a_mesh_not_the_size_of_an_organ_is_refused_with_its_size_and_the_scale_to_use(tmp_path, factor, suggested):
+    points, tets = cube_arrays()  # 0.1 m: written in centimetres (×100), millimetres (×1000) or too small (×0.1)
+    path = write_meshio(tmp_path / "unitless.msh", points * factor, [("tetra", tets)], file_format="gmsh22",
+                        binary=False)
+    side = EDGE * factor
+    assert_refused(path, f"implausible size for an organ: {side:g} x {side:g} x {side:g} m across, "
+                         f"{side ** 3:.4g} m^3")
+    with pytest.raises(MeshError) as caught:
+        load_mesh(path)
+    assert f"--scale {suggested} " in str(caught.value) and "mesh_scale" in str(caught.value)
+    mesh = load_mesh(path, scale=1.0 / factor)
+    np.testing.assert_allclose(mesh.points, points, rtol=1e-12, atol=1e-15)
+    assert mesh.volume == pytest.approx(EDGE ** 3)
+
+
+def test_the_suggested_scale_loads_a_centimetre_surface_at_its_size(tmp_path):
+    path = write_sphere_surface(tmp_path / "sphere_cm.stl", SPHERE_RADIUS * 100)
+    with pytest.raises(MeshError, match=r"sphere_cm.stl: implausible size for an organ: (9|10)[.0-9]* x .* m across, "
+                                        r"5\d\d(\.\d+)? m\^3 .*--scale 0\.01 "):
+        load_mesh(path, target_tets=500)
+    mesh = load_mesh(path, target_tets=500, scale=0.01)
+    assert mesh.source == str(path)
+    assert mesh.volume == pytest.approx(4 / 3 * math.pi * SPHERE_RADIUS ** 3, rel=0.08)
+    assert np.ptp(mesh.points, axis=0) == pytest.approx([2 * SPHERE_RADIUS] * 3, rel=0.05)
+
+
+def test_a_scale_that_still_leaves_an_implausible_size_says_so(tmp_path):
+    points, tets = cube_arrays()
+    path = write_meshio(tmp_path / "mm.vtu", points * 1000, [("tetra", tets)])
+    assert_refused(path, "after scaling by 0.01", scale=0.01)  # millimetres taken for centimetres: 1 m across
+    with pytest.raises(MeshError, match=r"--scale 0\.001 "):
+        load_mesh(path, scale=0.01)
+
+
+@pytest.mark.parametrize("scale", [0.0, -0.01, math.nan, math.inf])
+def test_a_scale_that_is_not_a_positive_factor_is_refused(tmp_path, scale):
+    points, tets = cube_arrays()
+    assert_refused(write_meshio(tmp_path / "cube.vtu", points, [("tetra", tets)]), f"scale {scale!r}", scale=scale)
 
 
 @pytest.mark.parametrize("suffix", [".msh", ".vtu"])

@@ -159,6 +159,44 @@ def test_demo_runs_the_network_and_writes_its_report(ros_domain_id, tmp_path):
     assert {"liver_physics.log", "haptic_bridge.log", "liver_tool.log", "phantom_sim.log"} <= logs
 
 
+def test_demo_on_a_users_mesh_in_centimetres_presses_it_where_it_lies(ros_env, tmp_path):
+    import json
+    import sys
+
+    from liver_sim.demo import PLOTTED_FIGURES
+    from meshes import write_sphere_surface
+
+    # 12 cm across, 0.37 m from the liver frame's origin: the default liver's press point misses it
+    mesh = write_sphere_surface(tmp_path / "organ_cm.stl", 6.0, centre=(30.0, -20.0, 10.0), subdivisions=2)
+    out = tmp_path / "demo"
+    result = subprocess.run([sys.executable, "-m", "liver_sim.cli", "demo", "--mesh", str(mesh), "--scale", "0.01",
+                             "--duration", "5", "--out", str(out)], env=ros_env, capture_output=True, text=True,
+                            timeout=300)
+    assert result.returncode == 0, result.stdout[-2000:] + result.stderr[-2000:]
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["mesh"] == {"source": str(mesh), "scale": 0.01, "sha256": summary["mesh"]["sha256"]}
+    assert summary["physics"]["samples"] > 100 and summary["haptic"]["samples"] > 1000
+    assert 0.1 < summary["peak_haptic_force_n"] <= MAX_FORCE_N   # the hand pressed the sphere, felt at the device
+    assert summary["peak_displacement_m"] > 0.002                 # the node loaded the same mesh and it deformed
+    physics_log = (out / "logs" / "liver_physics.log").read_text()
+    assert f"mesh '{mesh.resolve()}'" in physics_log
+    for name in PLOTTED_FIGURES + ("summary.json", "summary.md"):
+        assert (out / name).stat().st_size > 0
+    assert "organ_cm.stl" in (out / "summary.md").read_text()
+
+
+def test_the_physics_node_refuses_a_unitless_mesh_at_start_with_the_scale_to_use(ros_env, tmp_path):
+    from meshes import write_sphere_surface
+
+    mesh = write_sphere_surface(tmp_path / "organ_mm.stl", 60.0, subdivisions=2)
+    result = subprocess.run(command_line("liver_physics", {"mesh_path": str(mesh)}), env=ros_env,
+                            capture_output=True, text=True, timeout=120)
+    assert result.returncode == 2
+    assert f"{mesh}: implausible size for an organ" in result.stderr
+    assert "mesh_scale" in result.stderr and "--scale 0.001 " in result.stderr
+    assert "Traceback" not in result.stderr
+
+
 @pytest.mark.parametrize("scenario", ["tear", "cut"])
 def test_tearing_and_cutting_change_the_mesh_and_every_subscriber_follows(ros_domain_id, tmp_path, scenario):
     from liver_sim.demo import TOPOLOGY_FIGURES, run_demo

@@ -5,6 +5,8 @@ import sys
 import numpy as np
 import pytest
 
+from liver_sim.mesh.io import load_mesh
+from liver_sim.mesh.tetmesh import MeshError
 from liver_sim.physics.pipeline import PARAMETERS, FramePipeline, build_model
 from liver_sim.scenarios import press_anchor
 from liver_sim.tool_scripts import ScriptSettings, make_script
@@ -61,6 +63,23 @@ def test_a_cut_flags_the_surface_and_is_logged():
     assert len(changed) == 1 == pipeline.model.topology_version
     assert [e.kind for e in changed[0].events] == ["topology"] and changed[0].events[0].text.startswith("cut: ")
     assert len(pipeline.model.positions) > len(liver.points)
+
+
+def test_build_model_loads_mesh_path_scaled_by_mesh_scale(tmp_path):
+    from meshes import write_sphere_surface
+
+    path = write_sphere_surface(tmp_path / "sphere_mm.obj", 40.0, centre=(100.0, -50.0, 20.0), subdivisions=2)
+    unitless = values(mesh_path=str(path), target_tets=300)
+    with pytest.raises(MeshError, match=r"sphere_mm.obj: implausible size .*mesh_scale.*--scale 0\.001 "):
+        build_model(unitless)
+    model = build_model({**unitless, "mesh_scale": 0.001})
+    lower, upper = model.mesh.bounds
+    np.testing.assert_allclose((lower + upper) / 2, [0.1, -0.05, 0.02], atol=2e-3)
+    np.testing.assert_allclose(upper - lower, [0.08] * 3, rtol=0.08)
+    in_metres = load_mesh(write_sphere_surface(tmp_path / "sphere_m.obj", 0.04, centre=(0.1, -0.05, 0.02),
+                                               subdivisions=2), 300)
+    assert len(model.mesh.tets) == len(in_metres.tets)  # the same organ as written in metres
+    assert model.mesh.volume == pytest.approx(in_metres.volume, rel=1e-3)  # the OBJ keeps 8 decimals
 
 
 def test_the_pipeline_and_the_offline_parameters_import_no_ros():

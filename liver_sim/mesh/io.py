@@ -4,15 +4,18 @@
 VTK ``.vtu``/``.vtk``, Medit ``.mesh``) and closed surfaces (``.stl``, ``.obj``,
 ``.ply``, ``.off``), which are turned into tets by isosurface stuffing of their signed
 distance.  :func:`write_mesh` writes ``.msh`` (Gmsh 2.2 ASCII) or ``.vtu`` with the skin
-tagged.  Coordinates are taken to be metres.  Every refused input raises
-:class:`MeshError` naming the file and the defect; reader crashes (including meshio's
-``sys.exit``) are converted, never propagated.
+tagged.  Coordinates are read as metres after multiplying them by the caller's `scale`
+(``--scale``, ``mesh_scale``), before any check or stuffing; a mesh whose bounding box is
+not the size of an organ (:data:`ORGAN_SIZE_RANGE_M`) is refused with the unit factor that
+would make it one.  Every refused input raises :class:`MeshError` naming the file and the
+defect; reader crashes (including meshio's ``sys.exit``) are converted, never propagated.
 """
 from __future__ import annotations
 
 import contextlib
 import io
 import itertools
+import math
 from pathlib import Path
 
 import meshio
@@ -45,17 +48,25 @@ DEGENERATE_RELATIVE_AREA = 1e-12
 _BVH_LEAF_TRIANGLES = 8
 #: Longest reader error text quoted in a MeshError.
 _MAX_REASON_CHARS = 200
+#: Plausible largest bounding-box side of an organ (m): a mesh outside is refused (a unit mistake).
+ORGAN_SIZE_RANGE_M = (0.02, 0.5)
+#: Largest side (m) a suggested scale aims at: an adult liver is 0.15-0.2 m across.
+TYPICAL_ORGAN_SIZE_M = 0.15
 
 
-def load_mesh(path, target_tets: int | None = None) -> TetMesh:
-    """Read a volume mesh or a closed surface file into a validated :class:`TetMesh`.
+def load_mesh(path, target_tets: int | None = None, scale: float = 1.0) -> TetMesh:
+    """Read a volume mesh or a closed surface file into a validated :class:`TetMesh` in metres.
 
-    `target_tets` is the tet count aimed at when a surface is tetrahedralised (default
-    :data:`DEFAULT_SURFACE_TETS`); volume meshes are taken as they are and ignore it.
-    Raises :class:`MeshError` (file, defect) for anything refused.
+    The file's coordinates times `scale` (> 0; e.g. 0.01 for a file in centimetres, 0.001 for
+    millimetres) are metres.  `target_tets` is the tet count aimed at when a surface is
+    tetrahedralised (default :data:`DEFAULT_SURFACE_TETS`); volume meshes are taken as they
+    are and ignore it.  Raises :class:`MeshError` (file, defect) for anything refused,
+    including a size implausible for an organ (:func:`check_organ_size`).
     """
     path = Path(path)
     source = str(path)
+    if not (math.isfinite(scale) and scale > 0.0):
+        raise MeshError(source, f"scale {scale!r} is not a finite factor > 0")
     if not path.exists():
         raise MeshError(source, "no such file")
     if not path.is_file():
@@ -68,14 +79,37 @@ def load_mesh(path, target_tets: int | None = None) -> TetMesh:
         if path.stat().st_size == 0:
             raise MeshError(source, "empty file")
         if suffix in SURFACE_SUFFIXES:
-            return _load_surface(path, target_tets or DEFAULT_SURFACE_TETS)
+            return _load_surface(path, target_tets or DEFAULT_SURFACE_TETS, scale)
         if suffix == ".msh" and _is_gmsh_v1(path):
             points, tets = _read_gmsh_v1(path)
         else:
             points, tets = _read_volume(path, *VOLUME_READERS[suffix])
     except OSError as exc:
         raise MeshError(source, f"cannot read: {exc.strerror or exc}") from None
-    return TetMesh.from_arrays(points, tets, source)
+    mesh = TetMesh.from_arrays(np.asarray(points, dtype=np.float64) * scale, tets, source)
+    check_organ_size(source, mesh.points, mesh.volume, scale)
+    return mesh
+
+
+def check_organ_size(source: str, points_m: np.ndarray, volume_m3: float, scale: float = 1.0) -> None:
+    """MeshError unless the largest bounding-box side of `points_m` lies in :data:`ORGAN_SIZE_RANGE_M`.
+
+    The message gives the size and volume, and the scale (a power of ten times `scale`, the one
+    already applied) that brings the largest side nearest :data:`TYPICAL_ORGAN_SIZE_M`.
+    """
+    size = np.ptp(points_m, axis=0)
+    largest = float(size.max())
+    low, high = ORGAN_SIZE_RANGE_M
+    if low <= largest <= high:
+        return
+    exponent = round(math.log10(TYPICAL_ORGAN_SIZE_M / largest)) if largest > 0.0 else 0
+    suggested = float(f"{scale * 10.0 ** exponent:.6g}")
+    applied = f" after scaling by {scale:g}" if scale != 1.0 else ""
+    raise MeshError(source, f"implausible size for an organ: {' x '.join(f'{s:.4g}' for s in size)} m across, "
+                            f"{volume_m3:.4g} m^3 ({volume_m3 * 1e3:.4g} L){applied}; an organ is "
+                            f"{low:g}-{high:g} m across. Coordinates are read as metres: if the file is in "
+                            f"other units, give the factor to metres with --scale (physics node: mesh_scale), "
+                            f"e.g. --scale {suggested:g} (0.01 for centimetres, 0.001 for millimetres)")
 
 
 def write_mesh(mesh: TetMesh, path) -> Path:
@@ -209,10 +243,13 @@ def _gmsh_v1_section(rows, start: str, end: str, source: str):
     return entries
 
 
-def _load_surface(path: Path, target_tets: int) -> TetMesh:
-    """Check a closed surface file, fix its winding, and tetrahedralise its interior."""
+def _load_surface(path: Path, target_tets: int, scale: float) -> TetMesh:
+    """Check a closed surface file, fix its winding, scale it to metres, check its size and
+    tetrahedralise its interior."""
     source = str(path)
     vertices, faces = _read_closed_surface(path)
+    vertices = vertices * scale
+    check_organ_size(source, vertices, float(trimesh.Trimesh(vertices, faces, process=False).volume), scale)
     try:
         return tetrahedralize_to_target(SurfaceSignedDistance(vertices, faces), vertices.min(axis=0),
                                         vertices.max(axis=0), target_tets, source)
@@ -223,7 +260,7 @@ def _load_surface(path: Path, target_tets: int) -> TetMesh:
 
 
 def _read_closed_surface(path: Path) -> tuple[np.ndarray, np.ndarray]:
-    """Vertices (m) and outward-wound triangles of a watertight, non-degenerate surface."""
+    """Vertices (file units) and outward-wound triangles of a watertight, non-degenerate surface."""
     source = str(path)
     try:
         with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):

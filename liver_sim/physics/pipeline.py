@@ -29,6 +29,8 @@ from liver_sim.physics.tool_use import TOOL_MODES, ToolUse
 DEFAULTS = ModelParams()
 PARAMETERS = {
     "mesh_path": Param("", "volume or closed-surface mesh file (metres); empty: the embedded default liver"),
+    "mesh_scale": Param(1.0, "factor from mesh_path's units to metres (dimensionless; 0.01: centimetres, 0.001: "
+                        "millimetres); a mesh not 0.02-0.5 m across after scaling is refused", 1e-6, 1e6),
     "target_tets": Param(1150, "tetrahedra to aim for when mesh_path is a surface", 50, 2_000_000),
     "frame_id": Param("liver", "frame of every published position"),
     "rate_hz": Param(DEFAULTS.frame_rate_hz, "physics frame rate (Hz)", 1.0, 1000.0),
@@ -102,7 +104,8 @@ def model_params(values: dict) -> ModelParams:
 
 def build_model(values: dict) -> LiverModel:
     """The LiverModel (mesh, parameters, tool, local model) named by the node's parameter values, warmed up."""
-    mesh = load_mesh(values["mesh_path"], values["target_tets"]) if values["mesh_path"] else default_liver()
+    mesh = (load_mesh(values["mesh_path"], values["target_tets"], values["mesh_scale"]) if values["mesh_path"]
+            else default_liver())
     tool = ToolShape(values["tool_shape"], values["tool_radius_m"], values["tool_length_m"],
                      tuple(values["tool_half_extents_m"]))
     model = LiverModel(mesh, model_params(values), tool, values["local_model"], values["local_model_reach_m"])
