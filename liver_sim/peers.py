@@ -22,6 +22,8 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from liver_sim.mesh.tetmesh import TetMesh
+from liver_sim.physics.contact import ToolPose
+from liver_sim.physics.model import LiverModel
 from liver_sim.scenarios import press_anchor
 
 #: How to get the peer.
@@ -46,7 +48,7 @@ class FlexSettings:
 
     integrator: str = "discrete"
     solver: str = "CG"
-    iterations: int = 100
+    iterations: int = 1000
     tolerance: float = 1e-8
     frame_rate_hz: float = 150.0
     steps_per_frame: int = 1
@@ -135,16 +137,30 @@ def _tool_force_n(mujoco, model, data) -> np.ndarray:
     return total
 
 
-def _displacement_m(model, data) -> float:
-    """Largest node displacement (m) from the rest shape."""
-    return float(np.abs(data.qpos).max()) if model.nq else 0.0
+def _displacements_m(mujoco, model, data, rest_m: np.ndarray) -> np.ndarray:
+    """Per mesh node, its distance (m) from its rest position `rest_m` in the current state."""
+    mujoco.mj_fwdPosition(model, data)
+    return np.linalg.norm(data.flexvert_xpos - rest_m, axis=1)
+
+
+def _warnings(mujoco, data, names) -> int:
+    """How many times MuJoCo raised the warnings `names` (mjtWarning members) so far."""
+    return sum(int(data.warning[int(getattr(mujoco.mjtWarning, name))].number) for name in names)
+
+
+#: Warnings after which MuJoCo resets the state (the step diverged) and the one of an under-converged solve.
+DIVERGED = ("mjWARN_BADQPOS", "mjWARN_BADQVEL", "mjWARN_BADQACC")
+UNDER_CONVERGED = ("mjWARN_INERTIA",)
 
 
 def time_mujoco_flex(mesh: TetMesh, youngs_modulus_pa: float, poisson_ratio: float, density_kg_m3: float, fixed_nodes,
               frames: int = 150, threads: int = 1, damping_s: float = 0.0, settings: FlexSettings = FlexSettings(),
               tool_radius_m: float = TOOL_RADIUS_M) -> dict:
     """Play `frames` frames of the press (press_depth_m) on the MuJoCo flex, timing each: wall and CPU ms per
-    frame (median, p90), steps per frame, stability, last tool force (N), model size and MuJoCo version."""
+    frame (median, p90), steps per frame, stability (no divergence warning — MuJoCo then resets the state —,
+    finite, no coordinate beyond STABLE_MAX_DISPLACEMENT_M; the run stops at the first unstable frame), steps
+    whose implicit solve under-converged, the last tool force (N) and node displacements (m, all and fixed
+    nodes), model size and MuJoCo version."""
     mujoco, model = build_flex(mesh, youngs_modulus_pa, poisson_ratio, density_kg_m3, fixed_nodes, damping_s,
                                settings, tool_radius_m)
     data = mujoco.MjData(model)
@@ -160,10 +176,13 @@ def time_mujoco_flex(mesh: TetMesh, youngs_modulus_pa: float, poisson_ratio: flo
         for _ in range(settings.steps_per_frame):
             mujoco.mj_step(model, data)
         wall[frame], cpu[frame] = time.perf_counter() - start_wall, time.thread_time() - start_cpu
-        if not (np.isfinite(data.qpos).all() and _displacement_m(model, data) <= STABLE_MAX_DISPLACEMENT_M):
+        if (_warnings(mujoco, data, DIVERGED) or not np.isfinite(data.qpos).all()
+                or np.abs(data.qpos).max(initial=0.0) > STABLE_MAX_DISPLACEMENT_M):
             stable = False
             wall, cpu = wall[:frame + 1], cpu[:frame + 1]
             break
+    moved = _displacements_m(mujoco, model, data, mesh.points)
+    fixed = np.asarray(fixed_nodes, np.int64)
     return {
         "simulator": f"MuJoCo {mujoco.__version__} flex",
         "mujoco_version": mujoco.__version__,
@@ -173,11 +192,13 @@ def time_mujoco_flex(mesh: TetMesh, youngs_modulus_pa: float, poisson_ratio: flo
         "steps_per_frame": settings.steps_per_frame,
         "frames": int(len(wall)),
         "stable": stable,
-        "max_displacement_m": _displacement_m(model, data),
+        "under_converged_steps": _warnings(mujoco, data, UNDER_CONVERGED),
+        "max_displacement_m": float(moved.max()),
+        "fixed_nodes_max_displacement_m": float(moved[fixed].max(initial=0.0)),
         "tool_force_n": _tool_force_n(mujoco, model, data).tolist(),
         "threads": threads,
         "dofs": int(model.nv),
-        "total_mass_kg": float(model.body_mass.sum()),
+        "free_mass_kg": float(model.body_mass[np.unique(model.flex_vertbodyid)].sum()),
         "settings": asdict(settings),
         "youngs_modulus_pa": youngs_modulus_pa,
         "poisson_ratio": poisson_ratio,
@@ -185,3 +206,13 @@ def time_mujoco_flex(mesh: TetMesh, youngs_modulus_pa: float, poisson_ratio: flo
         "damping_s": damping_s,
     }
 
+
+
+def liver_sim_press_force_n(model: LiverModel, frames: int = 150) -> np.ndarray:
+    """The force (N) on liver_sim's tool after `frames` frames of the same press (press_depth_m) on `model`."""
+    anchor = press_anchor(model.mesh)
+    force = np.zeros(3)
+    for frame in range(frames):
+        depth = press_depth_m((frame + 1) / model.params.frame_rate_hz)
+        force = model.step_frame(ToolPose(anchor + [0.0, 0.0, model.tool.radius_m - depth])).tool_force_n
+    return np.asarray(force, dtype=float)
