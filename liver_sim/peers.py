@@ -154,8 +154,8 @@ UNDER_CONVERGED = ("mjWARN_INERTIA",)
 
 
 def time_mujoco_flex(mesh: TetMesh, youngs_modulus_pa: float, poisson_ratio: float, density_kg_m3: float, fixed_nodes,
-              frames: int = 150, threads: int = 1, damping_s: float = 0.0, settings: FlexSettings = FlexSettings(),
-              tool_radius_m: float = TOOL_RADIUS_M) -> dict:
+                     frames: int = 150, threads: int = 1, damping_s: float = 0.0,
+                     settings: FlexSettings = FlexSettings(), tool_radius_m: float = TOOL_RADIUS_M) -> dict:
     """Play `frames` frames of the press (press_depth_m) on the MuJoCo flex, timing each: wall and CPU ms per
     frame (median, p90), steps per frame, stability (no divergence warning — MuJoCo then resets the state —,
     finite, no coordinate beyond STABLE_MAX_DISPLACEMENT_M; the run stops at the first unstable frame), steps
@@ -163,6 +163,20 @@ def time_mujoco_flex(mesh: TetMesh, youngs_modulus_pa: float, poisson_ratio: flo
     nodes), model size and MuJoCo version."""
     mujoco, model = build_flex(mesh, youngs_modulus_pa, poisson_ratio, density_kg_m3, fixed_nodes, damping_s,
                                settings, tool_radius_m)
+    messages = []
+    previous = mujoco.get_mju_user_warning()
+    mujoco.set_mju_user_warning(messages.append)  # into the result, not into a log file in the working folder
+    try:
+        figures = _press(mujoco, model, mesh, fixed_nodes, frames, threads, settings, tool_radius_m, messages)
+    finally:
+        mujoco.set_mju_user_warning(previous)
+    return {**figures, "youngs_modulus_pa": youngs_modulus_pa, "poisson_ratio": poisson_ratio,
+            "density_kg_m3": density_kg_m3, "damping_s": damping_s}
+
+
+def _press(mujoco, model, mesh: TetMesh, fixed_nodes, frames: int, threads: int, settings: FlexSettings,
+           tool_radius_m: float, messages: list) -> dict:
+    """time_mujoco_flex's frames on the compiled `model`: timing, stability and figures (its docstring)."""
     data = mujoco.MjData(model)
     if threads > 1:
         mujoco.mju_threadpool(data, threads)
@@ -193,6 +207,7 @@ def time_mujoco_flex(mesh: TetMesh, youngs_modulus_pa: float, poisson_ratio: flo
         "frames": int(len(wall)),
         "stable": stable,
         "under_converged_steps": _warnings(mujoco, data, UNDER_CONVERGED),
+        "warnings": sorted(set(m.split(" Time = ")[0] for m in messages)),
         "max_displacement_m": float(moved.max()),
         "fixed_nodes_max_displacement_m": float(moved[fixed].max(initial=0.0)),
         "tool_force_n": _tool_force_n(mujoco, model, data).tolist(),
@@ -200,12 +215,7 @@ def time_mujoco_flex(mesh: TetMesh, youngs_modulus_pa: float, poisson_ratio: flo
         "dofs": int(model.nv),
         "free_mass_kg": float(model.body_mass[np.unique(model.flex_vertbodyid)].sum()),
         "settings": asdict(settings),
-        "youngs_modulus_pa": youngs_modulus_pa,
-        "poisson_ratio": poisson_ratio,
-        "density_kg_m3": density_kg_m3,
-        "damping_s": damping_s,
     }
-
 
 
 def liver_sim_press_force_n(model: LiverModel, frames: int = 150) -> np.ndarray:

@@ -71,6 +71,7 @@ def test_an_explicit_step_of_a_whole_frame_is_reported_unstable(box):
     result = peers.time_mujoco_flex(mesh, stiff, NU, RHO, fixed, frames=150,
                                     settings=peers.FlexSettings(integrator="Euler"))
     assert not result["stable"] and result["frames"] < 150
+    assert any("unstable" in message for message in result["warnings"])
 
 
 def test_bench_hook_reports_the_peer_and_the_ratio(box):
