@@ -7,10 +7,12 @@ of the Green strain, Lamé constants from Young's modulus E and Poisson's ratio 
 β = η/E (MuJoCo's damping matrix β·K is the Kelvin–Voigt stress σ = E·ε + η·ε̇ of the parenchyma),
 and a rigid sphere of the tool's radius that presses the top of the liver as the tool does.
 
-Best stable setting (measured on the default and ~10k-tet livers, see README "Peers"): MuJoCo 4.0
-integrates flex elasticity implicitly only with `integrator="discrete"` (the implicit and implicitfast
-integrators refuse it, explicit Euler diverges at 1/150 s); of its two primal solvers CG is 3–5×
-faster than Newton per frame at equal forces; one step per 150 Hz frame stays stable.
+Best stable setting (FlexSettings' defaults, tried on the default and ~10k-tet livers; README "Peers, side
+by side"): MuJoCo 4.0 integrates flex elasticity implicitly only with `integrator="discrete"` (implicit and
+implicitfast refuse it; explicit Euler diverges even at 20 steps per 150 Hz frame); of its two primal
+solvers CG gives Newton's forces in 1/2 (default liver) to 1/7 (~10k tets) of its time; with fewer than
+~200 iterations the discrete step's solve ends under-converged on the ~10k liver in contact, so the cap is
+1000 (CG stops at the tolerance first); one step per frame stays stable.
 
 MuJoCo is an optional extra (`pip install .[peers]`); the product never imports this module.
 """
