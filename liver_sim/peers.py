@@ -40,7 +40,7 @@ FLEX_NAME = "liver"
 TOOL_RADIUS_M = 0.015
 PRESS_CLEARANCE_M = 0.005
 PRESS_DEPTH_M = 0.005
-#: A run is stable when every coordinate stays finite and no node moves further than this (m).
+#: A run is stable when every node coordinate stays finite and within this (m) of its rest value.
 STABLE_MAX_DISPLACEMENT_M = 0.05
 
 
