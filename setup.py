@@ -71,6 +71,7 @@ setup(
     ],
     extras_require={
         'test': ['pytest'],
+        'peers': ['mujoco==4.0.0'],  # liver-sim bench physics --peers: MuJoCo's flex beside our model
     },
     zip_safe=True,
     entry_points={

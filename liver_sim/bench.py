@@ -135,9 +135,41 @@ def livers(sizes, progress=None, doing: str = "timing"):
         yield name, mesh
 
 
-def run_physics_bench(sizes=LARGER_LIVERS, min_seconds: float = 1.0, progress=None) -> dict:
-    """The benchmark's JSON object: machine, results (default liver first) and targets met."""
-    results = [bench_mesh(name, mesh, min_seconds) for name, mesh in livers(sizes, progress)]
+def peer_figures(mesh, liver_sim_ms_per_frame: float, force_check: bool = False, progress=None) -> dict:
+    """The same mesh and tissue (materials.TissueProperties defaults: parenchyma E, η as Rayleigh damping η/E,
+    density; ν of the spring network; the default fixed nodes) through MuJoCo's flex (liver_sim.peers), one
+    thread: `peer` (its settings and figures), `peer_ms_per_frame` and `peer_ratio` (peer ms / liver_sim ms per
+    frame).  With `force_check`, also the force on the sphere after the same 5 mm press on the default
+    LiverModel and on the peer: `press_force_n`, `peer_press_force_n` and `peer_force_ratio` (|peer| / |ours|)."""
+    from liver_sim.physics.materials import TissueProperties
+    from liver_sim.physics.model import default_fixed_nodes
+    from liver_sim.peers import NETWORK_POISSON_RATIO, liver_sim_press_force_n, time_mujoco_flex
+
+    if progress:
+        progress(f"MuJoCo flex: {len(mesh.tets)} tets")
+    tissue = TissueProperties()
+    peer = time_mujoco_flex(mesh, tissue.parenchyma_young_modulus_pa, NETWORK_POISSON_RATIO, tissue.density_kg_m3,
+                            default_fixed_nodes(mesh), threads=1,
+                            damping_s=tissue.parenchyma_viscosity_pa_s / tissue.parenchyma_young_modulus_pa)
+    figures = {"peer": peer, "peer_ms_per_frame": round(peer["ms_per_frame_median"], 3),
+               "peer_ratio": round(peer["ms_per_frame_median"] / liver_sim_ms_per_frame, 3)}
+    if force_check:
+        ours = liver_sim_press_force_n(LiverModel(mesh, stable_params(mesh)), peer["frames"])
+        figures.update(press_force_n=ours.tolist(), peer_press_force_n=peer["tool_force_n"],
+                       peer_force_ratio=round(float(np.linalg.norm(peer["tool_force_n"]) / np.linalg.norm(ours)), 3))
+    return figures
+
+
+def run_physics_bench(sizes=LARGER_LIVERS, min_seconds: float = 1.0, progress=None, peers: bool = False) -> dict:
+    """The benchmark's JSON object: machine, results (default liver first) and targets met; with `peers`, each
+    row also has peer_figures (the force check on the default liver)."""
+    results = []
+    for name, mesh in livers(sizes, progress):
+        results.append(bench_mesh(name, mesh, min_seconds))
+        if peers:
+            row = results[-1]
+            row.update(peer_figures(mesh, row["us_per_step_1thread"] * row["substeps_per_frame"] / 1e3,
+                                    force_check=len(results) == 1, progress=progress))
     default = results[0]
     met = {
         "default_us_per_step_1thread_max": default["us_per_step_1thread"] <= TARGETS["default_us_per_step_1thread_max"],

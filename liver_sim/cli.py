@@ -159,6 +159,8 @@ def add_bench_command(commands) -> None:
     physics.add_argument("--sizes", type=positive_int, nargs="*", default=None, metavar="TETS",
                          help="target tet counts of the larger livers (default: 10000 100000)")
     physics.add_argument("--seconds", type=float, default=1.0, help="timing per kernel and mesh (default: 1 s)")
+    physics.add_argument("--peers", action="store_true",
+                         help="also run each mesh through MuJoCo's flex and report the ratio (pip install .[peers])")
     physics.set_defaults(handler=bench_physics)
     loop = kinds.add_parser("loop", help="the four nodes in closed loop: rates, jitter, latency, Fig. 8 smoothness")
     loop.add_argument("--json", action="store_true", help="print one JSON object")
@@ -180,7 +182,14 @@ def bench_physics(args) -> int:
 
     progress = None if args.json else (lambda line: print(line, flush=True))
     sizes = LARGER_LIVERS if args.sizes is None else tuple(args.sizes)
-    report = run_physics_bench(sizes, args.seconds, progress)
+    if args.peers:
+        from liver_sim.peers import import_mujoco
+        try:
+            import_mujoco()
+        except ImportError as exc:
+            print(f"{PROG}: error: {exc}", file=sys.stderr)
+            return EXIT_REFUSED
+    report = run_physics_bench(sizes, args.seconds, progress, peers=args.peers)
     if args.json:
         print(json.dumps(report))
         return 0
@@ -191,6 +200,11 @@ def bench_physics(args) -> int:
         print(f"{r['mesh']:<20}{r['tetrahedra']:>8}{r['springs']:>9}{r['us_per_step_1thread']:>12.1f}"
               f"{r['us_per_step_all_threads']:>12.1f}{r['numpy_us_per_step']:>10.0f}"
               f"{r['stable_dt_s'] * 1e6:>9.0f}us{r['realtime_factor_150hz']:>10.2f}")
+    for r in (r for r in report["results"] if "peer" in r):
+        print(f"{r['mesh']:<20} {r['peer']['simulator']}: {r['peer_ms_per_frame']:.2f} ms/frame "
+              f"({r['peer']['steps_per_frame']} step, 1 thread, stable: {r['peer']['stable']}), "
+              f"peer/liver_sim = {r['peer_ratio']:.2f}"
+              + (f", press force peer/liver_sim = {r['peer_force_ratio']:.2f}" if "peer_force_ratio" in r else ""))
     for target, met in report["met"].items():
         print(f"target {target} = {report['targets'][target]:g}: {'met' if met else 'NOT met'}")
     return 0
