@@ -148,6 +148,16 @@ def test_shallow_cut_across_the_slab_keeps_it_in_one_piece(slab):
     assert check_sound(slab, change) == 1
 
 
+def test_a_cut_along_existing_faces_opens_them_without_new_nodes(slab):
+    # the ribbon is the grid plane y = 2 cm: φ vanishes at its nodes and no edge crosses it
+    path = slab_path(np.array([[-0.01, 0.02], [0.07, 0.02]]))
+    change = cut_along_path(slab.points, slab.tets, slab.points, slab.skin, path, 0.012, DOWN)
+    assert check_sound(slab, change) == 1
+    assert (change.node_weights.max(axis=1) == 1.0).all()  # every node is an old one or a copy of one
+    corners = change.rest_points[np.unique(opened_triangles(change))]
+    assert np.allclose(corners[:, 1], 0.02)
+
+
 def test_path_missing_the_mesh_changes_nothing(slab, liver):
     above = slab_path(np.array([[0.01, 0.01], [0.05, 0.03]])) + [0.0, 0.0, 0.05]
     assert cut_along_path(slab.points, slab.tets, slab.points, slab.skin, above, 0.01, DOWN) is None
