@@ -1,7 +1,11 @@
-"""Small tet meshes built in the tests themselves."""
+"""Small tet meshes built in the tests themselves, and the checks that a mesh (or a model) is sound."""
 import numpy as np
+import pytest
+import scipy.sparse
+import scipy.sparse.csgraph
 
 from liver_sim.mesh import TetMesh
+from liver_sim.mesh.tetmesh import signed_volumes
 
 # Kuhn's split of a unit cube (corner index = 4·i + 2·j + k) into six tets.
 KUHN_TETS = np.array([[0, 1, 3, 7], [0, 1, 5, 7], [0, 2, 3, 7], [0, 2, 6, 7], [0, 4, 5, 7], [0, 4, 6, 7]])
@@ -20,3 +24,27 @@ def box_mesh(nx: int, ny: int, nz: int, spacing_m: float) -> TetMesh:
 def kinetic_energy_j(model) -> float:
     """½·Σ m·|v|² (J) of a LiverModel."""
     return 0.5 * float((model.masses_kg * (model.velocities ** 2).sum(axis=1)).sum())
+
+
+def components(tets: np.ndarray, n: int) -> tuple[int, np.ndarray]:
+    """(count, label per node) of the node graph joined through tet edges."""
+    e = tets[:, [0, 1, 0, 2, 0, 3]].reshape(-1, 2)
+    graph = scipy.sparse.coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n))
+    return scipy.sparse.csgraph.connected_components(graph, directed=False)
+
+
+def assert_sound(mesh: TetMesh) -> int:
+    """No orphan node, no inverted tet, and every component's skin watertight (each edge on two
+    triangles traversing it oppositely: a manifold at its edges) and outward; returns the number of
+    components."""
+    assert np.array_equal(np.unique(mesh.tets), np.arange(len(mesh.points)))
+    assert (signed_volumes(mesh.points, mesh.tets) > 0).all()
+    count, labels = components(mesh.tets, len(mesh.points))
+    for label in range(count):
+        piece = mesh.tets[labels[mesh.tets[:, 0]] == label]
+        sub = TetMesh.from_arrays(mesh.points, piece)
+        assert sub.watertight
+        skin = sub.points[sub.skin]
+        enclosed = np.einsum("ij,ij->i", skin[:, 0], np.cross(skin[:, 1], skin[:, 2])).sum() / 6.0
+        assert enclosed == pytest.approx(sub.volume, rel=1e-9)
+    return count

@@ -1,9 +1,7 @@
 """Cutting along the tool path (paper §3.5; P14, R5 of docs/paper.md): the cut follows the path, the mesh stays sound."""
 import numpy as np
 import pytest
-import scipy.sparse
-import scipy.sparse.csgraph
-from meshes import box_mesh, kinetic_energy_j
+from meshes import assert_sound, box_mesh, components, kinetic_energy_j
 
 from liver_sim.mesh import TetMesh
 from liver_sim.mesh.liver_shape import default_liver
@@ -37,13 +35,6 @@ def mean_edge_m(mesh):
 def snap_tolerance_m(mesh, snap_fraction=SNAP_FRACTION):
     """How far a cut may stray from its path: a node snapped onto the cut lies within snap_fraction of its edge."""
     return snap_fraction * longest_edge_m(mesh)
-
-
-def components(tets, n):
-    """(count, label per node) of the node graph joined through tet edges."""
-    e = tets[:, [0, 1, 0, 2, 0, 3]].reshape(-1, 2)
-    graph = scipy.sparse.coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n))
-    return scipy.sparse.csgraph.connected_components(graph, directed=False)
 
 
 def area_m2(points, triangles):
@@ -80,21 +71,16 @@ def capsule_border_nodes(change):
 
 
 def check_sound(mesh, change):
-    """Valid, positively oriented, no orphan nodes, volume kept, every component watertight and
-    outward, capsule area kept, opened faces not capsule, state sources consistent with rest points."""
+    """Valid, positively oriented, no orphan nodes, volume kept, every component sound (assert_sound:
+    watertight, outward, manifold), capsule area kept, opened faces not capsule, state sources consistent
+    with rest points.  Returns the number of components."""
     new = TetMesh.from_arrays(change.rest_points, change.tets)
     assert len(new.points) == len(change.rest_points)  # no orphan node
     volumes = signed_volumes(change.rest_points, change.tets)
     assert volumes.min() >= SNAP_FRACTION ** 3 * mesh.volumes.min() * (1 - 1e-9)
     assert volumes.sum() == pytest.approx(mesh.volume, rel=1e-12)
     assert new.lumped_masses(1000.0).sum() == pytest.approx(mesh.lumped_masses(1000.0).sum(), rel=1e-12)
-    count, label = components(change.tets, len(change.rest_points))
-    for c in range(count):
-        part = TetMesh.from_arrays(change.rest_points, change.tets[label[change.tets[:, 0]] == c])
-        assert part.watertight
-        p = part.points[part.skin]
-        enclosed = np.einsum("ij,ij->i", p[:, 0], np.cross(p[:, 1], p[:, 2])).sum() / 6.0
-        assert enclosed == pytest.approx(part.volume, rel=1e-9)  # skin outward
+    count = assert_sound(new)
     skin_keys = {tuple(sorted(t)) for t in new.skin.tolist()}
     assert all(tuple(sorted(t)) in skin_keys for t in change.capsule_triangles.tolist())
     assert area_m2(change.rest_points, change.capsule_triangles) == pytest.approx(area_m2(mesh.points, mesh.skin))
