@@ -48,3 +48,22 @@ def assert_sound(mesh: TetMesh) -> int:
         enclosed = np.einsum("ij,ij->i", skin[:, 0], np.cross(skin[:, 1], skin[:, 2])).sum() / 6.0
         assert enclosed == pytest.approx(sub.volume, rel=1e-9)
     return count
+
+
+def model_state(model) -> dict:
+    """Copies of all a topology change replaces in a LiverModel: node state, mesh, capsule, springs,
+    masses, fixed and held nodes, substeps, stability bound, topology_version."""
+    springs = model.springs
+    arrays = (model.positions, model.velocities, model.external_forces_n, model.masses_kg, model.inv_mass,
+              model.fixed_nodes, model.held_nodes, model.mesh.points, model.mesh.tets, model.capsule_triangles,
+              springs.node_i, springs.node_j, springs.rest_length_m)
+    return {"arrays": [a.copy() for a in arrays], "substeps": model.params.substeps,
+            "stable_dt_s": model.stable_dt_s, "topology_version": model.topology_version}
+
+
+def assert_same_state(state: dict, model) -> None:
+    """The model holds `state` (model_state) still."""
+    now = model_state(model)
+    for a, b in zip(state.pop("arrays"), now.pop("arrays"), strict=True):
+        np.testing.assert_array_equal(a, b)
+    assert state == now

@@ -7,6 +7,7 @@ import pytest
 from liver_sim.local_model import penetration
 from liver_sim.mesh.liver_shape import default_liver
 from liver_sim.mesh.tetmesh import TET_FACES, TetMesh
+from liver_sim.physics import model as model_module
 from liver_sim.physics.contact import ToolPose
 from liver_sim.physics.model import LiverModel
 from liver_sim.physics.params import ModelParams
@@ -14,7 +15,7 @@ from liver_sim.physics.tool_use import ToolUse
 from liver_sim.physics.topology import TearDetector, duplication_change, separate_faces
 from liver_sim.scenarios import press_anchor
 
-from meshes import assert_sound, box_mesh, components
+from meshes import assert_same_state, assert_sound, box_mesh, components, model_state
 
 SPACING_M = 0.02
 NX, NY, NZ = 10, 3, 3
@@ -320,3 +321,57 @@ def test_a_grasped_and_pulled_liver_tears_and_stays_sound():
     assert model.params.dt_s <= model.stable_dt_s   # substeps raised where the tear made it stiffer
     assert model.masses_kg.sum() == pytest.approx(mass, rel=1e-9)
     assert_sound(model.mesh)
+
+
+def test_a_tear_failing_midway_leaves_the_model_as_it_was_and_the_bar_tears_once_it_can(monkeypatch):
+    model = pulled_bar(16.0, tearing=True, tear_strain_parenchyma=0.15, tear_strain_capsule=0.2)
+    before = []
+    apply = model.apply_topology
+
+    def record_then_apply(change):
+        before.append(model_state(model))
+        apply(change)
+
+    def broken(*args, **kwargs):  # LiverModel._set_mesh calls it after taking the new mesh and node state
+        raise RuntimeError("injected")
+
+    model.apply_topology = record_then_apply
+    monkeypatch.setattr(model_module, "build_springs", broken)
+    for _ in range(300):
+        result = model.step_frame()
+        if before:
+            break
+    assert "RuntimeError: injected" in result.topology_failure and not result.topology_changed
+    assert_same_state(before[0], model)
+    monkeypatch.undo()
+    results = [model.step_frame() for _ in range(100)]
+    assert any(r.topology_changed for r in results) and not any(r.topology_failure for r in results)
+    assert_sound(model.mesh)
+
+
+def test_repeated_grasp_and_pull_tears_big_chunks_and_never_fails():
+    rng = np.random.default_rng(1)
+    liver = default_liver()
+    model = LiverModel(liver, ModelParams(tearing=True, tear_strain_parenchyma=0.15, tear_strain_capsule=0.15))
+    use = ToolUse(model, "grasp", grasp_margin_m=0.01)
+    mass_kg = model.masses_kg.sum()
+    for _ in range(3):
+        version = model.topology_version
+        node = rng.choice(model.mesh.skin_nodes)
+        outward = model.positions[node] - model.positions.mean(axis=0)
+        outward /= np.linalg.norm(outward)
+        start = model.positions[node] + outward * (model.tool.radius_m - 0.004)
+        use.mode = "grasp"
+        assert use.grasp(ToolPose(start)) > 0
+        pull_m = rng.uniform(0.08, 0.2)
+        for k in range(120):
+            use.step_frame(ToolPose(start + outward * pull_m * min(1.0, k / 80)))
+        use.mode = "press"
+        for _ in range(10):
+            use.step_frame(None)
+        assert not use.failures, use.failures
+        assert model.topology_version > version
+        assert_sound(model.mesh)
+        assert np.isfinite(model.positions).all() and np.isfinite(model.velocities).all()
+        assert model.masses_kg.sum() == pytest.approx(mass_kg, rel=1e-9)
+    assert len(model.positions) > len(liver.points) + 60
