@@ -1,7 +1,11 @@
-"""Small tet meshes built in the tests themselves."""
+"""Small tet meshes built in the tests themselves, and the checks that a mesh (or a model) is sound."""
 import numpy as np
+import pytest
+import scipy.sparse
+import scipy.sparse.csgraph
 
 from liver_sim.mesh import TetMesh
+from liver_sim.mesh.tetmesh import signed_volumes
 
 # Kuhn's split of a unit cube (corner index = 4·i + 2·j + k) into six tets.
 KUHN_TETS = np.array([[0, 1, 3, 7], [0, 1, 5, 7], [0, 2, 3, 7], [0, 2, 6, 7], [0, 4, 5, 7], [0, 4, 6, 7]])
@@ -30,3 +34,46 @@ def write_sphere_surface(path, radius, centre=(0.0, 0.0, 0.0), subdivisions=3):
     sphere.apply_translation(centre)
     sphere.export(path)
     return path
+
+
+def components(tets: np.ndarray, n: int) -> tuple[int, np.ndarray]:
+    """(count, label per node) of the node graph joined through tet edges."""
+    e = tets[:, [0, 1, 0, 2, 0, 3]].reshape(-1, 2)
+    graph = scipy.sparse.coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n))
+    return scipy.sparse.csgraph.connected_components(graph, directed=False)
+
+
+def assert_sound(mesh: TetMesh) -> int:
+    """No orphan node, no inverted tet, and every component's skin watertight (each edge on two
+    triangles traversing it oppositely: a manifold at its edges) and outward; returns the number of
+    components."""
+    assert np.array_equal(np.unique(mesh.tets), np.arange(len(mesh.points)))
+    assert (signed_volumes(mesh.points, mesh.tets) > 0).all()
+    count, labels = components(mesh.tets, len(mesh.points))
+    for label in range(count):
+        piece = mesh.tets[labels[mesh.tets[:, 0]] == label]
+        sub = TetMesh.from_arrays(mesh.points, piece)
+        assert sub.watertight
+        skin = sub.points[sub.skin]
+        enclosed = np.einsum("ij,ij->i", skin[:, 0], np.cross(skin[:, 1], skin[:, 2])).sum() / 6.0
+        assert enclosed == pytest.approx(sub.volume, rel=1e-9)
+    return count
+
+
+def model_state(model) -> dict:
+    """Copies of all a topology change replaces in a LiverModel: node state, mesh, capsule, springs,
+    masses, fixed and held nodes, substeps, stability bound, topology_version."""
+    springs = model.springs
+    arrays = (model.positions, model.velocities, model.external_forces_n, model.masses_kg, model.inv_mass,
+              model.fixed_nodes, model.held_nodes, model.mesh.points, model.mesh.tets, model.capsule_triangles,
+              springs.node_i, springs.node_j, springs.rest_length_m)
+    return {"arrays": [a.copy() for a in arrays], "substeps": model.params.substeps,
+            "stable_dt_s": model.stable_dt_s, "topology_version": model.topology_version}
+
+
+def assert_same_state(state: dict, model) -> None:
+    """The model holds `state` (model_state) still."""
+    now = model_state(model)
+    for a, b in zip(state.pop("arrays"), now.pop("arrays"), strict=True):
+        np.testing.assert_array_equal(a, b)
+    assert state == now

@@ -1,10 +1,9 @@
 """Cutting along the tool path (paper §3.5; P14, R5 of docs/paper.md): the cut follows the path, the mesh stays sound."""
 import numpy as np
 import pytest
-import scipy.sparse
-import scipy.sparse.csgraph
-from meshes import box_mesh, kinetic_energy_j
+from meshes import assert_sound, box_mesh, components, kinetic_energy_j
 
+from liver_sim.local_model import LocalModel
 from liver_sim.mesh import TetMesh
 from liver_sim.mesh.liver_shape import default_liver
 from liver_sim.mesh.tetmesh import signed_volumes
@@ -12,6 +11,7 @@ from liver_sim.physics.cutting import SNAP_FRACTION, Ribbon, cut_along_path, def
 from liver_sim.physics.model import LiverModel
 from liver_sim.physics.params import ModelParams
 from liver_sim.physics.springs import stable_time_step
+from liver_sim.physics.tool_use import ToolUse
 from liver_sim.scenarios import upper_skin_path
 
 DOWN = np.array([0.0, 0.0, -1.0])
@@ -37,13 +37,6 @@ def mean_edge_m(mesh):
 def snap_tolerance_m(mesh, snap_fraction=SNAP_FRACTION):
     """How far a cut may stray from its path: a node snapped onto the cut lies within snap_fraction of its edge."""
     return snap_fraction * longest_edge_m(mesh)
-
-
-def components(tets, n):
-    """(count, label per node) of the node graph joined through tet edges."""
-    e = tets[:, [0, 1, 0, 2, 0, 3]].reshape(-1, 2)
-    graph = scipy.sparse.coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n))
-    return scipy.sparse.csgraph.connected_components(graph, directed=False)
 
 
 def area_m2(points, triangles):
@@ -80,21 +73,16 @@ def capsule_border_nodes(change):
 
 
 def check_sound(mesh, change):
-    """Valid, positively oriented, no orphan nodes, volume kept, every component watertight and
-    outward, capsule area kept, opened faces not capsule, state sources consistent with rest points."""
+    """Valid, positively oriented, no orphan nodes, volume kept, every component sound (assert_sound:
+    watertight, outward, manifold), capsule area kept, opened faces not capsule, state sources consistent
+    with rest points.  Returns the number of components."""
     new = TetMesh.from_arrays(change.rest_points, change.tets)
     assert len(new.points) == len(change.rest_points)  # no orphan node
     volumes = signed_volumes(change.rest_points, change.tets)
     assert volumes.min() >= SNAP_FRACTION ** 3 * mesh.volumes.min() * (1 - 1e-9)
     assert volumes.sum() == pytest.approx(mesh.volume, rel=1e-12)
     assert new.lumped_masses(1000.0).sum() == pytest.approx(mesh.lumped_masses(1000.0).sum(), rel=1e-12)
-    count, label = components(change.tets, len(change.rest_points))
-    for c in range(count):
-        part = TetMesh.from_arrays(change.rest_points, change.tets[label[change.tets[:, 0]] == c])
-        assert part.watertight
-        p = part.points[part.skin]
-        enclosed = np.einsum("ij,ij->i", p[:, 0], np.cross(p[:, 1], p[:, 2])).sum() / 6.0
-        assert enclosed == pytest.approx(part.volume, rel=1e-9)  # skin outward
+    count = assert_sound(new)
     skin_keys = {tuple(sorted(t)) for t in new.skin.tolist()}
     assert all(tuple(sorted(t)) in skin_keys for t in change.capsule_triangles.tolist())
     assert area_m2(change.rest_points, change.capsule_triangles) == pytest.approx(area_m2(mesh.points, mesh.skin))
@@ -146,6 +134,16 @@ def test_shallow_cut_across_the_slab_keeps_it_in_one_piece(slab):
     path = slab_path(np.array([[-0.01, 0.0155], [0.07, 0.0245]]))
     change = cut_along_path(slab.points, slab.tets, slab.points, slab.skin, path, 0.01, DOWN)
     assert check_sound(slab, change) == 1
+
+
+def test_a_cut_along_existing_faces_opens_them_without_new_nodes(slab):
+    # the ribbon is the grid plane y = 2 cm: φ vanishes at its nodes and no edge crosses it
+    path = slab_path(np.array([[-0.01, 0.02], [0.07, 0.02]]))
+    change = cut_along_path(slab.points, slab.tets, slab.points, slab.skin, path, 0.012, DOWN)
+    assert check_sound(slab, change) == 1
+    assert (change.node_weights.max(axis=1) == 1.0).all()  # every node is an old one or a copy of one
+    corners = change.rest_points[np.unique(opened_triangles(change))]
+    assert np.allclose(corners[:, 1], 0.02)
 
 
 def test_path_missing_the_mesh_changes_nothing(slab, liver):
@@ -228,3 +226,73 @@ def test_the_stability_estimate_after_each_cut_is_not_above_the_exact_bound(live
         assert p.dt_s <= exact
     model.velocities += np.random.default_rng(1).normal(scale=0.05, size=model.velocities.shape)
     assert all(model.step_frame().divergence is None for _ in range(30))
+
+
+def random_stroke(model, rng, previous):
+    """A blade path (P, 3) in the deformed frame: a chord between two skin nodes (through nodes, along the
+    mesh), a diagonal on the upper skin, a stroke of 0.3 mm to 3 cm from a skin node, a 10–40 cm stroke
+    that leaves the liver, a wiggly polyline, or a stroke across the middle of the `previous` path."""
+    x = model.positions
+    skin = model.mesh.skin_nodes
+    direction = rng.normal(size=3)
+    direction /= np.linalg.norm(direction)
+    kind = rng.integers(6)
+    if kind == 0:
+        return np.linspace(*x[rng.choice(skin, 2, replace=False)], rng.integers(2, 12))
+    if kind == 1:
+        low, high = model.mesh.bounds[:, :2] * 0.8
+        try:
+            return upper_skin_path(model.mesh, rng.uniform(low, high), rng.uniform(low, high), rng.integers(2, 15))
+        except ValueError:  # a point not above the mesh: a straight line over it
+            kind = 3
+    if kind == 2:
+        return x[rng.choice(skin)] + np.outer(np.linspace(0.0, 10 ** rng.uniform(-3.5, -1.5), rng.integers(2, 6)),
+                                              direction)
+    if kind == 3:
+        return x[rng.choice(skin)] + np.outer(np.linspace(-0.5, 0.5, rng.integers(2, 30)) * rng.uniform(0.1, 0.4),
+                                              direction)
+    if kind == 4:
+        return x[rng.choice(skin)] + np.cumsum(rng.normal(scale=0.01, size=(rng.integers(2, 10), 3)), axis=0)
+    middle = previous[len(previous) // 2]
+    return middle + np.outer(np.linspace(-0.03, 0.03, rng.integers(2, 12)), direction)
+
+
+def stroke(use, path):
+    """The tool in cut mode in contact along `path`, then off the surface: True when the mesh changed."""
+    for point in path:
+        use.after_frame(LocalModel("plane", True, point, [0.0, 0.0, 1.0], point, 0.0, 0.001, True))
+    return use.after_frame(LocalModel.invalid())
+
+
+def test_many_random_cuts_never_raise_and_keep_the_mesh_sound(liver):
+    # crossing strokes, strokes along mesh edges, very short and very long ones, some on a deformed liver;
+    # this seed makes strokes whose ribbon meets the mesh at nodes only (it raised IndexError)
+    rng = np.random.default_rng(13)
+    model = LiverModel(liver, ModelParams())
+    use = ToolUse(model, "cut")
+    mass_kg = model.masses_kg.sum()
+    previous = liver_top_path(liver, 0.08)
+    changes = 0
+    for k in range(60):
+        if k % 4 == 3:  # deform the liver by a small random linear map about its centre
+            centre = model.positions.mean(axis=0)
+            model.positions = centre + (model.positions - centre) @ (np.eye(3) + rng.normal(scale=0.03, size=(3, 3)))
+        use.cut_depth_m = 10 ** rng.uniform(-3.3, -1.3)
+        path = random_stroke(model, rng, previous)
+        version = model.topology_version
+        changed = stroke(use, path)
+        assert not use.failures, use.failures
+        assert model.topology_version == version + changed
+        if changed:
+            changes += 1
+            previous = path
+            assert_sound(model.mesh)
+            assert len(model.positions) == len(model.mesh.points) == len(model.masses_kg)
+        assert np.isfinite(model.positions).all() and np.isfinite(model.velocities).all()
+        assert model.masses_kg.sum() == pytest.approx(mass_kg, rel=1e-9)
+    assert changes >= 30
+    assert model.params.dt_s <= model.stable_dt_s
+    model.positions = model.mesh.points.copy()
+    model.velocities += rng.normal(scale=0.01, size=model.velocities.shape)
+    assert all(model.step_frame().divergence is None for _ in range(3))
+    assert np.isfinite(model.positions).all()

@@ -5,8 +5,12 @@ import sys
 import numpy as np
 import pytest
 
+from meshes import assert_same_state, model_state
+
 from liver_sim.mesh.io import load_mesh
 from liver_sim.mesh.tetmesh import MeshError
+from liver_sim.physics import model as model_module
+from liver_sim.physics.model import LiverModel
 from liver_sim.physics.pipeline import PARAMETERS, FramePipeline, build_model
 from liver_sim.scenarios import press_anchor
 from liver_sim.tool_scripts import ScriptSettings, make_script
@@ -80,6 +84,42 @@ def test_build_model_loads_mesh_path_scaled_by_mesh_scale(tmp_path):
                                                subdivisions=2), 300)
     assert len(model.mesh.tets) == len(in_metres.tets)  # the same organ as written in metres
     assert model.mesh.volume == pytest.approx(in_metres.volume, rel=1e-3)  # the OBJ keeps 8 decimals
+
+
+def test_a_cut_failing_midway_leaves_the_model_as_it_was_is_counted_and_the_frames_go_on(monkeypatch):
+    cut = values(tool_mode="cut", cut_depth_m=0.012)
+    pipeline = FramePipeline(build_model(cut), cut)
+    model = pipeline.model
+    before = []
+    apply = LiverModel.apply_topology
+
+    def record_then_apply(self, change):
+        before.append(model_state(self))
+        apply(self, change)
+
+    def broken(*args, **kwargs):  # LiverModel._set_mesh calls it after taking the new mesh and node state
+        raise RuntimeError("injected")
+
+    monkeypatch.setattr(LiverModel, "apply_topology", record_then_apply)
+    monkeypatch.setattr(model_module, "build_springs", broken)
+    script = make_script("press_slide_release", ScriptSettings(
+        anchor_m=tuple(press_anchor(model.mesh)), depth_m=0.012, slide_m=0.03, approach_s=0.1, press_s=0.3,
+        hold_s=0.05, slide_s=0.5, withdraw_s=0.1, rest_s=0.2))
+    period = model.frame_period_s
+    for k in range(int(script.duration_s / period)):
+        pipeline.receive(script.position_at(k * period), (0, 0, 0, 1), k * period)
+        frame = pipeline.step(k * period)
+        if before:
+            break
+    assert len(before) == 1 and pipeline.topology_failures == 1
+    assert_same_state(before[0], model)
+    assert not frame.surface_changed and not frame.result.topology_changed
+    failed = [e.text for e in frame.events if e.kind == "topology_failed"]
+    assert len(failed) == 1 and "RuntimeError: injected" in failed[0]
+    for j in range(k + 1, k + 5):
+        pipeline.receive(script.position_at(j * period), (0, 0, 0, 1), j * period)
+        assert pipeline.step(j * period).result.divergence is None
+    assert np.isfinite(model.positions).all() and pipeline.topology_failures == 1
 
 
 def test_the_pipeline_and_the_offline_parameters_import_no_ros():

@@ -3,12 +3,11 @@ import math
 
 import numpy as np
 import pytest
-import scipy.sparse
-import scipy.sparse.csgraph
 
 from liver_sim.local_model import penetration
 from liver_sim.mesh.liver_shape import default_liver
-from liver_sim.mesh.tetmesh import TET_FACES, TetMesh, signed_volumes
+from liver_sim.mesh.tetmesh import TET_FACES, TetMesh
+from liver_sim.physics import model as model_module
 from liver_sim.physics.contact import ToolPose
 from liver_sim.physics.model import LiverModel
 from liver_sim.physics.params import ModelParams
@@ -16,7 +15,7 @@ from liver_sim.physics.tool_use import ToolUse
 from liver_sim.physics.topology import TearDetector, duplication_change, separate_faces
 from liver_sim.scenarios import press_anchor
 
-from meshes import box_mesh
+from meshes import assert_same_state, assert_sound, box_mesh, components, model_state
 
 SPACING_M = 0.02
 NX, NY, NZ = 10, 3, 3
@@ -36,28 +35,6 @@ def opened_faces(old_tets, new_tets, parent):
     """Old interior faces whose two tets no longer share them after the change."""
     still = face_keys(parent[interior_faces(new_tets)])
     return [f for f in face_keys(interior_faces(old_tets)) if f not in still]
-
-
-def components(tets, count):
-    """Label of each node's connected component (nodes joined by tets)."""
-    rows = np.repeat(tets[:, 0], 3)
-    cols = tets[:, 1:].ravel()
-    graph = scipy.sparse.coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(count, count))
-    return scipy.sparse.csgraph.connected_components(graph, directed=False)[1]
-
-
-def assert_sound(mesh):
-    """Watertight, outward-oriented skin on every component; no inverted tet, no orphan node."""
-    assert np.array_equal(np.unique(mesh.tets), np.arange(len(mesh.points)))
-    assert (signed_volumes(mesh.points, mesh.tets) > 0).all()
-    labels = components(mesh.tets, len(mesh.points))
-    for label in np.unique(labels):
-        piece = mesh.tets[labels[mesh.tets[:, 0]] == label]
-        sub = TetMesh.from_arrays(mesh.points, piece)
-        assert sub.watertight
-        skin = sub.points[sub.skin]
-        enclosed = np.einsum("ij,ij->i", skin[:, 0], np.cross(skin[:, 1], skin[:, 2])).sum() / 6.0
-        assert enclosed == pytest.approx(sub.volume, rel=1e-9)
 
 
 def bar_params(**changes):
@@ -120,7 +97,7 @@ def test_crack_ending_inside_keeps_the_skin_manifold():
     torn = TetMesh.from_arrays(mesh.points[parent], tets)
     assert len(torn.points) > len(mesh.points)
     assert opened_faces(mesh.tets, tets, parent)
-    assert len(np.unique(components(tets, len(parent)))) == 1  # still one piece
+    assert components(tets, len(parent))[0] == 1  # still one piece
     assert_sound(torn)
 
 
@@ -260,7 +237,7 @@ def test_momentum_and_mass_carry_over_a_duplication():
     mass, force = old_masses.sum(), model.external_forces_n.sum(axis=0)
     positions = model.positions.copy()
     model.apply_topology(change)
-    assert len(np.unique(components(model.mesh.tets, len(model.positions)))) == 2
+    assert components(model.mesh.tets, len(model.positions))[0] == 2
     assert model.masses_kg.sum() == pytest.approx(mass, rel=1e-12)
     assert np.allclose((model.masses_kg[:, None] * model.velocities).sum(axis=0), momentum, rtol=1e-12, atol=1e-15)
     assert np.allclose(model.external_forces_n.sum(axis=0), force, rtol=1e-12)
@@ -344,3 +321,57 @@ def test_a_grasped_and_pulled_liver_tears_and_stays_sound():
     assert model.params.dt_s <= model.stable_dt_s   # substeps raised where the tear made it stiffer
     assert model.masses_kg.sum() == pytest.approx(mass, rel=1e-9)
     assert_sound(model.mesh)
+
+
+def test_a_tear_failing_midway_leaves_the_model_as_it_was_and_the_bar_tears_once_it_can(monkeypatch):
+    model = pulled_bar(16.0, tearing=True, tear_strain_parenchyma=0.15, tear_strain_capsule=0.2)
+    before = []
+    apply = model.apply_topology
+
+    def record_then_apply(change):
+        before.append(model_state(model))
+        apply(change)
+
+    def broken(*args, **kwargs):  # LiverModel._set_mesh calls it after taking the new mesh and node state
+        raise RuntimeError("injected")
+
+    model.apply_topology = record_then_apply
+    monkeypatch.setattr(model_module, "build_springs", broken)
+    for _ in range(300):
+        result = model.step_frame()
+        if before:
+            break
+    assert "RuntimeError: injected" in result.topology_failure and not result.topology_changed
+    assert_same_state(before[0], model)
+    monkeypatch.undo()
+    results = [model.step_frame() for _ in range(100)]
+    assert any(r.topology_changed for r in results) and not any(r.topology_failure for r in results)
+    assert_sound(model.mesh)
+
+
+def test_repeated_grasp_and_pull_tears_big_chunks_and_never_fails():
+    rng = np.random.default_rng(1)
+    liver = default_liver()
+    model = LiverModel(liver, ModelParams(tearing=True, tear_strain_parenchyma=0.15, tear_strain_capsule=0.15))
+    use = ToolUse(model, "grasp", grasp_margin_m=0.01)
+    mass_kg = model.masses_kg.sum()
+    for _ in range(3):
+        version = model.topology_version
+        node = rng.choice(model.mesh.skin_nodes)
+        outward = model.positions[node] - model.positions.mean(axis=0)
+        outward /= np.linalg.norm(outward)
+        start = model.positions[node] + outward * (model.tool.radius_m - 0.004)
+        use.mode = "grasp"
+        assert use.grasp(ToolPose(start)) > 0
+        pull_m = rng.uniform(0.08, 0.2)
+        for k in range(120):
+            use.step_frame(ToolPose(start + outward * pull_m * min(1.0, k / 80)))
+        use.mode = "press"
+        for _ in range(10):
+            use.step_frame(None)
+        assert not use.failures, use.failures
+        assert model.topology_version > version
+        assert_sound(model.mesh)
+        assert np.isfinite(model.positions).all() and np.isfinite(model.velocities).all()
+        assert model.masses_kg.sum() == pytest.approx(mass_kg, rel=1e-9)
+    assert len(model.positions) > len(liver.points) + 60

@@ -106,6 +106,8 @@ class PhysicsNode(Node):
                 logger.error(event.text, throttle_duration_sec=1.0)
             elif event.kind == "topology":
                 logger.info(event.text, throttle_duration_sec=0.5)
+            elif event.kind == "topology_failed":
+                logger.error(event.text, throttle_duration_sec=1.0)
             else:
                 logger.info(event.text)
 
@@ -138,6 +140,7 @@ class PhysicsNode(Node):
         extra = {"frame_compute_p99_s": float(np.percentile(compute, 99)) if compute.size else 0.0,
                  "divergences": self.model.divergences, "bad_tool_poses": self._pipeline.refused_poses,
                  "tool_mode": self._pipeline.tool_use.mode, "topology_changes": self.model.topology_version,
+                 "topology_failures": self._pipeline.topology_failures,
                  "nodes": len(self.model.positions), "substeps": self.model.params.substeps,
                  "tool_pose_age_s": float(time.monotonic() - received), "simulated_s": self.model.time_s}
         publish_diagnostics(self, self._diagnostics,

@@ -203,13 +203,16 @@ def _edges_to_split(ribbon: Ribbon, positions: np.ndarray, inner_tets: np.ndarra
                     snap_fraction: float) -> _Split | None:
     """The edges of the outer tets that φ crosses (after `_snap`, which zeroes φ in place) and that lie
     in an inner tet split by the cut: φ changes sign in it and one corner of its cut lies in the ribbon
-    (0 ≤ s ≤ length, |h| ≤ depth_m).  None when φ neither crosses an edge nor vanishes at a node."""
+    (0 ≤ s ≤ length, |h| ≤ depth_m); none when φ vanishes at nodes only.  None when φ neither crosses
+    an edge nor vanishes at a node."""
     n = len(positions)
     edges = unique_edges(outer, TET_EDGES)
     crossing, t = _snap(phi, edges, snap_fraction)
     if not crossing.any() and not (phi[outer] == 0).any():
         return None
     cross_edges, t = edges[crossing], t[crossing]
+    if not len(cross_edges):  # φ vanishes at nodes only: the cut can only open existing faces
+        return _Split(cross_edges, np.zeros(0), np.zeros(0), np.zeros(0))
     cross_points = (1 - t)[:, None] * positions[cross_edges[:, 0]] + t[:, None] * positions[cross_edges[:, 1]]
     _, cross_s, cross_h = ribbon.locate(cross_points)
 
@@ -219,8 +222,8 @@ def _edges_to_split(ribbon: Ribbon, positions: np.ndarray, inner_tets: np.ndarra
     edge_keys = cross_edges[:, 0] * n + cross_edges[:, 1]
     local = np.sort(inner_tets[:, TET_EDGES], axis=2)
     local_keys = local[:, :, 0] * n + local[:, :, 1]
-    where = np.clip(np.searchsorted(edge_keys, local_keys), 0, max(len(edge_keys) - 1, 0))
-    crossed = (edge_keys[where] == local_keys) if len(edge_keys) else np.zeros(local_keys.shape, bool)
+    where = np.clip(np.searchsorted(edge_keys, local_keys), 0, len(edge_keys) - 1)
+    crossed = edge_keys[where] == local_keys
     zero_in_band = (phi == 0) & in_band(node_s, node_h)
     active = crossed.any(axis=1) & ((crossed & in_band(cross_s, cross_h)[where]).any(axis=1)
                                     | zero_in_band[inner_tets].any(axis=1))

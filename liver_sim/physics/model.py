@@ -18,7 +18,7 @@ from liver_sim.physics.contact import ToolPose, ToolShape, pull_local_model, sur
 from liver_sim.physics.params import ModelParams
 from liver_sim.physics.springs import build_springs, estimate_stable_time_step, stable_time_step
 from liver_sim.physics.cutting import cut_along_path
-from liver_sim.physics.topology import NodeState, TearDetector, TopologyChange, carry_over, tear
+from liver_sim.physics.topology import NodeState, TearDetector, TopologyChange, apply_change, carry_over, tear
 
 #: Above this many springs the parallel kernel is used (below it thread start-up costs more).
 PARALLEL_MIN_EDGES = 20_000
@@ -46,13 +46,15 @@ def scaled_masses(masses_kg: np.ndarray, min_fraction: float) -> np.ndarray:
 @dataclass(frozen=True)
 class FrameResult:
     """What one frame produced: simulation time (s), force on the tool (N), local model, divergence,
-    and whether the mesh tore at the end of the frame (then `LiverModel.topology_version` moved on)."""
+    and whether the mesh tore at the end of the frame (then `LiverModel.topology_version` moved on), or
+    why a tear failed (the mesh is then as it was)."""
 
     time_s: float
     tool_force_n: np.ndarray
     local_model: LocalModel
     divergence: str | None
     topology_changed: bool = False
+    topology_failure: str | None = None
 
 
 class LiverModel:
@@ -123,11 +125,12 @@ class LiverModel:
 
     def cut(self, path_m: np.ndarray, depth_m: float) -> bool:
         """Cut along the blade's path (P, 3) m, deformed frame, down to `depth_m` under it (P14, §3.5;
-        see cutting.cut_along_path); True when the mesh changed."""
+        see cutting.cut_along_path); True when the mesh changed.  All or nothing (topology.apply_change):
+        when it raises, the model is as it was."""
         change = cut_along_path(self.mesh.points, self.mesh.tets, self.positions, self.capsule_triangles,
                                 path_m, depth_m)
         if change is not None:
-            self.apply_topology(change)
+            apply_change(self, change)
         return change is not None
 
     def hold(self, nodes: np.ndarray) -> None:
@@ -182,7 +185,7 @@ class LiverModel:
             self.divergences += 1
             self.reset()
             return FrameResult(self.time_s, np.zeros(3), LocalModel.invalid(), divergence)
-        torn = self.params.tearing and self._tear()
+        torn, failure = self._tear() if self.params.tearing else (False, None)
         if pose is None:
             local_model = LocalModel.invalid()
         elif holding:
@@ -191,7 +194,7 @@ class LiverModel:
         else:
             local_model = surface_local_model(self.tool, pose, tool, self.positions, self._skin,
                                               self.local_model_reach_m, self.local_model_kind)
-        return FrameResult(self.time_s, -liver_force, local_model, None, torn)
+        return FrameResult(self.time_s, -liver_force, local_model, None, torn, failure)
 
     def _detector(self) -> TearDetector:
         """The TearDetector of the current mesh and thresholds (rebuilt when either changes)."""
@@ -201,14 +204,18 @@ class LiverModel:
                                                      key[1], key[2]))
         return self._tear_detector[1]
 
-    def _tear(self) -> bool:
-        """Open the faces stretched beyond the tearing thresholds; True when the mesh changed."""
+    def _tear(self) -> tuple[bool, str | None]:
+        """Open the faces stretched beyond the tearing thresholds, all or nothing (topology.apply_change):
+        (True when the mesh changed, why the tear failed or None)."""
         params = self.params
-        change = tear(self.mesh.points, self.mesh.tets, self.positions, self.capsule_triangles,
-                      params.tear_strain_parenchyma, params.tear_strain_capsule, detector=self._detector())
-        if change is not None:
-            self.apply_topology(change)
-        return change is not None
+        try:
+            change = tear(self.mesh.points, self.mesh.tets, self.positions, self.capsule_triangles,
+                          params.tear_strain_parenchyma, params.tear_strain_capsule, detector=self._detector())
+            if change is not None:
+                apply_change(self, change)
+        except Exception as exc:  # the model is as it was; the frame goes on
+            return False, f"tear failed, the mesh is unchanged: {type(exc).__name__}: {exc}"
+        return change is not None, None
 
     def _advance(self, pose: ToolPose | None, substeps: int) -> tuple[np.ndarray, kernels.ToolState]:
         """Run `substeps` steps with the tool moving from the previous pose to `pose` (contact.tool_state).

@@ -116,7 +116,8 @@ def build_model(values: dict) -> LiverModel:
 @dataclass(frozen=True)
 class Event:
     """Something worth a log line.  kind: 'refused' (a tool pose), 'diverged' (the model was reset),
-    'topology' (a tear or a cut changed the mesh) or 'tool' (ToolUse's events)."""
+    'topology' (a tear or a cut changed the mesh), 'topology_failed' (a tear or a cut failed, the model
+    is as it was) or 'tool' (ToolUse's events)."""
 
     kind: str
     text: str
@@ -138,7 +139,8 @@ class FramePipeline:
     """The frame sequence of one model, configured by the physics node's parameter `values`.
 
     `receive`/`refuse` take each tool pose message (time in the clock `step` is called with), `step`
-    runs a frame.  `tool_use.mode` may change between frames.  Counts: `frames`, `refused_poses`.
+    runs a frame.  `tool_use.mode` may change between frames.  Counts: `frames`, `refused_poses`,
+    `topology_failures` (tears and cuts that failed and left the model as it was).
     """
 
     def __init__(self, model: LiverModel, values: dict):
@@ -150,6 +152,7 @@ class FramePipeline:
         self.marker_every = max(1, round(values["rate_hz"] / values["marker_rate_hz"]))
         self.frames = 0
         self.refused_poses = 0
+        self.topology_failures = 0
         self._pose: ToolPose | None = None
         self._pose_time_s = -np.inf
         self._events: list[Event] = []
@@ -180,7 +183,10 @@ class FramePipeline:
             if changed:
                 events.append(Event("topology", self._topology_text(cause)))
         events += [Event("tool", text) for text in self.tool_use.events]
+        events += [Event("topology_failed", text) for text in self.tool_use.failures]
+        self.topology_failures += len(self.tool_use.failures)
         self.tool_use.events.clear()
+        self.tool_use.failures.clear()
         marker_due = self.frames % self.marker_every == 0
         self.frames += 1
         return Frame(result, result.topology_changed or cut, marker_due, tuple(events))

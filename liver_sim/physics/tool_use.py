@@ -23,7 +23,8 @@ class ToolUse:
     grasp: at the first frame in contact the skin nodes within the tool (+ `grasp_margin_m`) are held
     (`grasp`) until the mode changes.  cut: the stroke's path is the local model's contact point,
     frame by frame; when the tool leaves the surface the model is cut along it, `cut_depth_m` deep
-    (LiverModel.cut).  `events` collects what happened, for a log.
+    (LiverModel.cut).  `events` collects what happened, for a log; `failures` why a cut or a tear failed
+    (whatever it raised: the model is then as it was and the frame goes on), for a log and a count.
     """
 
     def __init__(self, model: LiverModel, mode: str = "press", grasp_margin_m: float = 0.005,
@@ -33,6 +34,7 @@ class ToolUse:
         self.grasp_margin_m = grasp_margin_m
         self.cut_depth_m = cut_depth_m
         self.events: list[str] = []
+        self.failures: list[str] = []
         self._in_contact = False
         self._path: list[np.ndarray] = []
         self._grasp_offsets = np.zeros((0, 3))
@@ -69,6 +71,8 @@ class ToolUse:
         if pose is not None and self.model.held_nodes.size:  # where the tool at `pose` holds them
             held = pose.position + self._grasp_offsets @ pose.rotation.T
         result = self.model.step_frame(pose, held)
+        if result.topology_failure:
+            self.failures.append(result.topology_failure)
         return result, self.after_frame(result.local_model)
 
     def before_frame(self, pose: ToolPose | None) -> None:
@@ -92,6 +96,7 @@ class ToolUse:
             return False
         try:
             return self.model.cut(np.array(path), self.cut_depth_m)
-        except ValueError as exc:  # e.g. a path along which no blade direction can be found
-            self.events.append(f"cut along {len(path)} points refused: {exc}")
+        except Exception as exc:  # e.g. a path along which no blade direction can be found
+            self.failures.append(f"cut along {len(path)} points failed, the mesh is unchanged: "
+                                 f"{type(exc).__name__}: {exc}")
             return False

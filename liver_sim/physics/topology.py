@@ -48,6 +48,59 @@ class NodeState(NamedTuple):
     fixed_nodes: np.ndarray
 
 
+def check_change(change: TopologyChange, old_node_count: int, source: str = "topology change") -> TetMesh:
+    """The new mesh of `change` (a TetMesh named `source`) once it is known to leave a sound model, else
+    ValueError naming the field: node_sources, node_weights (N', S) with sources among the
+    `old_node_count` old nodes, finite non-negative weights summing to 1 per row; finite rest_points;
+    tets using every node, positively oriented at rest (TetMesh.from_arrays keeps them as they are); a
+    watertight skin (every skin edge on two skin triangles traversing it oppositely, so every component
+    is closed and manifold at its edges); capsule_triangles among its triangles."""
+    sources = np.asarray(change.node_sources)
+    weights = np.asarray(change.node_weights, dtype=np.float64)
+    count = len(change.rest_points)
+    if sources.ndim != 2 or sources.shape != weights.shape or len(sources) != count:
+        raise ValueError("topology change: node_sources and node_weights must both be (N', S) "
+                         f"with N' = {count} rest points")
+    if sources.size and (sources.min() < 0 or sources.max() >= old_node_count):
+        raise ValueError(f"topology change: node_sources must index the old nodes 0..{old_node_count - 1}")
+    if not (np.isfinite(weights).all() and (weights >= 0.0).all()
+            and np.allclose(weights.sum(axis=1), 1.0, rtol=0.0, atol=1e-9)):
+        raise ValueError("topology change: node_weights must be finite, non-negative and sum to 1 per node")
+    if not np.isfinite(change.rest_points).all():
+        raise ValueError("topology change: rest_points must be finite")
+    mesh = TetMesh.from_arrays(change.rest_points, change.tets, source=source)
+    if len(mesh.points) != count or not np.array_equal(mesh.tets, change.tets):
+        raise ValueError("topology change: tets must use every node and be positively oriented at rest")
+    directed = mesh.skin[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
+    forward = np.sort(directed[:, 0] * count + directed[:, 1])
+    if (np.diff(forward) == 0).any() or not isin_keys(directed[:, 1] * count + directed[:, 0], forward).all():
+        raise ValueError("topology change: the new skin is not watertight (an edge not on exactly two "
+                         "oppositely oriented skin triangles)")
+    capsule = np.asarray(change.capsule_triangles, dtype=np.int64).reshape(-1, 3)
+    if len(capsule) and (capsule.min() < 0 or capsule.max() >= count
+                         or not isin_keys(face_keys(capsule, count), face_keys(mesh.skin, count)).all()):
+        raise ValueError("topology change: capsule_triangles must be skin triangles of the new mesh")
+    return mesh
+
+
+def apply_change(model, change: TopologyChange) -> None:
+    """Apply `change` to `model` (its apply_topology) all or nothing: the change is checked (carry_over:
+    check_change) before the model is touched; if applying raises midway, every attribute of the model
+    is put back, with the contents of its arrays, and the error re-raised: positions, velocities,
+    masses, mesh, springs, fixed and held nodes, topology_version are then as they were."""
+    saved = dict(vars(model))
+    contents = {name: value.copy() for name, value in saved.items() if isinstance(value, np.ndarray)}
+    try:
+        model.apply_topology(change)
+    except BaseException:
+        for name, value in contents.items():
+            if saved[name].flags.writeable:
+                np.copyto(saved[name], value)
+        vars(model).clear()
+        vars(model).update(saved)
+        raise
+
+
 def carry_over(change: TopologyChange, state: NodeState, source: str, density_kg_m3: float,
                min_node_mass_fraction: float) -> tuple[TetMesh, NodeState]:
     """The new mesh (named `source`) of `change` and the node state carried onto it.
@@ -57,19 +110,12 @@ def carry_over(change: TopologyChange, state: NodeState, source: str, density_kg
     each old mass is so split exactly: the total is conserved and, for duplicated nodes (one source,
     weight 1), so is the momentum; mass of an old node nothing draws on is spread over all nodes ∝ mass.
     External forces are split with the same shares.  A new node drawing only on fixed nodes is fixed.
-    ValueError for a change that does not fit the old nodes.
+    ValueError (check_change) for a change that would not leave a sound model.
     """
+    old_count = len(state.positions)
+    mesh = check_change(change, old_count, source)
     sources = np.asarray(change.node_sources, dtype=np.int64)
     weights = np.asarray(change.node_weights, dtype=np.float64)
-    old_count = len(state.positions)
-    if sources.ndim != 2 or sources.shape != weights.shape or len(sources) != len(change.rest_points):
-        raise ValueError("topology change: node_sources and node_weights must both be (N', S) "
-                         f"with N' = {len(change.rest_points)} rest points")
-    if sources.size and (sources.min() < 0 or sources.max() >= old_count):
-        raise ValueError(f"topology change: node_sources must index the old nodes 0..{old_count - 1}")
-    mesh = TetMesh.from_arrays(change.rest_points, change.tets, source=source)
-    if len(mesh.points) != len(change.rest_points) or not np.array_equal(mesh.tets, change.tets):
-        raise ValueError("topology change: tets must use every node and be positively oriented at rest")
     used = weights > 0.0
     claims = np.where(used, weights, 0.0) * mesh.lumped_masses(density_kg_m3)[:, None]
     share = mass_shares(sources, claims, used, state.masses_kg, min_node_mass_fraction)
@@ -336,17 +382,18 @@ def tear(rest_points: np.ndarray, tets: np.ndarray, positions: np.ndarray, capsu
     """Open the faces stretched beyond their threshold (TearDetector, separate_faces); None if none opens.
 
     `detector`, when given, must be the TearDetector of these rest_points, tets and capsule_triangles;
-    it remembers the last set of faces that opened nothing (no node to split), so that the same set
-    on the next frames costs no further separation attempt.
+    it remembers the last set of faces that opened nothing (no node to split) or whose separation
+    raised, so that the same set on the next frames costs no further separation attempt.
     """
     detector = detector or TearDetector(rest_points, tets, capsule_triangles, parenchyma_threshold,
                                         capsule_threshold)
     over = detector.over_threshold(positions)
     if not over.any() or (detector._futile is not None and np.array_equal(over, detector._futile)):
         return None
+    detector._futile = over.copy()
     change = duplication_change(rest_points, tets, capsule_triangles, detector.faces[over])
-    if change is None:
-        detector._futile = over.copy()
+    if change is not None:
+        detector._futile = None
     return change
 
 
