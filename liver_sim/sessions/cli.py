@@ -28,14 +28,14 @@ def add_record_command(commands) -> None:
 def record(args) -> int:
     import time
 
-    from liver_sim.sessions.record import default_topics, run_record
+    from liver_sim.sessions.record import EXIT_LOST, default_topics, run_record
 
     out = args.out or Path("out/sessions") / time.strftime("session_%Y%m%d_%H%M%S")
     topics = args.topics or default_topics(marker=args.marker)
     if args.marker and args.topics and "/liver/marker" not in topics:
         topics.append("/liver/marker")
-    run_record(out, topics, args.storage, args.duration, _progress)
-    return 0
+    _, lost = run_record(out, topics, args.storage, args.duration, _progress)
+    return EXIT_LOST if lost else 0
 
 
 def add_replay_command(commands) -> None:

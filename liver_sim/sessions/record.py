@@ -3,8 +3,12 @@
 No executor: a loop takes every waiting message of every subscription each DRAIN_PERIOD_S and writes
 them in order of arrival, each logged at its receive time (the rmw's reception timestamp).  The
 history of each subscription (HISTORY_DEPTH) holds several seconds at 1 kHz, so a slow write never
-drops a message; the bag notes the deepest backlog seen.  SIGINT or SIGTERM ends the recording after
-a last drain and closes the bag (metadata.yaml included).
+drops a message; the bag notes the deepest backlog seen.  Every message is taken with its writer's GID
+and publication sequence number (sessions.rcl_take), so every message lost to the recording is counted
+(sessions.gaps) into metadata.yaml's custom_data; a recording that lost any ends with EXIT_LOST.
+`ready:` is printed once the subscriptions exist and have matched the publishers already in the graph:
+from then on nothing is lost uncounted.  SIGINT or SIGTERM ends the recording after a last drain and
+closes the bag (metadata.yaml included).
 """
 from __future__ import annotations
 
@@ -15,6 +19,7 @@ import time
 from pathlib import Path
 
 from liver_sim.sessions.bag import BagWriter, QosSpec
+from liver_sim.sessions.gaps import SequenceGaps
 
 RECORDER_NODE = "liver_sim_recorder"
 #: Messages kept per subscription between two drains: 2 s at 1 kHz, 100 drain periods.
@@ -23,6 +28,12 @@ DRAIN_PERIOD_S = 0.02
 #: How often (s) topics of unknown type are looked up in the ROS graph.
 DISCOVERY_PERIOD_S = 0.5
 PROGRESS_PERIOD_S = 5.0
+#: How long (s) the recorder waits for its subscriptions to match the publishers the graph already shows.
+MATCH_TIMEOUT_S = 10.0
+#: The line `liver-sim record` prints when it records everything published from then on.
+READY = "ready:"
+#: Exit status of `liver-sim record` when messages were lost (the bag is complete and says how many).
+EXIT_LOST = 3
 
 
 def default_topics(marker: bool = False) -> list[str]:
@@ -98,9 +109,11 @@ class Recorder:
         self.progress = progress
         self.node = rclpy.create_node(RECORDER_NODE, context=context, start_parameter_services=False,
                                       enable_rosout=False)
-        self._subscriptions = []  # (topic, type name, QosSpec, subscription)
+        self._subscriptions = []  # (topic, type name, QosSpec, subscription, SerializedTake)
         self._pending = []
         self.max_backlog = 0
+        self.gaps = SequenceGaps()
+        self._writer_nodes: dict[bytes, str] = {}
         known = known_topics()
         for topic in topics:
             if topic in known:
@@ -112,9 +125,37 @@ class Recorder:
         self._unknown = set()
 
     def _subscribe(self, topic: str, msg_class, spec: QosSpec) -> None:
+        from liver_sim.sessions.rcl_take import SerializedTake
+
         subscription = self.node.create_subscription(msg_class, topic, lambda _: None,
                                                      _rclpy_qos(spec, HISTORY_DEPTH), raw=True)
-        self._subscriptions.append((topic, type_name(msg_class), spec, subscription))
+        self._subscriptions.append((topic, type_name(msg_class), spec, subscription, SerializedTake(subscription)))
+
+    def wait_until_matched(self, timeout_s: float = MATCH_TIMEOUT_S) -> int:
+        """Until every subscription has matched the publishers the graph shows for its topic (at most
+        `timeout_s`); those writers count as already publishing. Returns how many publishers matched."""
+        deadline = time.monotonic() + timeout_s
+        while True:
+            shown = {topic: self.node.get_publishers_info_by_topic(topic) for topic, *_ in self._subscriptions}
+            if all(sub.get_publisher_count() >= len(shown[topic]) for topic, _, _, sub, _ in self._subscriptions) \
+                    or time.monotonic() > deadline:
+                break
+            time.sleep(0.05)
+        for topic, publishers in shown.items():
+            self.gaps.already_publishing(topic, (bytes(p.endpoint_gid) for p in publishers))
+        return sum(sub.get_publisher_count() for *_, sub, _ in self._subscriptions)
+
+    @property
+    def subscribed(self) -> list[str]:
+        """The topics subscribed so far."""
+        return [topic for topic, *_ in self._subscriptions]
+
+    def _writer_node(self, topic: str, gid: bytes) -> str:
+        """The name of the node whose writer has `gid`, from the graph ('' once it is gone)."""
+        if gid not in self._writer_nodes:
+            for publisher in self.node.get_publishers_info_by_topic(topic):
+                self._writer_nodes[bytes(publisher.endpoint_gid)] = publisher.node_name
+        return self._writer_nodes.get(gid, "")
 
     def discover(self) -> None:
         """Subscribe to the requested topics once a publisher shows their type, and re-subscribe a topic
@@ -123,9 +164,10 @@ class Recorder:
             if self._try_subscribe(topic):
                 self._pending.remove(topic)
         for entry in list(self._subscriptions):
-            topic, name, _, subscription = entry
+            topic, name, _, subscription, take = entry
             published = {p.topic_type for p in self.node.get_publishers_info_by_topic(topic)}
             if published and name not in published:
+                take.close()
                 self.node.destroy_subscription(subscription)
                 self._subscriptions.remove(entry)
                 if not self._try_subscribe(topic):
@@ -145,19 +187,19 @@ class Recorder:
                 self.progress(f"warning: {topic} not recorded: {exc}")
             return False
         self._subscribe(topic, msg_class, offered_qos(self.node, topic))
+        self.gaps.already_publishing(topic, (bytes(p.endpoint_gid) for p in publishers))
         self.progress(f"recording {topic} ({kind})")
         return True
 
     def drain(self) -> int:
         """Take every waiting message and write them in order of reception; return how many."""
         taken = []
-        for topic, name, spec, subscription in self._subscriptions:
+        for topic, name, spec, _, take in self._subscriptions:
             count = 0
-            with subscription.handle:
-                while (message := subscription.handle.take_message(subscription.msg_type, True)) is not None:
-                    data, info = message
-                    taken.append((info.get("received_timestamp") or time.time_ns(), topic, name, spec, data))
-                    count += 1
+            while (message := take()) is not None:
+                self.gaps.add(topic, message.gid, message.sequence, self._writer_node(topic, message.gid))
+                taken.append((message.received_ns or time.time_ns(), topic, name, spec, message.data))
+                count += 1
             self.max_backlog = max(self.max_backlog, count)
         taken.sort(key=lambda item: item[0])
         for received, topic, name, spec, data in taken:
@@ -182,14 +224,18 @@ class Recorder:
         self.drain()
 
     def destroy(self) -> None:
+        for *_, take in self._subscriptions:
+            take.close()
         self.node.destroy_node()
 
 
 def run_record(out: Path, topics: list[str], storage: str = "mcap", duration_s: float | None = None,
-               progress=print) -> dict[str, int]:
-    """Record `topics` into a new bag at `out` until SIGINT/SIGTERM (or `duration_s`); return the counts.
+               progress=print) -> tuple[dict[str, int], int]:
+    """Record `topics` into a new bag at `out` until SIGINT/SIGTERM (or `duration_s`); return the counts per
+    topic and how many messages were lost (sessions.gaps).
 
-    metadata.yaml's custom_data gets the recorder's CPU and wall time (s) and its deepest backlog.
+    metadata.yaml's custom_data gets the recorder's CPU and wall time (s), its history depth and deepest
+    backlog, and the lost messages (SequenceGaps.custom_data).
     """
     import rclpy
     from rclpy.signals import SignalHandlerOptions
@@ -204,6 +250,8 @@ def run_record(out: Path, topics: list[str], storage: str = "mcap", duration_s: 
             recorder = Recorder(writer, topics, context, progress)
             progress(f"recording to {out} ({storage}): {', '.join(topics)}; stop with Ctrl-C")
             try:
+                matched = recorder.wait_until_matched()
+                progress(f"{READY} {len(recorder.subscribed)} topics subscribed, {matched} publishers matched")
                 recorder.run(stop, duration_s)
             finally:
                 recorder.destroy()
@@ -211,13 +259,19 @@ def run_record(out: Path, topics: list[str], storage: str = "mcap", duration_s: 
                 writer.set_custom_data("recorder_wall_s", f"{time.monotonic() - wall0:.3f}")
                 writer.set_custom_data("recorder_history_depth", HISTORY_DEPTH)
                 writer.set_custom_data("recorder_max_backlog", recorder.max_backlog)
+                for key, value in recorder.gaps.custom_data().items():
+                    writer.set_custom_data(key, value)
             counts = dict(writer.counts)
     finally:
         context.try_shutdown()
         for sig, handler in previous.items():
             signal.signal(sig, handler)
-    if recorder.max_backlog >= HISTORY_DEPTH:
-        progress(f"warning: a subscription's history ({HISTORY_DEPTH}) filled up between two writes: "
-                 "messages may have been lost")
     progress(f"wrote {out}: " + (", ".join(f"{t} {n}" for t, n in sorted(counts.items())) or "no messages"))
-    return counts
+    lost = recorder.gaps.lost
+    if lost:
+        progress(f"error: {lost} message(s) lost to the recording: " + ", ".join(
+            f"{t} {n}" for t, n in sorted(recorder.gaps.lost_by_topic().items()) if n) + f" (per writer: "
+            f"custom_data 'writers' of {out / 'metadata.yaml'})")
+    else:
+        progress("lost: 0")
+    return counts, lost
