@@ -34,8 +34,8 @@ def record(args) -> int:
     topics = args.topics or default_topics(marker=args.marker)
     if args.marker and args.topics and "/liver/marker" not in topics:
         topics.append("/liver/marker")
-    _, lost = run_record(out, topics, args.storage, args.duration, _progress)
-    return EXIT_LOST if lost else 0
+    _, failed = run_record(out, topics, args.storage, args.duration, _progress)
+    return EXIT_LOST if failed else 0
 
 
 def add_replay_command(commands) -> None:
@@ -94,6 +94,24 @@ def report(args) -> int:
     from liver_sim.sessions.report import write_report
 
     write_report(args.bag, args.out or args.bag.with_name(args.bag.name + "_report"), _progress)
+    return 0
+
+
+def add_bag_command(commands) -> None:
+    """``liver-sim bag repair BAG [--out DIR]``."""
+    parser = commands.add_parser("bag", help="bag tools: repair a bag whose recorder was killed")
+    actions = parser.add_subparsers(dest="action", required=True, metavar="ACTION")
+    repair = actions.add_parser("repair", help="write a complete bag from what a damaged bag's storage file holds "
+                                               "(the damaged bag is left as it is)")
+    repair.add_argument("bag", type=Path, metavar="BAG", help="rosbag2 bag folder (metadata.yaml may be missing)")
+    repair.add_argument("--out", type=Path, default=None, help="new bag folder (default: BAG_repaired)")
+    repair.set_defaults(handler=bag_repair)
+
+
+def bag_repair(args) -> int:
+    from liver_sim.sessions.bag import repair_bag
+
+    repair_bag(args.bag, args.out or args.bag.with_name(args.bag.name + "_repaired"), _progress)
     return 0
 
 

@@ -5,7 +5,8 @@ them in order of arrival, each logged at its receive time (the rmw's reception t
 history of each subscription (HISTORY_DEPTH) holds several seconds at 1 kHz, so a slow write never
 drops a message; the bag notes the deepest backlog seen.  Every message is taken with its writer's GID
 and publication sequence number (sessions.rcl_take), so every message lost to the recording is counted
-(sessions.gaps) into metadata.yaml's custom_data; a recording that lost any ends with EXIT_LOST.
+(sessions.gaps) into metadata.yaml's custom_data; a recording that lost messages of a reliable topic, or
+whose history overflowed, ends with EXIT_LOST.
 `ready:` is printed once the subscriptions exist and have matched the publishers already in the graph:
 from then on nothing is lost uncounted.  SIGINT or SIGTERM ends the recording after a last drain and
 closes the bag (metadata.yaml included).
@@ -22,12 +23,16 @@ from liver_sim.sessions.bag import BagWriter, QosSpec
 from liver_sim.sessions.gaps import SequenceGaps
 
 RECORDER_NODE = "liver_sim_recorder"
-#: Messages kept per subscription between two drains: 2 s at 1 kHz, 100 drain periods.
+#: Messages kept per subscription between two drains beyond the publishers' own history depth (which a
+#: late match delivers at once): 2 s at 1 kHz, 100 drain periods.
 HISTORY_DEPTH = 2000
 DRAIN_PERIOD_S = 0.02
 #: How often (s) topics of unknown type are looked up in the ROS graph.
 DISCOVERY_PERIOD_S = 0.5
 PROGRESS_PERIOD_S = 5.0
+#: How often (s) what was recorded goes into the storage file (BagWriter.flush): a killed recorder loses at
+#: most this much, and `liver-sim bag repair` gets the rest back.
+FLUSH_PERIOD_S = 1.0
 #: How long (s) the recorder waits for its subscriptions to match the publishers the graph already shows.
 MATCH_TIMEOUT_S = 10.0
 #: The line `liver-sim record` prints when it records everything published from then on.
@@ -112,6 +117,7 @@ class Recorder:
         self._subscriptions = []  # (topic, type name, QosSpec, subscription, SerializedTake)
         self._pending = []
         self.max_backlog = 0
+        self.overflowed: list[str] = []
         self.gaps = SequenceGaps()
         self._writer_nodes: dict[bytes, str] = {}
         known = known_topics()
@@ -128,7 +134,7 @@ class Recorder:
         from liver_sim.sessions.rcl_take import SerializedTake
 
         subscription = self.node.create_subscription(msg_class, topic, lambda _: None,
-                                                     _rclpy_qos(spec, HISTORY_DEPTH), raw=True)
+                                                     _rclpy_qos(spec, spec.depth + HISTORY_DEPTH), raw=True)
         self._subscriptions.append((topic, type_name(msg_class), spec, subscription, SerializedTake(subscription)))
 
     def wait_until_matched(self, timeout_s: float = MATCH_TIMEOUT_S) -> int:
@@ -201,6 +207,8 @@ class Recorder:
                 taken.append((message.received_ns or time.time_ns(), topic, name, spec, message.data))
                 count += 1
             self.max_backlog = max(self.max_backlog, count)
+            if count >= spec.depth + HISTORY_DEPTH and topic not in self.overflowed:
+                self.overflowed.append(topic)
         taken.sort(key=lambda item: item[0])
         for received, topic, name, spec, data in taken:
             self.writer.write(topic, name, received, data, spec)
@@ -209,19 +217,33 @@ class Recorder:
     def run(self, stop: threading.Event, duration_s: float | None = None) -> None:
         """Drain every DRAIN_PERIOD_S until `stop` is set (or `duration_s` has passed), then once more."""
         start = time.monotonic()
-        next_drain = next_progress = start
+        next_drain = next_progress = next_flush = start
         while not stop.is_set() and (duration_s is None or time.monotonic() - start < duration_s):
             now = time.monotonic()
             if now >= self._next_discovery:
                 self.discover()
                 self._next_discovery = now + DISCOVERY_PERIOD_S
             self.drain()
+            if now >= next_flush + FLUSH_PERIOD_S:
+                next_flush = now
+                self.writer.flush()
             if now >= next_progress + PROGRESS_PERIOD_S:
                 next_progress = now
                 self.progress(f"  {now - start:6.1f} s: {sum(self.writer.counts.values())} messages")
             next_drain += DRAIN_PERIOD_S
             stop.wait(max(0.0, next_drain - time.monotonic()))
         self.drain()
+
+    def failures(self) -> str:
+        """What this recording lost that it must not: messages of reliable topics (the publishers keep enough
+        history for a reader that fell behind), or a subscription's history filled up between two drains.
+        Best-effort messages dropped on the way are counted, not a failure: DDS resends none. '' when none."""
+        reliable = {topic for topic, _, spec, _, _ in self._subscriptions if spec.reliable}
+        lost = {t: n for t, n in self.gaps.lost_by_topic().items() if n and t in reliable}
+        reasons = [f"{n} message(s) of reliable {t} lost" for t, n in sorted(lost.items())]
+        if self.overflowed:
+            reasons.append(f"the history of {', '.join(self.overflowed)} filled up between two drains")
+        return "; ".join(reasons)
 
     def destroy(self) -> None:
         for *_, take in self._subscriptions:
@@ -232,7 +254,7 @@ class Recorder:
 def run_record(out: Path, topics: list[str], storage: str = "mcap", duration_s: float | None = None,
                progress=print) -> tuple[dict[str, int], int]:
     """Record `topics` into a new bag at `out` until SIGINT/SIGTERM (or `duration_s`); return the counts per
-    topic and how many messages were lost (sessions.gaps).
+    topic and whether the recording failed (Recorder.failures: it lost what it must not).
 
     metadata.yaml's custom_data gets the recorder's CPU and wall time (s), its history depth and deepest
     backlog, and the lost messages (SequenceGaps.custom_data).
@@ -267,11 +289,10 @@ def run_record(out: Path, topics: list[str], storage: str = "mcap", duration_s: 
         for sig, handler in previous.items():
             signal.signal(sig, handler)
     progress(f"wrote {out}: " + (", ".join(f"{t} {n}" for t, n in sorted(counts.items())) or "no messages"))
-    lost = recorder.gaps.lost
-    if lost:
-        progress(f"error: {lost} message(s) lost to the recording: " + ", ".join(
-            f"{t} {n}" for t, n in sorted(recorder.gaps.lost_by_topic().items()) if n) + f" (per writer: "
-            f"custom_data 'writers' of {out / 'metadata.yaml'})")
-    else:
-        progress("lost: 0")
-    return counts, lost
+    lost = recorder.gaps.lost_by_topic()
+    progress(f"lost: {recorder.gaps.lost}" + "".join(f", {t} {n}" for t, n in sorted(lost.items()) if n)
+             + (f" (per writer: custom_data 'writers' of {out / 'metadata.yaml'})" if recorder.gaps.lost else ""))
+    failed = recorder.failures()
+    if failed:
+        progress(f"error: {failed}")
+    return counts, bool(failed)
