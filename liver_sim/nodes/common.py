@@ -358,8 +358,9 @@ def run_node(make_node, args=None) -> int:
     finally:
         if node is not None:
             node.close()
+            deadline = time.monotonic() + CLOSE_ACK_TIMEOUT_S
             for publisher in node.publishers:  # a recorder that fell behind still gets the last messages
-                publisher.wait_for_all_acked(Duration(seconds=CLOSE_ACK_TIMEOUT_S))
+                publisher.wait_for_all_acked(Duration(seconds=max(0.0, deadline - time.monotonic())))
             node.destroy_node()
         if rclpy.ok():
             rclpy.shutdown()
