@@ -180,7 +180,7 @@ class RunFile:
             except (ValueError, KeyError, TypeError):
                 runs = []  # a damaged run file names nothing that can be trusted
             yield runs
-            runs[:] = [run for run in runs if run["processes"] or _alive(run["owner"])]
+            runs[:] = [run for run in runs if run["processes"]]
             if runs:
                 self.path.write_text(json.dumps({"runs": runs}, indent=1) + "\n")
             elif self.path.exists():

@@ -45,7 +45,7 @@ class Topic:
 #: depth stays 1. Memory: depth × message size per publisher (docs/contract.md).
 CATCH_UP_S = 5.0
 #: ... and for messages the size of the mesh, which cost memory in proportion.
-MESH_CATCH_UP_S = 1.0
+MESH_CATCH_UP_S = 2.0
 
 
 def catch_up_depth(rate_hz: float, seconds: float = CATCH_UP_S) -> int:
