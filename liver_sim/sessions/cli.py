@@ -11,6 +11,11 @@ def _progress(line: str) -> None:
     print(line, flush=True)
 
 
+def _output(args, suffix: str) -> Path:
+    """--out, or a folder beside BAG named BAG<suffix>."""
+    return args.out or args.bag.with_name(args.bag.name + suffix)
+
+
 def add_record_command(commands) -> None:
     """``liver-sim record [--topics …] [--storage mcap|sqlite3] [--out DIR] [--duration S] [--marker]``."""
     parser = commands.add_parser("record", help="record the product's topics into a rosbag2 bag until Ctrl-C")
@@ -77,8 +82,7 @@ def add_resimulate_command(commands) -> None:
 def resimulate(args) -> int:
     from liver_sim.sessions.resimulate import resimulate as run
 
-    out = args.out or args.bag.with_name(args.bag.name + "_resimulated")
-    run(args.bag, out, args.overrides, args.storage, _progress, args.compare)
+    run(args.bag, _output(args, "_resimulated"), args.overrides, args.storage, _progress, args.compare)
     return 0
 
 
@@ -93,7 +97,7 @@ def add_report_command(commands) -> None:
 def report(args) -> int:
     from liver_sim.sessions.report import write_report
 
-    write_report(args.bag, args.out or args.bag.with_name(args.bag.name + "_report"), _progress)
+    write_report(args.bag, _output(args, "_report"), _progress)
     return 0
 
 
@@ -111,7 +115,7 @@ def add_bag_command(commands) -> None:
 def bag_repair(args) -> int:
     from liver_sim.sessions.bag import repair_bag
 
-    repair_bag(args.bag, args.out or args.bag.with_name(args.bag.name + "_repaired"), _progress)
+    repair_bag(args.bag, _output(args, "_repaired"), _progress)
     return 0
 
 
