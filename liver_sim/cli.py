@@ -20,14 +20,16 @@ from liver_sim.mesh.io import (CAPSULE_REGION, ORGAN_SIZE_RANGE_M, PARENCHYMA_RE
                                checked_output_path, load_mesh, write_mesh)
 from liver_sim.mesh.liver_shape import build_liver, default_liver
 from liver_sim.mesh.tetmesh import TetMesh
-from liver_sim.processes import DISCOVERY_RANGES, keep_dds_local
+from liver_sim.processes import DISCOVERY_RANGES, NodeFailure, keep_dds_local
 from liver_sim.sessions.bag import STORAGES
-from liver_sim.sessions.cli import (add_bench_record_parser, add_record_command, add_replay_command, add_report_command,
-                                   add_resimulate_command)
+from liver_sim.sessions.cli import (add_bag_command, add_bench_record_parser, add_record_command, add_replay_command,
+                                   add_report_command, add_resimulate_command)
 
 PROG = "liver-sim"
 #: Exit status of a command that refused its input.
 EXIT_REFUSED = 2
+#: Exit status of a command whose node processes failed (NodeFailure).
+EXIT_NODE_FAILED = 1
 
 
 def positive_int(text: str) -> int:
@@ -283,7 +285,7 @@ def demo(args) -> int:
 
 #: The subcommands, in the order `liver-sim --help` lists them.
 COMMANDS = (add_mesh_command, add_traction_command, add_bench_command, add_demo_command, add_record_command,
-            add_replay_command, add_resimulate_command, add_report_command)
+            add_replay_command, add_resimulate_command, add_report_command, add_bag_command)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -328,6 +330,9 @@ def main(argv=None) -> int:
     except ValueError as exc:  # MeshError, or a refusal of the stuffing; both name the source
         print(f"{PROG}: error: {exc}", file=sys.stderr)
         return EXIT_REFUSED
+    except NodeFailure as exc:  # names the node, its status and the end of its log
+        print(f"{PROG}: error: {exc}", file=sys.stderr)
+        return EXIT_NODE_FAILED
 
 
 if __name__ == "__main__":

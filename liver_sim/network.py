@@ -13,7 +13,7 @@ from pathlib import Path
 
 
 from liver_sim.mesh.liver_shape import default_liver
-from liver_sim.processes import NodeProcesses, command_line, printable
+from liver_sim.processes import NodeProcesses, command_line, log_tail, printable
 from liver_sim.scenarios import press_anchor
 from msg_defs.topics import BASELINE_FORCE_TOPIC
 
@@ -35,7 +35,8 @@ class NetworkPlan:
     force_topics: dict[str, tuple[str, str]] = field(default_factory=dict)
     #: started once the physics publishes, so that a scripted device does not press an absent liver
     after_physics: tuple = ("phantom_sim",)
-    #: processes that watch the network (e.g. `liver-sim record`): started before the nodes, stopped after them
+    #: `liver-sim record` command lines: started before the nodes, which start once each has printed its
+    #: READY line and its subscriptions show in the graph; stopped after the nodes, given the time they need
     observers: dict[str, list[str]] = field(default_factory=dict)
 
 
@@ -68,7 +69,8 @@ def run_network(plan: NetworkPlan, duration_s: float, log_dir: Path, progress=pr
     """Start the plan's processes, listen for `duration_s` after they are up, stop them; return the snapshot
     (NetworkListener.snapshot) with `window_s`, the (start, end) of those `duration_s` (monotonic s).
 
-    Raises RuntimeError naming any node that exited early (its log is in log_dir).
+    Raises NodeFailure naming any process that exited early or with a non-zero status at stop, with the tail
+    of its log (in log_dir); RuntimeError if the network does not come up.
     """
     import rclpy
     from rclpy.experimental import EventsExecutor
@@ -87,13 +89,13 @@ def run_network(plan: NetworkPlan, duration_s: float, log_dir: Path, progress=pr
     executor.add_node(listener)
     spinner = threading.Thread(target=spin, args=(executor, context), daemon=True)
     spinner.start()
-    processes = NodeProcesses(log_dir)
+    processes = None
     try:
-        present = len(listener.get_node_names())  # the listener's own nodes, and any left over in the domain
+        processes = NodeProcesses(log_dir, progress)
         for label, args in plan.observers.items():
-            processes.start(label, args)
-        _wait_until(listener, processes, f"the observers {', '.join(plan.observers)}",
-                    lambda heard: len(heard.get_node_names()) >= present + len(plan.observers))
+            processes.start(label, args, patient=True)
+        _wait_until(listener, processes, f"the recorder(s) {', '.join(plan.observers)} (ready and subscribed)",
+                    lambda heard: all(_recorder_ready(heard, log_dir / f"{label}.log") for label in plan.observers))
         for label, args in plan.commands.items():
             if label not in plan.after_physics:
                 processes.start(label, args)
@@ -110,17 +112,33 @@ def run_network(plan: NetworkPlan, duration_s: float, log_dir: Path, progress=pr
         start = time.monotonic()
         while time.monotonic() - start < duration_s:
             time.sleep(min(1.0, duration_s - (time.monotonic() - start)))
-            failed = processes.failed()
-            if failed:
-                raise RuntimeError(f"node(s) exited early: {failed}; see logs in {log_dir}")
+            processes.check("while running")
             progress(f"  {time.monotonic() - start:5.1f} / {duration_s:.1f} s")
-        return {**listener.snapshot(), "window_s": (start, time.monotonic())}
+        window = (start, time.monotonic())
     finally:
-        processes.stop([label for label in plan.commands if label in processes.processes])
-        processes.stop()
+        if processes is not None:
+            processes.stop([label for label in plan.commands if label in processes.processes])
+            if plan.observers:
+                progress("  nodes stopped; waiting for the recorder to close its bag")
+            processes.stop()
+        snapshot = listener.snapshot()  # with what the nodes sent while they stopped
         context.try_shutdown()
         spinner.join(timeout=2.0)
         listener.destroy_node()
+    processes.check_exit_codes()
+    return {**snapshot, "window_s": window}
+
+
+def _recorder_ready(listener, log: Path) -> bool:
+    """Whether the recorder logging to `log` said READY and the graph shows its subscriptions to the
+    contract's topics."""
+    from liver_sim.sessions.record import READY, RECORDER_NODE
+    from msg_defs.topics import TOPICS
+
+    if not any(line.startswith(READY) for line in log_tail(log, 1000)):
+        return False
+    return all(any(s.node_name == RECORDER_NODE for s in listener.get_subscriptions_info_by_topic(t.name))
+               for key, t in TOPICS.items() if key != "marker")
 
 
 def _wait_until(listener, processes: NodeProcesses, what: str, ready, timeout_s: float = 60.0) -> None:
@@ -129,8 +147,6 @@ def _wait_until(listener, processes: NodeProcesses, what: str, ready, timeout_s:
     while time.monotonic() - start < timeout_s:
         if ready(listener):
             return
-        failed = processes.failed()
-        if failed:
-            raise RuntimeError(f"node(s) exited during start-up: {failed}; see logs in {processes.log_dir}")
+        processes.check("during start-up")
         time.sleep(0.1)
     raise RuntimeError(f"{what} did not come up within {timeout_s:.0f} s; see logs in {processes.log_dir}")

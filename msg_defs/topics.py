@@ -39,19 +39,34 @@ class Topic:
                                       else DurabilityPolicy.VOLATILE))
 
 
+#: Seconds of messages a reliable publisher keeps, transient local, for a reader that fell behind (a
+#: recorder starved for a moment, a viewer) or matched it late (discovery of a new process took seconds
+#: under load): its history depth is this at the topic's rate. Best-effort topics resend nothing, so their
+#: depth stays 1. Memory: depth × message size per publisher (docs/contract.md).
+CATCH_UP_S = 5.0
+#: ... and for messages the size of the mesh, which cost memory in proportion.
+MESH_CATCH_UP_S = 2.0
+
+
+def catch_up_depth(rate_hz: float, seconds: float = CATCH_UP_S) -> int:
+    """History depth of a reliable publisher at `rate_hz` (its default rate) that keeps `seconds` of messages."""
+    return max(1, round(seconds * rate_hz))
+
+
 TOPICS = {
-    "nodes": Topic("/liver/nodes", PointCloud2, 1),
-    "surface": Topic("/liver/surface", Mesh, 1, transient_local=True),
-    "marker": Topic("/liver/marker", Marker, 1),
-    "contact_plane": Topic("/liver/contact_plane", Marker, 1),
-    "tool_wrench": Topic("/liver/tool_wrench", WrenchStamped, 10),
+    "nodes": Topic("/liver/nodes", PointCloud2, catch_up_depth(150.0, MESH_CATCH_UP_S), transient_local=True),
+    # at start and after a tear or cut, at most one per 150 Hz frame
+    "surface": Topic("/liver/surface", Mesh, catch_up_depth(150.0, MESH_CATCH_UP_S), transient_local=True),
+    "marker": Topic("/liver/marker", Marker, catch_up_depth(30.0, MESH_CATCH_UP_S), transient_local=True),
+    "contact_plane": Topic("/liver/contact_plane", Marker, catch_up_depth(150.0), transient_local=True),
+    "tool_wrench": Topic("/liver/tool_wrench", WrenchStamped, catch_up_depth(150.0), transient_local=True),
     "tool_pose": Topic("/tool/pose", PoseStamped, 1, reliable=False),
     "measured_cp": Topic("/phantom/measured_cp", PoseStamped, 1, reliable=False),
-    "servo_cf": Topic("/phantom/servo_cf", None, 1),
-    # the device map liver_tool uses, for the bridge (msg_defs.conversions.device_map_message)
+    "servo_cf": Topic("/phantom/servo_cf", None, catch_up_depth(1000.0), transient_local=True),
+    # the device map liver_tool uses, for the bridge (msg_defs.conversions.device_map_message): published once
     "device_map": Topic("/tool/device_map", Float64MultiArray, 1, transient_local=True),
-    # "default" in the table: rclpy's usual keep-last 10, reliable, volatile.
-    "diagnostics": Topic("/diagnostics", DiagnosticArray, 10),
+    # 1 Hz per node
+    "diagnostics": Topic("/diagnostics", DiagnosticArray, catch_up_depth(1.0), transient_local=True),
 }
 
 #: Force topic of a baseline bridge (`local_model: none`) beside the normal one: the Fig. 8 comparison

@@ -389,15 +389,15 @@ def test_force_output_refusals():
 
 def test_topics_follow_the_design_table():
     expected = {
-        "nodes": ("/liver/nodes", ReliabilityPolicy.RELIABLE, DurabilityPolicy.VOLATILE, 1),
-        "surface": ("/liver/surface", ReliabilityPolicy.RELIABLE, DurabilityPolicy.TRANSIENT_LOCAL, 1),
-        "marker": ("/liver/marker", ReliabilityPolicy.RELIABLE, DurabilityPolicy.VOLATILE, 1),
-        "contact_plane": ("/liver/contact_plane", ReliabilityPolicy.RELIABLE, DurabilityPolicy.VOLATILE, 1),
-        "tool_wrench": ("/liver/tool_wrench", ReliabilityPolicy.RELIABLE, DurabilityPolicy.VOLATILE, 10),
+        "nodes": ("/liver/nodes", ReliabilityPolicy.RELIABLE, DurabilityPolicy.TRANSIENT_LOCAL, 300),
+        "surface": ("/liver/surface", ReliabilityPolicy.RELIABLE, DurabilityPolicy.TRANSIENT_LOCAL, 300),
+        "marker": ("/liver/marker", ReliabilityPolicy.RELIABLE, DurabilityPolicy.TRANSIENT_LOCAL, 60),
+        "contact_plane": ("/liver/contact_plane", ReliabilityPolicy.RELIABLE, DurabilityPolicy.TRANSIENT_LOCAL, 750),
+        "tool_wrench": ("/liver/tool_wrench", ReliabilityPolicy.RELIABLE, DurabilityPolicy.TRANSIENT_LOCAL, 750),
         "tool_pose": ("/tool/pose", ReliabilityPolicy.BEST_EFFORT, DurabilityPolicy.VOLATILE, 1),
         "measured_cp": ("/phantom/measured_cp", ReliabilityPolicy.BEST_EFFORT, DurabilityPolicy.VOLATILE, 1),
-        "servo_cf": ("/phantom/servo_cf", ReliabilityPolicy.RELIABLE, DurabilityPolicy.VOLATILE, 1),
-        "diagnostics": ("/diagnostics", ReliabilityPolicy.RELIABLE, DurabilityPolicy.VOLATILE, 10),
+        "servo_cf": ("/phantom/servo_cf", ReliabilityPolicy.RELIABLE, DurabilityPolicy.TRANSIENT_LOCAL, 5000),
+        "diagnostics": ("/diagnostics", ReliabilityPolicy.RELIABLE, DurabilityPolicy.TRANSIENT_LOCAL, 5),
         "device_map": ("/tool/device_map", ReliabilityPolicy.RELIABLE, DurabilityPolicy.TRANSIENT_LOCAL, 1),
     }
     assert set(TOPICS) == set(expected)

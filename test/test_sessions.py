@@ -285,8 +285,8 @@ def test_demo_records_its_run_and_the_report_reads_it(ros_domain_id, tmp_path):
     assert "/liver/marker" not in read  # only with --marker
     # the recorder starts before the nodes and stops after them: it holds every frame the demo saw
     assert len(read["/liver/nodes"]) >= summary["physics"]["samples"]
-    assert any(line.startswith("recording to")
-               for line in (tmp_path / "logs" / "recorder.log").read_text().splitlines())
+    domain_line, recording_line = (tmp_path / "logs" / "recorder.log").read_text().splitlines()[:2]
+    assert domain_line.startswith("liver-sim: ROS_DOMAIN_ID=") and recording_line.startswith("recording to")
     report = write_report(bag, tmp_path / "report", progress=lambda line: None)
     assert report["topics"]["/liver/nodes"]["messages"] == len(read["/liver/nodes"])
     assert {"force.png", "tool_path.png", "loop_rates.png"} <= set(report["figures"])

@@ -18,6 +18,7 @@ import numpy as np
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
+from rclpy.duration import Duration
 from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException
 from rclpy.experimental import EventsExecutor
@@ -33,6 +34,8 @@ CATCH_UP_PERIODS = 2
 GIL_SWITCH_INTERVAL_S = 0.0002
 #: A loop is on rate while it achieves at least this fraction of its rate (diagnostics).
 ON_RATE_FRACTION = 0.98
+#: How long (s) a closing node waits for its reliable subscribers to acknowledge what it published.
+CLOSE_ACK_TIMEOUT_S = 1.0
 
 
 class Latest:
@@ -331,8 +334,9 @@ def run_node(make_node, args=None) -> int:
 
     The process handles SIGINT and SIGTERM itself (rclpy's handlers would shut the context down first):
     a signal ends the spin, then `node.close()` runs while the context is still up — the bridge sends its
-    zero force there — and only then does the context go.  A refused parameter ends the process with
-    status 2 and a message naming it.  The interpreter hands the GIL over every GIL_SWITCH_INTERVAL_S so
+    zero force there — then the node waits up to CLOSE_ACK_TIMEOUT_S for its reliable subscribers (a
+    recorder) to acknowledge what it published; only then does the context go.  A refused parameter ends
+    the process with status 2 and a message naming it.  The interpreter hands the GIL over every GIL_SWITCH_INTERVAL_S so
     that a rate loop and the executor thread do not hold each other up for Python's default 5 ms.
     """
     sys.setswitchinterval(GIL_SWITCH_INTERVAL_S)
@@ -354,6 +358,9 @@ def run_node(make_node, args=None) -> int:
     finally:
         if node is not None:
             node.close()
+            deadline = time.monotonic() + CLOSE_ACK_TIMEOUT_S
+            for publisher in node.publishers:  # a recorder that fell behind still gets the last messages
+                publisher.wait_for_all_acked(Duration(seconds=max(0.0, deadline - time.monotonic())))
             node.destroy_node()
         if rclpy.ok():
             rclpy.shutdown()

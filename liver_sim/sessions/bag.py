@@ -107,6 +107,19 @@ class BagWriter:
         self._writer.write(connection, int(timestamp_ns), data)
         self.counts[topic] += 1
 
+    def flush(self) -> None:
+        """Put what was written so far into the storage file (an MCAP chunk, an sqlite3 commit), so that a
+        recorder killed later leaves it there for `repair_bag`."""
+        from rosbags.rosbag2.storage_mcap import McapWriter
+
+        storage = self._writer.storage
+        if isinstance(storage, McapWriter):
+            if storage.chunk.bio.tell():
+                storage.close_chunk()
+            storage.bio.flush()
+        else:
+            storage.conn.commit()
+
     def set_custom_data(self, key: str, value) -> None:
         """A key/value pair for metadata.yaml's custom_data (value stored as text)."""
         self._writer.set_custom_data(key, str(value))
@@ -225,4 +238,82 @@ def check_bag(path) -> dict[str, int]:
     counts: dict[str, int] = {}
     for message in read_messages(path):
         counts[message.topic] = counts.get(message.topic, 0) + 1
+    return counts
+
+
+def _storage_file(path: Path) -> tuple[Path, str]:
+    """The bag folder's storage file and its storage, or BagError."""
+    if not path.is_dir():
+        raise BagError(path, "does not exist" if not path.exists() else "is not a bag folder")
+    found = [(f, "mcap" if f.suffix == ".mcap" else "sqlite3") for f in sorted(path.iterdir())
+             if f.suffix in (".mcap", ".db3")]
+    if len(found) != 1:
+        raise BagError(path, f"holds {len(found)} storage files (.mcap or .db3); repair takes a bag of one")
+    return found[0]
+
+
+def _complete_records_end(bio, data_start: int, size: int) -> int:
+    """Offset after the last complete MCAP record of the data section (a killed writer leaves a partial one)."""
+    position = data_start
+    while position + 9 <= size:
+        bio.seek(position)
+        header = bio.read(9)
+        opcode, length = header[0], struct.unpack("<Q", header[1:])[0]
+        if opcode in (0x02, 0x0F) or position + 9 + length > size:  # footer, data end, or cut short
+            break
+        position += 9 + length
+    return position
+
+
+def _salvaged_mcap(file: Path):
+    """(connections, messages) of the complete records of an MCAP file, with or without its summary."""
+    from rosbags.rosbag2.storage_mcap import McapReader, read_sized
+
+    reader = McapReader(file)
+    reader.bio = file.open("rb")
+    if reader.bio.read(8) != b"\x89MCAP0\r\n" or reader.bio.read(1) != b"\x01":
+        raise ValueError("not an MCAP file")
+    read_sized(reader.bio)  # the header record
+    reader.data_start = reader.bio.tell()
+    reader.data_end = _complete_records_end(reader.bio, reader.data_start, file.stat().st_size)
+    reader.meta_scan()
+    return reader.connections, reader.messages_scan(reader.connections)
+
+
+def _salvaged_sqlite3(file: Path):
+    """(connections, messages) of the committed rows of a rosbag2 sqlite3 file."""
+    from rosbags.rosbag2.storage_sqlite3 import Sqlite3Reader
+
+    reader = Sqlite3Reader(file)
+    reader.open()
+    return reader.connections, reader.messages(reader.connections)
+
+
+def repair_bag(path, out, progress=print) -> dict[str, int]:
+    """Write a complete bag at `out` (new) with every message the storage file of the bag `path` still holds,
+    e.g. one whose recorder was killed before it could write its summary and metadata.yaml; `path` is left as
+    it is. Returns {topic: count}; BagError when nothing can be read."""
+    from rosbags.interfaces import QosDurability, QosReliability
+
+    path, out = Path(path), Path(out)
+    file, storage = _storage_file(path)
+    if out.exists():
+        raise BagError(out, "exists already; a bag is never overwritten")
+    try:
+        connections, messages = (_salvaged_mcap if storage == "mcap" else _salvaged_sqlite3)(file)
+        qos = {}
+        for c in connections:
+            offered = c.ext.offered_qos_profiles
+            qos[c.id] = QosSpec(offered[0].reliability == QosReliability.RELIABLE,
+                                offered[0].durability == QosDurability.TRANSIENT_LOCAL,
+                                offered[0].depth) if offered else None
+        with BagWriter(out, storage) as writer:
+            for connection, timestamp, data in messages:
+                writer.write(connection.topic, connection.msgtype, timestamp, bytes(data), qos[connection.id])
+            writer.set_custom_data("repaired_from", str(path))
+            counts = dict(writer.counts)
+    except _reader_errors() as exc:
+        raise BagError(path, f"cannot be repaired ({type(exc).__name__}: {exc})") from None
+    progress(f"wrote {out}: " + (", ".join(f"{t} {n}" for t, n in sorted(counts.items())) or "no messages")
+             + f", read from {file}")
     return counts

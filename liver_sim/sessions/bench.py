@@ -12,6 +12,15 @@ def recorder_command(out: Path, storage: str = "mcap") -> list[str]:
     return cli_command_line("record", "--out", str(out), "--storage", storage)
 
 
+def new_path(path: Path) -> Path:
+    """`path`, or the first of path_2, path_3, … that does not exist."""
+    candidate, k = path, 1
+    while candidate.exists():
+        k += 1
+        candidate = path.with_name(f"{path.name}_{k}")
+    return candidate
+
+
 def loop_figures(report: dict) -> dict:
     """The haptic loop's headline figures of a run_loop_bench report."""
     results = report["results"]
@@ -27,12 +36,11 @@ def loop_figures(report: dict) -> dict:
 
 def run_record_bench(duration_s: float = 30.0, out: Path = Path("out/bench_record"), storage: str = "mcap",
                      progress=None, compare: bool = True) -> dict:
-    """run_loop_bench with a recorder into out/session (replaced if there) — and first without it when
+    """run_loop_bench with a recorder into a new bag out/bench_session (or out/bench_session_2, … : nothing
+    there is replaced) — and first without it when
     `compare` — adding the recorder's CPU share (CPU seconds per wall second, of one core and of the
     machine, from its rclpy start-up to the closed bag; imports excluded), the bag's counts and rates,
     and the loop figures side by side."""
-    import shutil
-
     from liver_sim.bench import run_loop_bench
     from liver_sim.sessions.bag import bag_info, check_bag
 
@@ -41,9 +49,7 @@ def run_record_bench(duration_s: float = 30.0, out: Path = Path("out/bench_recor
     if compare:
         say("the closed loop without the recorder:")
         without = run_loop_bench(duration_s, out / "logs_without_recorder", progress)
-    bag = out / "session"
-    if bag.exists():
-        shutil.rmtree(bag)
+    bag = new_path(out / "bench_session")
     say("the closed loop with the recorder:")
     report = run_loop_bench(duration_s, out / "logs", progress, {"recorder": recorder_command(bag, storage)})
     report["benchmark"] = "record"
@@ -54,7 +60,8 @@ def run_record_bench(duration_s: float = 30.0, out: Path = Path("out/bench_recor
     report["recorder"] = {"cpu_s": cpu_s, "wall_s": wall_s, "cpu_share_of_one_core": cpu_s / wall_s,
                           "cpu_share_of_machine": cpu_s / wall_s / cores,
                           "max_backlog": int(info.custom_data["recorder_max_backlog"]),
-                          "history_depth": int(info.custom_data["recorder_history_depth"]), "storage": storage}
+                          "history_depth": int(info.custom_data["recorder_history_depth"]),
+                          "lost_messages": int(info.custom_data["lost_messages"]), "storage": storage}
     seconds = info.duration_ns * 1e-9
     report["bag"] = {"path": str(bag), "duration_s": seconds, "messages": counts,
                      "rate_hz": {t: n / seconds for t, n in counts.items()} if seconds > 0 else {},

@@ -11,6 +11,11 @@ def _progress(line: str) -> None:
     print(line, flush=True)
 
 
+def _output(args, suffix: str) -> Path:
+    """--out, or a folder beside BAG named BAG<suffix>."""
+    return args.out or args.bag.with_name(args.bag.name + suffix)
+
+
 def add_record_command(commands) -> None:
     """``liver-sim record [--topics …] [--storage mcap|sqlite3] [--out DIR] [--duration S] [--marker]``."""
     parser = commands.add_parser("record", help="record the product's topics into a rosbag2 bag until Ctrl-C")
@@ -28,14 +33,14 @@ def add_record_command(commands) -> None:
 def record(args) -> int:
     import time
 
-    from liver_sim.sessions.record import default_topics, run_record
+    from liver_sim.sessions.record import EXIT_LOST, default_topics, run_record
 
     out = args.out or Path("out/sessions") / time.strftime("session_%Y%m%d_%H%M%S")
     topics = args.topics or default_topics(marker=args.marker)
     if args.marker and args.topics and "/liver/marker" not in topics:
         topics.append("/liver/marker")
-    run_record(out, topics, args.storage, args.duration, _progress)
-    return 0
+    _, failed = run_record(out, topics, args.storage, args.duration, _progress)
+    return EXIT_LOST if failed else 0
 
 
 def add_replay_command(commands) -> None:
@@ -77,8 +82,7 @@ def add_resimulate_command(commands) -> None:
 def resimulate(args) -> int:
     from liver_sim.sessions.resimulate import resimulate as run
 
-    out = args.out or args.bag.with_name(args.bag.name + "_resimulated")
-    run(args.bag, out, args.overrides, args.storage, _progress, args.compare)
+    run(args.bag, _output(args, "_resimulated"), args.overrides, args.storage, _progress, args.compare)
     return 0
 
 
@@ -93,7 +97,25 @@ def add_report_command(commands) -> None:
 def report(args) -> int:
     from liver_sim.sessions.report import write_report
 
-    write_report(args.bag, args.out or args.bag.with_name(args.bag.name + "_report"), _progress)
+    write_report(args.bag, _output(args, "_report"), _progress)
+    return 0
+
+
+def add_bag_command(commands) -> None:
+    """``liver-sim bag repair BAG [--out DIR]``."""
+    parser = commands.add_parser("bag", help="bag tools: repair a bag whose recorder was killed")
+    actions = parser.add_subparsers(dest="action", required=True, metavar="ACTION")
+    repair = actions.add_parser("repair", help="write a complete bag from what a damaged bag's storage file holds "
+                                               "(the damaged bag is left as it is)")
+    repair.add_argument("bag", type=Path, metavar="BAG", help="rosbag2 bag folder (metadata.yaml may be missing)")
+    repair.add_argument("--out", type=Path, default=None, help="new bag folder (default: BAG_repaired)")
+    repair.set_defaults(handler=bag_repair)
+
+
+def bag_repair(args) -> int:
+    from liver_sim.sessions.bag import repair_bag
+
+    repair_bag(args.bag, _output(args, "_repaired"), _progress)
     return 0
 
 

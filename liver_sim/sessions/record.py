@@ -3,8 +3,13 @@
 No executor: a loop takes every waiting message of every subscription each DRAIN_PERIOD_S and writes
 them in order of arrival, each logged at its receive time (the rmw's reception timestamp).  The
 history of each subscription (HISTORY_DEPTH) holds several seconds at 1 kHz, so a slow write never
-drops a message; the bag notes the deepest backlog seen.  SIGINT or SIGTERM ends the recording after
-a last drain and closes the bag (metadata.yaml included).
+drops a message; the bag notes the deepest backlog seen.  Every message is taken with its writer's GID
+and publication sequence number (sessions.rcl_take), so every message lost to the recording is counted
+(sessions.gaps) into metadata.yaml's custom_data; a recording that lost messages of a reliable topic, or
+whose history overflowed, ends with EXIT_LOST.
+`ready:` is printed once the subscriptions exist and have matched the publishers already in the graph:
+from then on nothing is lost uncounted.  SIGINT or SIGTERM ends the recording after a last drain and
+closes the bag (metadata.yaml included).
 """
 from __future__ import annotations
 
@@ -15,14 +20,25 @@ import time
 from pathlib import Path
 
 from liver_sim.sessions.bag import BagWriter, QosSpec
+from liver_sim.sessions.gaps import SequenceGaps
 
 RECORDER_NODE = "liver_sim_recorder"
-#: Messages kept per subscription between two drains: 2 s at 1 kHz, 100 drain periods.
+#: Messages kept per subscription between two drains beyond the publishers' own history depth (which a
+#: late match delivers at once): 2 s at 1 kHz, 100 drain periods.
 HISTORY_DEPTH = 2000
 DRAIN_PERIOD_S = 0.02
 #: How often (s) topics of unknown type are looked up in the ROS graph.
 DISCOVERY_PERIOD_S = 0.5
 PROGRESS_PERIOD_S = 5.0
+#: How often (s) what was recorded goes into the storage file (BagWriter.flush): a killed recorder loses at
+#: most this much, and `liver-sim bag repair` gets the rest back.
+FLUSH_PERIOD_S = 1.0
+#: How long (s) the recorder waits for its subscriptions to match the publishers the graph already shows.
+MATCH_TIMEOUT_S = 10.0
+#: The line `liver-sim record` prints when it records everything published from then on.
+READY = "ready:"
+#: Exit status of `liver-sim record` when messages were lost (the bag is complete and says how many).
+EXIT_LOST = 3
 
 
 def default_topics(marker: bool = False) -> list[str]:
@@ -98,9 +114,12 @@ class Recorder:
         self.progress = progress
         self.node = rclpy.create_node(RECORDER_NODE, context=context, start_parameter_services=False,
                                       enable_rosout=False)
-        self._subscriptions = []  # (topic, type name, QosSpec, subscription)
+        self._subscriptions = []  # (topic, type name, QosSpec, subscription, SerializedTake)
         self._pending = []
         self.max_backlog = 0
+        self.overflowed: list[str] = []
+        self.gaps = SequenceGaps()
+        self._writer_nodes: dict[bytes, str] = {}
         known = known_topics()
         for topic in topics:
             if topic in known:
@@ -112,9 +131,37 @@ class Recorder:
         self._unknown = set()
 
     def _subscribe(self, topic: str, msg_class, spec: QosSpec) -> None:
+        from liver_sim.sessions.rcl_take import SerializedTake
+
         subscription = self.node.create_subscription(msg_class, topic, lambda _: None,
-                                                     _rclpy_qos(spec, HISTORY_DEPTH), raw=True)
-        self._subscriptions.append((topic, type_name(msg_class), spec, subscription))
+                                                     _rclpy_qos(spec, spec.depth + HISTORY_DEPTH), raw=True)
+        self._subscriptions.append((topic, type_name(msg_class), spec, subscription, SerializedTake(subscription)))
+
+    def wait_until_matched(self, timeout_s: float = MATCH_TIMEOUT_S) -> int:
+        """Until every subscription has matched the publishers the graph shows for its topic (at most
+        `timeout_s`); those writers count as already publishing. Returns how many publishers matched."""
+        deadline = time.monotonic() + timeout_s
+        while True:
+            shown = {topic: self.node.get_publishers_info_by_topic(topic) for topic, *_ in self._subscriptions}
+            if all(sub.get_publisher_count() >= len(shown[topic]) for topic, _, _, sub, _ in self._subscriptions) \
+                    or time.monotonic() > deadline:
+                break
+            time.sleep(0.05)
+        for topic, publishers in shown.items():
+            self.gaps.already_publishing(topic, (bytes(p.endpoint_gid) for p in publishers))
+        return sum(sub.get_publisher_count() for *_, sub, _ in self._subscriptions)
+
+    @property
+    def subscribed(self) -> list[str]:
+        """The topics subscribed so far."""
+        return [topic for topic, *_ in self._subscriptions]
+
+    def _writer_node(self, topic: str, gid: bytes) -> str:
+        """The name of the node whose writer has `gid`, from the graph ('' once it is gone)."""
+        if gid not in self._writer_nodes:
+            for publisher in self.node.get_publishers_info_by_topic(topic):
+                self._writer_nodes[bytes(publisher.endpoint_gid)] = publisher.node_name
+        return self._writer_nodes.get(gid, "")
 
     def discover(self) -> None:
         """Subscribe to the requested topics once a publisher shows their type, and re-subscribe a topic
@@ -123,9 +170,10 @@ class Recorder:
             if self._try_subscribe(topic):
                 self._pending.remove(topic)
         for entry in list(self._subscriptions):
-            topic, name, _, subscription = entry
+            topic, name, _, subscription, take = entry
             published = {p.topic_type for p in self.node.get_publishers_info_by_topic(topic)}
             if published and name not in published:
+                take.close()
                 self.node.destroy_subscription(subscription)
                 self._subscriptions.remove(entry)
                 if not self._try_subscribe(topic):
@@ -145,20 +193,22 @@ class Recorder:
                 self.progress(f"warning: {topic} not recorded: {exc}")
             return False
         self._subscribe(topic, msg_class, offered_qos(self.node, topic))
+        self.gaps.already_publishing(topic, (bytes(p.endpoint_gid) for p in publishers))
         self.progress(f"recording {topic} ({kind})")
         return True
 
     def drain(self) -> int:
         """Take every waiting message and write them in order of reception; return how many."""
         taken = []
-        for topic, name, spec, subscription in self._subscriptions:
+        for topic, name, spec, _, take in self._subscriptions:
             count = 0
-            with subscription.handle:
-                while (message := subscription.handle.take_message(subscription.msg_type, True)) is not None:
-                    data, info = message
-                    taken.append((info.get("received_timestamp") or time.time_ns(), topic, name, spec, data))
-                    count += 1
+            while (message := take()) is not None:
+                self.gaps.add(topic, message.gid, message.sequence, self._writer_node(topic, message.gid))
+                taken.append((message.received_ns or time.time_ns(), topic, name, spec, message.data))
+                count += 1
             self.max_backlog = max(self.max_backlog, count)
+            if count >= spec.depth + HISTORY_DEPTH and topic not in self.overflowed:
+                self.overflowed.append(topic)
         taken.sort(key=lambda item: item[0])
         for received, topic, name, spec, data in taken:
             self.writer.write(topic, name, received, data, spec)
@@ -167,13 +217,16 @@ class Recorder:
     def run(self, stop: threading.Event, duration_s: float | None = None) -> None:
         """Drain every DRAIN_PERIOD_S until `stop` is set (or `duration_s` has passed), then once more."""
         start = time.monotonic()
-        next_drain = next_progress = start
+        next_drain = next_progress = next_flush = start
         while not stop.is_set() and (duration_s is None or time.monotonic() - start < duration_s):
             now = time.monotonic()
             if now >= self._next_discovery:
                 self.discover()
                 self._next_discovery = now + DISCOVERY_PERIOD_S
             self.drain()
+            if now >= next_flush + FLUSH_PERIOD_S:
+                next_flush = now
+                self.writer.flush()
             if now >= next_progress + PROGRESS_PERIOD_S:
                 next_progress = now
                 self.progress(f"  {now - start:6.1f} s: {sum(self.writer.counts.values())} messages")
@@ -181,15 +234,30 @@ class Recorder:
             stop.wait(max(0.0, next_drain - time.monotonic()))
         self.drain()
 
+    def failures(self) -> str:
+        """What this recording lost that it must not: messages of reliable topics (the publishers keep enough
+        history for a reader that fell behind), or a subscription's history filled up between two drains.
+        Best-effort messages dropped on the way are counted, not a failure: DDS resends none. '' when none."""
+        reliable = {topic for topic, _, spec, _, _ in self._subscriptions if spec.reliable}
+        lost = {t: n for t, n in self.gaps.lost_by_topic().items() if n and t in reliable}
+        reasons = [f"{n} message(s) of reliable {t} lost" for t, n in sorted(lost.items())]
+        if self.overflowed:
+            reasons.append(f"the history of {', '.join(self.overflowed)} filled up between two drains")
+        return "; ".join(reasons)
+
     def destroy(self) -> None:
+        for *_, take in self._subscriptions:
+            take.close()
         self.node.destroy_node()
 
 
 def run_record(out: Path, topics: list[str], storage: str = "mcap", duration_s: float | None = None,
-               progress=print) -> dict[str, int]:
-    """Record `topics` into a new bag at `out` until SIGINT/SIGTERM (or `duration_s`); return the counts.
+               progress=print) -> tuple[dict[str, int], int]:
+    """Record `topics` into a new bag at `out` until SIGINT/SIGTERM (or `duration_s`); return the counts per
+    topic and whether the recording failed (Recorder.failures: it lost what it must not).
 
-    metadata.yaml's custom_data gets the recorder's CPU and wall time (s) and its deepest backlog.
+    metadata.yaml's custom_data gets the recorder's CPU and wall time (s), its history depth and deepest
+    backlog, and the lost messages (SequenceGaps.custom_data).
     """
     import rclpy
     from rclpy.signals import SignalHandlerOptions
@@ -204,6 +272,8 @@ def run_record(out: Path, topics: list[str], storage: str = "mcap", duration_s: 
             recorder = Recorder(writer, topics, context, progress)
             progress(f"recording to {out} ({storage}): {', '.join(topics)}; stop with Ctrl-C")
             try:
+                matched = recorder.wait_until_matched()
+                progress(f"{READY} {len(recorder.subscribed)} topics subscribed, {matched} publishers matched")
                 recorder.run(stop, duration_s)
             finally:
                 recorder.destroy()
@@ -211,13 +281,18 @@ def run_record(out: Path, topics: list[str], storage: str = "mcap", duration_s: 
                 writer.set_custom_data("recorder_wall_s", f"{time.monotonic() - wall0:.3f}")
                 writer.set_custom_data("recorder_history_depth", HISTORY_DEPTH)
                 writer.set_custom_data("recorder_max_backlog", recorder.max_backlog)
+                for key, value in recorder.gaps.custom_data().items():
+                    writer.set_custom_data(key, value)
             counts = dict(writer.counts)
     finally:
         context.try_shutdown()
         for sig, handler in previous.items():
             signal.signal(sig, handler)
-    if recorder.max_backlog >= HISTORY_DEPTH:
-        progress(f"warning: a subscription's history ({HISTORY_DEPTH}) filled up between two writes: "
-                 "messages may have been lost")
     progress(f"wrote {out}: " + (", ".join(f"{t} {n}" for t, n in sorted(counts.items())) or "no messages"))
-    return counts
+    lost = recorder.gaps.lost_by_topic()
+    progress(f"lost: {recorder.gaps.lost}" + "".join(f", {t} {n}" for t, n in sorted(lost.items()) if n)
+             + (f" (per writer: custom_data 'writers' of {out / 'metadata.yaml'})" if recorder.gaps.lost else ""))
+    failed = recorder.failures()
+    if failed:
+        progress(f"error: {failed}")
+    return counts, bool(failed)

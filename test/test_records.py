@@ -1,0 +1,234 @@
+"""Runs that clean up after themselves, recordings that lose nothing (and count what they lose)."""
+import json
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+
+import pytest
+
+from liver_sim.processes import RunFile, _process_start, cli_command_line, stop_leftovers
+from liver_sim.sessions.bag import BagError, BagWriter, bag_info, check_bag, repair_bag
+from liver_sim.sessions.gaps import SequenceGaps
+
+GID_A, GID_B = bytes(range(16)), bytes(range(1, 17))
+
+
+def test_gaps_are_counted_per_writer_from_sequence_numbers():
+    gaps = SequenceGaps()
+    gaps.already_publishing("/t", [GID_A])
+    for sequence in (5, 6, 9, 10):            # A published before the recording: 7 and 8 lost
+        gaps.add("/t", GID_A, sequence, "a")
+    for sequence in (3, 4, 5):                # B appeared later: 1 and 2 published before it matched
+        gaps.add("/t", GID_B, sequence, "b")
+    gaps.add("/u", GID_A, 1)
+    assert gaps.lost_by_topic() == {"/t": 4, "/u": 0} and gaps.lost == 4
+    a, b = gaps.writers["/t", GID_A], gaps.writers["/t", GID_B]
+    assert (a.received, a.gaps, a.before_match) == (4, 2, 0)
+    assert (b.received, b.gaps, b.before_match) == (3, 0, 2)
+    gaps.add("/t", GID_A, 7)                  # a late arrival fills its gap
+    assert gaps.writers["/t", GID_A].gaps == 1
+    data = gaps.custom_data()
+    assert data["lost_messages"] == "3" and json.loads(data["lost_messages_by_topic"]) == {"/t": 3, "/u": 0}
+    assert {w["node"] for w in json.loads(data["writers"])} == {"a", "b", ""}
+
+
+def test_leftovers_of_a_dead_run_are_stopped_and_a_live_run_is_refused(tmp_path):
+    leftover = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(600)"], start_new_session=True)
+    dead_owner = subprocess.Popen([sys.executable, "-c", "pass"])
+    dead_owner.wait()
+    run_file = RunFile("7", tmp_path)
+    try:
+        with run_file.edit() as runs:
+            runs.append({"owner": [dead_owner.pid, 1], "log_dir": "old", "processes": [
+                ["liver_physics", leftover.pid, _process_start(leftover.pid), False]]})
+        said = []
+        assert stop_leftovers(run_file, said.append) == [f"liver_physics (pid {leftover.pid})"]
+        assert leftover.wait(timeout=10) == -signal.SIGTERM and "liver_physics" in said[0]
+        assert not run_file.path.exists()  # nothing left to remember
+        live = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(600)"])
+        with run_file.edit() as runs:
+            runs.append({"owner": [live.pid, _process_start(live.pid)], "log_dir": "busy", "processes": [
+                ["haptic_bridge", live.pid, _process_start(live.pid), False]]})
+        with pytest.raises(RuntimeError, match="choose another ROS_DOMAIN_ID"):
+            stop_leftovers(run_file)
+        assert live.poll() is None  # another live run's process is never touched
+        live.kill()
+        live.wait()
+    finally:
+        leftover.kill()
+        leftover.wait()
+
+
+KILLED_WRITER = """
+import os, sys
+from rclpy.serialization import serialize_message
+from liver_sim.sessions.bag import BagWriter
+from msg_defs import conversions
+writer = BagWriter(sys.argv[1], sys.argv[2])
+for k in range(500):
+    data = serialize_message(conversions.wrench_stamped([0.0, 0.0, k * 1e-3], 1.0 + k * 1e-3, "liver"))
+    writer.write("/liver/tool_wrench", "geometry_msgs/msg/WrenchStamped", 10**9 + k * 10**6, data)
+    if k == 299:
+        writer.flush()
+os._exit(0)  # killed: no summary, no metadata.yaml
+"""
+
+
+@pytest.mark.parametrize("storage", ["mcap", "sqlite3"])
+def test_a_bag_whose_recorder_was_killed_is_repaired_into_a_new_bag(tmp_path, capsys, storage):
+    from liver_sim.cli import main
+
+    bag = tmp_path / "killed"
+    subprocess.run([sys.executable, "-c", KILLED_WRITER, str(bag), storage], check=True, timeout=60)
+    with pytest.raises(BagError, match="no metadata.yaml"):
+        bag_info(bag)
+    before = sorted(p.name for p in bag.iterdir())
+    assert main(["bag", "repair", str(bag)]) == 0
+    repaired = tmp_path / "killed_repaired"
+    counts = check_bag(repaired)
+    assert 300 <= counts["/liver/tool_wrench"] <= 500  # everything flushed before the kill
+    assert bag_info(repaired).custom_data["repaired_from"] == str(bag)
+    assert sorted(p.name for p in bag.iterdir()) == before  # the damaged bag is left as it was
+    assert main(["bag", "repair", str(bag)]) == 2  # and nothing is overwritten
+    assert "exists already" in capsys.readouterr().err
+
+
+def test_bench_record_never_replaces_an_existing_bag(tmp_path):
+    from liver_sim.sessions.bench import new_path
+
+    (tmp_path / "bench_session").mkdir()
+    assert new_path(tmp_path / "bench_session") == tmp_path / "bench_session_2"
+    with BagWriter(tmp_path / "session"):
+        pass
+    assert new_path(tmp_path / "other") == tmp_path / "other"
+
+
+# ------------------------------------------------------------------ real processes
+
+def start_demo(ros_env, out, duration_s=120):
+    """`liver-sim demo --record` as a separate process; returns it once the nodes run (its run file lists them)."""
+    demo = subprocess.Popen(cli_command_line("demo", "--record", "--duration", str(duration_s), "--out", str(out)),
+                            env=ros_env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    lines = []
+    for line in demo.stdout:
+        lines.append(line)
+        if line.strip().startswith("1.0 /"):  # the first second of the closed loop
+            return demo
+    raise AssertionError("the demo did not come up: " + "".join(lines) + demo.stderr.read())
+
+
+def run_processes(ros_env):
+    """{label: pid} of the processes the run file of ros_env's domain lists."""
+    runs = json.loads(RunFile(ros_env["ROS_DOMAIN_ID"]).path.read_text())["runs"]
+    return {label: pid for run in runs for label, pid, _, _ in run["processes"]}
+
+
+def alive(pid):
+    try:
+        stat = open(f"/proc/{pid}/stat").read()
+    except OSError:
+        return False
+    return stat.rsplit(")", 1)[1].split()[0] not in ("Z", "X")
+
+
+def test_sigkill_of_the_demo_leaves_no_process_of_its_run(ros_env, tmp_path):
+    demo = start_demo(ros_env, tmp_path)
+    children = run_processes(ros_env)
+    assert set(children) == {"recorder", "liver_physics", "haptic_bridge", "liver_tool", "phantom_sim"}
+    demo.kill()
+    demo.wait()
+    deadline = time.monotonic() + 2.0
+    while any(alive(pid) for pid in children.values()) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert not {label for label, pid in children.items() if alive(pid)}
+    assert check_bag(tmp_path / "session")["/liver/nodes"] > 0  # the recorder closed its bag on the way
+
+
+def test_a_node_that_crashes_is_reported_by_name_with_its_log(ros_env, tmp_path):
+    demo = start_demo(ros_env, tmp_path)
+    os.kill(run_processes(ros_env)["liver_physics"], signal.SIGSEGV)
+    _, error = demo.communicate(timeout=120)
+    assert demo.returncode == 1
+    assert error.startswith("liver-sim: error: liver_physics was killed by SIGSEGV while running; last lines of "
+                            f"{tmp_path / 'logs' / 'liver_physics.log'}")
+    assert "Traceback" not in error
+    assert not RunFile(ros_env["ROS_DOMAIN_ID"]).path.exists()  # every other process was stopped
+
+
+class Tally:
+    """An independent client: subscribes to every recorded topic with the contract's QoS and keeps, per writer,
+    the highest publication sequence number it saw."""
+
+    def __init__(self):
+        import rclpy
+
+        from liver_sim.sessions.rcl_take import SerializedTake
+        from liver_sim.sessions.record import _rclpy_qos, default_topics, known_topics
+
+        self.context = rclpy.Context()
+        rclpy.init(context=self.context)
+        self.node = rclpy.create_node("independent_tally", context=self.context)
+        known = known_topics()
+        self.takes = {}
+        for topic in default_topics():
+            msg_class, spec = known[topic]
+            subscription = self.node.create_subscription(msg_class, topic, lambda _: None,
+                                                         _rclpy_qos(spec, spec.depth + 5000), raw=True)
+            self.takes[topic] = SerializedTake(subscription)
+        self.last: dict[tuple[str, str], int] = {}
+        self.stop = threading.Event()
+        self.thread = threading.Thread(target=self._run, daemon=True)
+        self.thread.start()
+
+    def _run(self):
+        while not self.stop.wait(0.01):
+            for topic, take in self.takes.items():
+                while (message := take()) is not None:
+                    key = (topic, message.gid.hex())
+                    self.last[key] = max(self.last.get(key, 0), message.sequence)
+
+    def close(self):
+        time.sleep(1.0)  # the last acknowledged messages
+        self.stop.set()
+        self.thread.join()
+        for take in self.takes.values():
+            take.close()
+        self.node.destroy_node()
+        self.context.try_shutdown()
+
+
+def test_a_recorded_demo_under_load_loses_nothing_the_publishers_numbered(ros_domain_id, tmp_path):
+    from liver_sim.demo import run_demo
+
+    busy = subprocess.Popen([sys.executable, "-c", "while True: pass"])  # one more core-bound process
+    tally = Tally()
+    try:
+        run_demo(tmp_path, duration_s=8.0, progress=lambda line: None, record_storage="mcap")
+    finally:
+        tally.close()
+        busy.kill()
+        busy.wait()
+    bag = tmp_path / "session"
+    info = bag_info(bag)
+    counts = check_bag(bag)
+    writers = json.loads(info.custom_data["writers"])
+    reliable = {"/liver/nodes", "/liver/contact_plane", "/liver/tool_wrench", "/phantom/servo_cf",
+                "/diagnostics", "/liver/surface", "/tool/device_map"}
+    lost = json.loads(info.custom_data["lost_messages_by_topic"])
+    assert reliable <= set(lost) and all(lost[t] == 0 for t in reliable)
+    assert int(info.custom_data["lost_messages"]) == sum(lost.values())
+    for topic in counts:
+        assert counts[topic] == sum(w["received"] for w in writers if w["topic"] == topic)
+    for w in writers:
+        # every message from the writer's first, numbered by the writer itself, is in the bag or counted lost
+        assert w["received"] + w["gaps"] + w["before_match"] == w["last"], w
+        if w["topic"] in reliable:
+            assert w["first"] == 1 and w["received"] == w["last"], w
+            # the recorder received each reliable writer's messages at least as far as an independent client did
+            assert w["last"] >= tally.last.get((w["topic"], w["gid"]), 0), w
+    seen = {key for key in tally.last if key[0] in reliable}
+    assert seen <= {(w["topic"], w["gid"]) for w in writers}
+    assert counts["/liver/nodes"] > 500 and counts["/phantom/servo_cf"] > 4000
