@@ -78,3 +78,12 @@ def batch_qos(topic: Topic, depth: int = 1000):
     """`topic`'s reliability and durability with a keep-last `depth` history (a QoSProfile): for a subscriber
     that takes messages in batches (a listener or recorder polling every few ms) and must keep them all."""
     return Topic(topic.name, topic.type, depth, topic.reliable, topic.transient_local).qos
+
+
+def device_command_qos(topic: Topic):
+    """The QoS a device (driver or phantom_sim) subscribes to force commands with: `topic`'s reliability and
+    depth, but VOLATILE. The bridge's publisher keeps transient-local history for a recorder that matches
+    late; a device must never receive that history, since an old force command replayed on joining would push
+    the hand. Drivers subscribing with ROS's default QoS (volatile) get none (docs/haptic-safety.md)."""
+    return Topic(topic.name, topic.type, topic.depth, topic.reliable, transient_local=False).qos
+

@@ -480,3 +480,14 @@ def test_quaternions_of_huge_or_tiny_components_normalise(component):
     np.testing.assert_allclose(q, [math.sqrt(0.5), math.sqrt(0.5), 0.0, 0.0])
     with pytest.raises(ValueError, match="non-zero"):
         conv.pose_stamped([0.0, 0.0, 0.0], (0.0, 0.0, 0.0, 0.0), 0.0, "liver")
+
+
+def test_devices_subscribe_to_force_commands_volatile_so_no_old_command_is_replayed_to_them():
+    from rclpy.qos import DurabilityPolicy
+
+    from msg_defs.topics import device_command_qos
+
+    device = device_command_qos(TOPICS["servo_cf"])
+    assert TOPICS["servo_cf"].qos.durability == DurabilityPolicy.TRANSIENT_LOCAL  # the recorder's catch-up
+    assert device.durability == DurabilityPolicy.VOLATILE
+    assert device.reliability == TOPICS["servo_cf"].qos.reliability and device.depth == TOPICS["servo_cf"].depth

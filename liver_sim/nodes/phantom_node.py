@@ -22,7 +22,7 @@ from liver_sim.nodes.common import (Latest, LoopInputs, RateLoop, apply_realtime
 from liver_sim.phantom import PARAMETERS, PhantomSim, StylusParams
 from liver_sim.tool_scripts import IDENTITY_XYZW, script_from
 from msg_defs import conversions
-from msg_defs.topics import TOPICS
+from msg_defs.topics import TOPICS, device_command_qos
 
 _ZERO = np.zeros(3)
 
@@ -44,7 +44,7 @@ class PhantomNode(Node):
                                                   TOPICS["diagnostics"].qos)
         self._inputs = LoopInputs(self)  # read by the 1 kHz loop itself, not by the executor
         self._inputs.subscribe(conversions.force_message_type(p["force_output"]), p["servo_cf_topic"],
-                               TOPICS["servo_cf"].qos, self._on_command, raw=True, received=True)
+                               device_command_qos(TOPICS["servo_cf"]), self._on_command, raw=True, received=True)
         self.create_timer(1.0, self._publish_diagnostics)
         self._refuse = read_at_start("phantom_sim", {"command_timeout_s"})
         on_parameter_changes(self, PARAMETERS, self._apply)
