@@ -133,3 +133,4 @@ def test_stretch_is_mesh_independent_with_material_springs(fine_liver):
     raw = [liver_stretch(m, build_springs(m, ModelParams(spring_constants="paper"))) for m in (coarse, fine)]
     assert material[1] == pytest.approx(material[0], rel=0.25)
     assert raw[1] / raw[0] > 2.0  # per-spring constants: the finer mesh is far stiffer
+
