@@ -22,6 +22,16 @@ def test_physics_bench_reports_the_default_liver_first_and_agrees_with_numpy():
                 "numpy_us_per_step", "stable_dt_s", "realtime_factor_150hz"} <= set(result)
         assert result["max_abs_diff_vs_numpy_m"] < 1e-9
         assert result["us_per_step_1thread"] > 0 and result["realtime_factor_150hz"] > 0
+        rows = {row["integrator"]: row for row in result["integrators"]}
+        assert set(rows) == {"implicit_euler", "symplectic_euler"}
+        assert rows["implicit_euler"]["steps_per_frame"] == 1
+        assert rows["symplectic_euler"]["steps_per_frame"] == result["substeps_per_frame"] > 1
+        assert rows["symplectic_euler"]["max_position_error_vs_reference_m"] == 0.0  # it is the reference
+        assert 0.0 < rows["implicit_euler"]["max_position_error_vs_reference_m"] < 1e-3
+        for row in rows.values():
+            assert row["ms_per_frame_1thread"] > 0 and row["ms_per_frame_all_threads"] > 0
+            assert row["realtime_factor_150hz"] > 0
+    assert "default_implicit_ms_per_frame_1thread_max" in report["met"]
     json.dumps(report)
 
 

@@ -21,8 +21,10 @@ def slab():
 
 
 def one_step_model(mesh, tool):
-    """One 10 µs step per frame: forces are read before the nodes have moved noticeably."""
-    params = ModelParams(substeps=1, frame_rate_hz=1e5, contact_stiffness_n_per_m=STIFFNESS,
+    """One 10 µs explicit step per frame: forces are read before the nodes have moved noticeably (the
+    implicit step's contacts, evaluated at the end of its step: test_implicit.py)."""
+    params = ModelParams(integrator="symplectic_euler", substeps=1, frame_rate_hz=1e5,
+                         contact_stiffness_n_per_m=STIFFNESS,
                          contact_damping_ns_per_m=0.0)
     return LiverModel(mesh, params, tool=tool)
 
@@ -68,8 +70,8 @@ def test_no_force_out_of_contact(slab):
 
 
 def test_penalty_damping_resists_approach(slab):
-    params = ModelParams(substeps=1, frame_rate_hz=1e5, contact_stiffness_n_per_m=STIFFNESS,
-                         contact_damping_ns_per_m=5.0)
+    params = ModelParams(integrator="symplectic_euler", substeps=1, frame_rate_hz=1e5,
+                         contact_stiffness_n_per_m=STIFFNESS, contact_damping_ns_per_m=5.0)
     model = LiverModel(slab, params, tool=ToolShape("sphere", radius_m=0.01))
     z0 = 0.04 + 0.01 - DEPTH
     model.step_frame(ToolPose(np.array([0.04, 0.04, z0 + 1e-6])))

@@ -9,11 +9,14 @@ from meshes import box_mesh
 from liver_sim.mesh.liver_shape import build_liver, default_liver
 from liver_sim.physics import reference
 from liver_sim.physics.implicit import ImplicitEuler
-from liver_sim.physics.materials import (CUBIC_RATIO, TissueProperties, edge_measures, equivalent_properties,
-                                         material_springs)
-from liver_sim.physics.params import ModelParams
+from liver_sim.physics.materials import edge_measures, equivalent_properties, network_young_modulus_pa
+from liver_sim.physics.params import CUBIC_RATIO, ModelParams, TissueProperties
 from liver_sim.physics.springs import build_springs
 from liver_sim.traction import cylinder_mesh
+
+
+def material_springs(mesh, tissue=TissueProperties()):
+    return build_springs(mesh, ModelParams(tissue=tissue))
 
 
 def test_regular_tetrahedron_gets_lloyds_stiffness():
@@ -24,7 +27,8 @@ def test_regular_tetrahedron_gets_lloyds_stiffness():
     mesh = TetMesh.from_arrays(points, np.array([[0, 1, 2, 3]]))
     if np.linalg.det(points[1:] - points[0]) < 0:
         mesh = TetMesh.from_arrays(points, np.array([[0, 2, 1, 3]]))
-    tissue = TissueProperties(parenchyma_young_modulus_pa=3000.0, capsule_stiffness_n_per_m=0.0)
+    tissue = TissueProperties(parenchyma_young_modulus_kpa=3.0, parenchyma_poisson_ratio=0.25,
+                              capsule_stiffness_n_per_m=0.0)
     springs = material_springs(mesh, tissue)
     np.testing.assert_allclose(springs.lambda2_n / springs.rest_length_m, math.sqrt(2) / 12 * 3000.0 * l)
     np.testing.assert_allclose(springs.lambda1_n, CUBIC_RATIO * springs.lambda2_n)
@@ -39,7 +43,7 @@ def test_edge_measures_sum_to_six_volumes_and_three_areas():
 
 
 def test_current_defaults_read_back_as_known_moduli():
-    params = ModelParams()
+    params = ModelParams(spring_constants="paper")
     moduli = equivalent_properties(default_liver(), params.parenchyma.lambda2_n, params.capsule.lambda2_n)
     assert moduli["parenchyma_young_modulus_pa"] == pytest.approx(2.1e3, rel=0.03)
     assert moduli["capsule_stiffness_n_per_m"] == pytest.approx(585.0, rel=0.03)
@@ -51,14 +55,30 @@ def test_material_springs_read_back_their_properties_on_average():
     tissue = TissueProperties(capsule_stiffness_n_per_m=0.0, capsule_viscosity_ns_per_m=0.0)
     springs = material_springs(mesh, tissue)
     e = (springs.lambda2_n * springs.rest_length_m).sum() / (6 * mesh.volume)
-    assert e == pytest.approx(tissue.parenchyma_young_modulus_pa)
+    assert e == pytest.approx(network_young_modulus_pa(tissue))
     eta = (springs.mu_ns_per_m * springs.rest_length_m ** 2).sum() / (6 * mesh.volume)
     assert eta == pytest.approx(tissue.parenchyma_viscosity_pa_s)
 
 
 def test_validate_names_the_parameter():
-    with pytest.raises(ValueError, match="parenchyma_young_modulus_pa"):
-        TissueProperties(parenchyma_young_modulus_pa=-1.0).validate()
+    with pytest.raises(ValueError, match="parenchyma_young_modulus_kpa"):
+        TissueProperties(parenchyma_young_modulus_kpa=-1.0).validate()
+    with pytest.raises(ValueError, match="parenchyma_poisson_ratio"):
+        ModelParams(tissue=TissueProperties(parenchyma_poisson_ratio=0.5)).validate()
+    with pytest.raises(ValueError, match="spring_constants"):
+        ModelParams(spring_constants="per_spring").validate()
+
+
+def test_poisson_ratio_sets_the_indentation_modulus():
+    # the network (ν = 1/4) is given E·(1 − 1/16)/(1 − ν²): the same E/(1 − ν²) as the tissue under a sphere
+    for nu in (0.25, 0.45, 0.49):
+        tissue = TissueProperties(parenchyma_young_modulus_kpa=4.0, parenchyma_poisson_ratio=nu)
+        network = network_young_modulus_pa(tissue)
+        assert network / (1 - 0.25 ** 2) == pytest.approx(4000.0 / (1 - nu ** 2))
+    mesh = default_liver()
+    soft, firm = (material_springs(mesh, TissueProperties(parenchyma_poisson_ratio=nu, capsule_stiffness_n_per_m=0.0))
+                  for nu in (0.25, 0.45))
+    np.testing.assert_allclose(firm.lambda2_n / soft.lambda2_n, (1 - 0.25 ** 2) / (1 - 0.45 ** 2))
 
 
 def static_reaction(mesh, springs, pulled, fixed, displacement):
@@ -84,12 +104,13 @@ def test_bar_recovers_young_modulus():
     z = mesh.points[:, 2]
     length = z.max() - z.min()
     top, bottom = np.flatnonzero(z > z.max() - 1e-6), np.flatnonzero(z < z.min() + 1e-6)
-    tissue = TissueProperties(capsule_stiffness_n_per_m=0.0, capsule_viscosity_ns_per_m=0.0)
+    tissue = TissueProperties(parenchyma_poisson_ratio=0.25, capsule_stiffness_n_per_m=0.0,
+                              capsule_viscosity_ns_per_m=0.0)  # the network's own ν: E is its Young's modulus
     strain = 0.002
     force = static_reaction(mesh, material_springs(mesh, tissue), bottom, top, np.array([0.0, 0.0, -strain * length]))
     area = mesh.volume / length
     measured = force[2] / (area * strain)
-    assert measured == pytest.approx(tissue.parenchyma_young_modulus_pa, rel=0.15)
+    assert measured == pytest.approx(tissue.parenchyma_young_modulus_kpa * 1e3, rel=0.15)
 
 
 @pytest.fixture(scope="module")
@@ -109,6 +130,7 @@ def liver_stretch(mesh, springs, strain=0.01, grip_m=0.03):
 def test_stretch_is_mesh_independent_with_material_springs(fine_liver):
     coarse, fine = default_liver(), fine_liver
     material = [liver_stretch(m, material_springs(m)) for m in (coarse, fine)]
-    raw = [liver_stretch(m, build_springs(m, ModelParams())) for m in (coarse, fine)]
+    raw = [liver_stretch(m, build_springs(m, ModelParams(spring_constants="paper"))) for m in (coarse, fine)]
     assert material[1] == pytest.approx(material[0], rel=0.25)
     assert raw[1] / raw[0] > 2.0  # per-spring constants: the finer mesh is far stiffer
+

@@ -53,8 +53,9 @@ class PhysicsNode(Node):
         self._loop = RateLoop(p["rate_hz"], self._step, "liver_physics")
         self.get_logger().info(
             f"liver_physics: mesh '{mesh.source}' ({len(mesh.points)} nodes, {len(mesh.tets)} tets, "
-            f"{len(mesh.skin)} skin triangles), {p['rate_hz']:g} Hz × {p['substeps']} substeps "
-            f"(dt {self.model.params.dt_s * 1e6:.0f} us, stable below {self.model.stable_dt_s * 1e6:.0f} us); "
+            f"{len(mesh.skin)} skin triangles), {p['rate_hz']:g} Hz × {self.model.params.substeps} "
+            f"{self.model.params.integrator} steps (dt {self.model.params.dt_s * 1e6:.0f} us"
+            f"{'' if self.model.implicit else f', stable below {self.model.stable_dt_s * 1e6:.0f} us'}); "
             f"in: {p['tool_pose_topic']}; out: {p['nodes_topic']}, {p['surface_topic']}, {p['marker_topic']} "
             f"({p['marker_rate_hz']:g} Hz), {p['contact_plane_topic']} ({p['local_model']}), {p['tool_wrench_topic']}; "
             f"tool {p['tool_shape']} in mode {p['tool_mode']}, tearing {'on' if p['tearing'] else 'off'}")

@@ -11,7 +11,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from liver_sim.geometry.rotations import quaternion_to_matrix
 from liver_sim.local_model import LocalModel
@@ -73,21 +72,26 @@ def tool_core(shape: ToolShape, pose: ToolPose) -> tuple[np.ndarray, np.ndarray]
 
 def candidate_nodes(points: np.ndarray, skin_nodes: np.ndarray, shape: ToolShape, pose: ToolPose,
                     reach_m: float) -> np.ndarray:
-    """Sorted skin nodes within the tool's bounding radius + `reach_m` of its core midpoint (k-d tree)."""
+    """Sorted skin nodes within the tool's bounding radius + `reach_m` of its core midpoint (a distance
+    test on every skin node: cheaper, per frame, than building a k-d tree of the moving skin)."""
     a, b = tool_core(shape, pose)
-    hits = cKDTree(points[skin_nodes]).query_ball_point((a + b) / 2.0, shape.bounding_radius_m + reach_m)
-    return np.sort(skin_nodes[np.asarray(hits, dtype=np.int64)])
+    offsets = points[skin_nodes] - (a + b) / 2.0
+    near = np.einsum("ij,ij->i", offsets, offsets) <= (shape.bounding_radius_m + reach_m) ** 2
+    return np.sort(skin_nodes[near])
 
 
 def candidate_triangles(points: np.ndarray, skin: np.ndarray, shape: ToolShape, pose: ToolPose,
                         reach_m: float) -> np.ndarray:
-    """Sorted skin triangles that may come within `reach_m` of the tool (k-d tree over centroids)."""
+    """Sorted skin triangles that may come within `reach_m` of the tool: centroid within the tool's bounding
+    radius + the largest circumradius + `reach_m` of its core midpoint."""
     a, b = tool_core(shape, pose)
     corners = points[skin]
     centroids = corners.mean(axis=1)
-    circumradius = np.linalg.norm(corners - centroids[:, None, :], axis=2).max()
-    hits = cKDTree(centroids).query_ball_point((a + b) / 2.0, shape.bounding_radius_m + circumradius + reach_m)
-    return np.sort(np.asarray(hits, dtype=np.int64))
+    spread = corners - centroids[:, None, :]
+    circumradius = math.sqrt(np.einsum("ijk,ijk->ij", spread, spread).max()) if len(skin) else 0.0
+    offsets = centroids - (a + b) / 2.0
+    near = np.einsum("ij,ij->i", offsets, offsets) <= (shape.bounding_radius_m + circumradius + reach_m) ** 2
+    return np.flatnonzero(near)
 
 
 def fit_local_model(gap: np.ndarray, point: np.ndarray, direction: np.ndarray, reach_m: float,

@@ -18,61 +18,26 @@ Viscosity, as a Kelvin–Voigt solid σ = E·ε + η·ε̇ (the viscous spring f
 λ2·d the same way): μ = η·Σ V_tet/l0² and, for the capsule, μ = η_s·Σ A_tri/l0² with η_s = η·t.
 The cubic term keeps Fig. 2's ratio: λ1 = (λ1/λ2)_Fig.2 · λ2 ≈ 143·λ2 (linear below ~10 % strain).
 
-Poisson's ratio is not a parameter: a network of central springs is a Cauchy solid, ν = 1/4 (3-D) and
-1/3 (membrane) whatever its constants.  Liver (ν ≈ 0.45–0.5) would need a volume term.  Matching E,
-the network's shear modulus is G = 0.4·E.
+Poisson's ratio.  A network of central springs is a Cauchy solid: its own ν is 1/4 (3-D) and 1/3
+(membrane) whatever its constants, and liver (ν ≈ 0.45–0.5) would need a volume term to do better.  So ν
+chooses which modulus the network matches: the one a tool feels.  A rigid sphere pressed into an elastic
+body meets the force F = (4/3)·E/(1 − ν²)·√R·δ^(3/2) (Hertz), so the network gets the Young's modulus
+E_network = E·(1 − 1/16)/(1 − ν²) that gives the tissue's indentation modulus E/(1 − ν²) at the
+network's ν = 1/4 (`network_young_modulus_pa`; at ν = 1/4 it is E).  Its shear modulus is 0.4·E_network.
 
-Check: the current per-spring defaults (params.py: λ2 = 0.5 N parenchyma, 10 N capsule) read back
+Check: the paper's per-spring constants (params.py: λ2 = 0.5 N parenchyma, 10 N capsule) read back
 with `equivalent_properties` on the default liver as E ≈ 2.1 kPa and E·t ≈ 585 N/m, and η ≈ 506 Pa·s,
-η·t ≈ 0.026 N·s/m.
-
-Defaults (`TissueProperties`) and sources:
-- parenchyma E = 5 kPa: transient elastography of healthy livers measures a Young's modulus about
-  5 kPa (Sandrin et al., Ultrasound Med. Biol. 29:1705, 2003); MR elastography a shear modulus about
-  2 kPa (Yin et al., Clin. Gastroenterol. Hepatol. 5:1207, 2007), which is 0.4·E of this network;
-- parenchyma η = 500 Pa·s: calibrated, not measured — the value the current model has (the paper's
-  slow return, B3, τ = η/E = 0.1 s).  Shear-wave dispersion gives ~1–2 Pa·s (Chen et al., Radiology
-  266:964, 2013), which governs 50–500 Hz waves, not the slow creep the paper shows;
-- capsule E·t = 500 N/m: Glisson's capsule in uniaxial tension has a modulus of the order of 10 MPa
-  over a thickness of some tens of µm (Brunon et al., J. Biomech. 43:2221, 2010), E·t a few hundred N/m;
-- capsule η·t = 0.025 N·s/m: calibrated like η (the current model's);
-- density 1060 kg/m³ (liver, as ModelParams).
+η·t ≈ 0.026 N·s/m.  Defaults (params.TissueProperties) and their sources: docs/materials.md.
 """
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass, fields
-
 import numpy as np
 
-from liver_sim.mesh.tetmesh import TET_EDGES, TRIANGLE_EDGES, TetMesh, edge_keys, signed_volumes, unique_edges
-from liver_sim.physics.params import FIG2_LAW
-from liver_sim.physics.springs import SpringNetwork
+from liver_sim.mesh.tetmesh import TET_EDGES, TRIANGLE_EDGES, TetMesh, edge_keys, signed_volumes
+from liver_sim.physics.params import TissueProperties
 
-#: Fig. 2's cubic-to-linear stiffness ratio λ1/λ2.
-CUBIC_RATIO = FIG2_LAW.lambda1_n / FIG2_LAW.lambda2_n
-
-
-@dataclass(frozen=True)
-class TissueProperties:
-    """Continuum properties of the liver (SI units; see the module docstring for the defaults' sources)."""
-
-    parenchyma_young_modulus_pa: float = 5000.0
-    parenchyma_viscosity_pa_s: float = 500.0
-    capsule_stiffness_n_per_m: float = 500.0
-    capsule_viscosity_ns_per_m: float = 0.025
-    density_kg_m3: float = 1060.0
-    cubic_ratio: float = CUBIC_RATIO
-
-    def validate(self) -> "TissueProperties":
-        """Return self, or raise ValueError naming the first value that is not finite and >= 0."""
-        for f in fields(self):
-            value = getattr(self, f.name)
-            if not (math.isfinite(value) and value >= 0.0):
-                raise ValueError(f"parameter {f.name} must be finite and >= 0, got {value!r}")
-        if not self.density_kg_m3 > 0.0:
-            raise ValueError(f"parameter density_kg_m3 must be > 0, got {self.density_kg_m3!r}")
-        return self
+#: The Poisson's ratio of a central-spring network (a Cauchy solid).
+NETWORK_POISSON_RATIO = 0.25
 
 
 def _edge_sums(edges: np.ndarray, cells: np.ndarray, local_edges: np.ndarray, measure: np.ndarray,
@@ -111,26 +76,29 @@ def edge_measures(mesh: TetMesh, rest_points: np.ndarray | None = None,
     return rest, volume, area
 
 
-def material_springs(mesh: TetMesh, tissue: TissueProperties | None = None, rest_points: np.ndarray | None = None,
-                     capsule_triangles: np.ndarray | None = None) -> SpringNetwork:
-    """The spring network of `mesh` (as springs.build_springs: one connector per edge, capsule on the edges
-    of `capsule_triangles`, default the skin) with coefficients from the tissue's properties:
-    λ2 = (E·ΣV + Y·ΣA)/l0, μ = (η·ΣV + η_s·ΣA)/l0², λ1 = cubic_ratio·λ2."""
-    tissue = (tissue or TissueProperties()).validate()
+def network_young_modulus_pa(tissue: TissueProperties) -> float:
+    """The network's Young's modulus (Pa) whose indentation modulus at ν = 1/4 is the tissue's:
+    E·(1 − ¼²)/(1 − ν²) (Hertz; see the module docstring)."""
+    return (tissue.parenchyma_young_modulus_kpa * 1e3 * (1.0 - NETWORK_POISSON_RATIO ** 2)
+            / (1.0 - tissue.parenchyma_poisson_ratio ** 2))
+
+
+def material_coefficients(mesh: TetMesh, tissue: TissueProperties, rest_points: np.ndarray | None = None,
+                          capsule_triangles: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Eq. 1's λ1 (N), λ2 (N) and μ (N·s/m) of each edge of `mesh` (mesh.edges order) from the tissue's
+    properties: λ2 = (E_network·ΣV + Y·ΣA)/l0, μ = (η·ΣV + η_s·ΣA)/l0², λ1 = cubic_ratio·λ2 (capsule:
+    the edges of `capsule_triangles`, default the skin)."""
+    tissue = tissue.validate()
     rest, volume, area = edge_measures(mesh, rest_points, capsule_triangles)
-    lambda2 = (tissue.parenchyma_young_modulus_pa * volume + tissue.capsule_stiffness_n_per_m * area) / rest
+    lambda2 = (network_young_modulus_pa(tissue) * volume + tissue.capsule_stiffness_n_per_m * area) / rest
     mu = (tissue.parenchyma_viscosity_pa_s * volume + tissue.capsule_viscosity_ns_per_m * area) / rest ** 2
-    edges = mesh.edges
-    capsule = len(unique_edges(_capsule(mesh, capsule_triangles), TRIANGLE_EDGES))
-    return SpringNetwork(node_i=np.ascontiguousarray(edges[:, 0]), node_j=np.ascontiguousarray(edges[:, 1]),
-                         rest_length_m=rest, lambda1_n=tissue.cubic_ratio * lambda2, lambda2_n=lambda2,
-                         mu_ns_per_m=mu, capsule_springs=capsule, parenchyma_springs=len(edges))
+    return tissue.cubic_ratio * lambda2, lambda2, mu
 
 
 def equivalent_properties(mesh: TetMesh, parenchyma_lambda2_n: float, capsule_lambda2_n: float,
                           parenchyma_mu_ns_per_m: float = 0.0, capsule_mu_ns_per_m: float = 0.0) -> dict:
     """The tissue properties that uniform per-spring constants (params.SpringLaw style) amount to on `mesh`:
-    E = λ2·Σ l0/(6·V), Y = λ2·Σ l0/(3·A) over the skin edges, η = μ·Σ l0²/(6·V),
+    E = λ2·Σ l0/(6·V) (the network's, ν = 1/4), Y = λ2·Σ l0/(3·A) over the skin edges, η = μ·Σ l0²/(6·V),
     η_s = μ·Σ l0²/(3·A)."""
     points = mesh.points
     rest = np.linalg.norm(points[mesh.edges[:, 1]] - points[mesh.edges[:, 0]], axis=1)

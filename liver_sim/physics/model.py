@@ -2,6 +2,8 @@
 
 `LiverModel.step_frame(pose)` advances one frame (1/frame_rate_hz s, `substeps` steps) with the
 tool at `pose`, and returns the contact force on the tool and the local model for the haptic loop.
+The integrator (params.integrator): linearised backward Euler (physics.implicit, one step per frame
+by default), or the explicit kernels (physics.kernels.run_frame: symplectic Euler, or Eq. 2).
 """
 from __future__ import annotations
 
@@ -15,6 +17,7 @@ from liver_sim.local_model import LocalModel
 from liver_sim.mesh.tetmesh import TetMesh
 from liver_sim.physics import kernels
 from liver_sim.physics.contact import ToolPose, ToolShape, pull_local_model, surface_local_model, tool_state
+from liver_sim.physics.implicit import ImplicitEuler, box_node_contacts, round_tool_node_contacts
 from liver_sim.physics.params import ModelParams
 from liver_sim.physics.springs import build_springs, estimate_stable_time_step, stable_time_step
 from liver_sim.physics.cutting import cut_along_path
@@ -83,8 +86,8 @@ class LiverModel:
         self.parallel = None if parallel is None else bool(parallel)
         self._set_mesh(mesh, mesh.skin, NodeState(mesh.points.copy(), np.zeros_like(mesh.points),
                                                   np.zeros_like(mesh.points), masses, fixed))
-        self.stable_dt_s = stable_time_step(self.springs, self.masses_kg, self.params.environment_damping_per_s,
-                                            self.params.integrator, mesh.points)
+        self.stable_dt_s = math.inf if self.implicit else stable_time_step(
+            self.springs, self.masses_kg, self.params.environment_damping_per_s, self.params.integrator, mesh.points)
         self._tear_detector: tuple[tuple, TearDetector] | None = None
         self.topology_version = 0
         self.divergences = 0
@@ -106,18 +109,25 @@ class LiverModel:
                                         self.parallel)
         self._skin = np.ascontiguousarray(mesh.skin)
         self._centre = mesh.points.mean(axis=0)
+        self._solver = ImplicitEuler(springs, len(mesh.points))
         self.hold(self.held_nodes)
+
+    @property
+    def implicit(self) -> bool:
+        """True when the integrator is linearised backward Euler (no stability bound on the step)."""
+        return self.params.integrator == "implicit_euler"
 
     def apply_topology(self, change: TopologyChange) -> None:
         """Replace the mesh by `change`'s (a tear or a cut), carrying state, masses and forces over
-        (topology.carry_over); raise the substeps if the new springs and masses need it."""
+        (topology.carry_over); with an explicit integrator, raise the substeps if the new springs and
+        masses need it (the implicit one keeps its steps)."""
         state = NodeState(self.positions, self.velocities, self.external_forces_n, self.masses_kg, self.fixed_nodes)
         mesh, state = carry_over(change, state, self.mesh.source, self.params.density_kg_m3,
                                  self.params.min_node_mass_fraction)
         self._set_mesh(mesh, change.capsule_triangles, state)
         params = self.params
-        self.stable_dt_s = estimate_stable_time_step(self.springs, self.masses_kg, params.environment_damping_per_s,
-                                                     params.integrator, mesh.points)
+        self.stable_dt_s = math.inf if self.implicit else estimate_stable_time_step(
+            self.springs, self.masses_kg, params.environment_damping_per_s, params.integrator, mesh.points)
         if self.params.dt_s > STABILITY_MARGIN * self.stable_dt_s:  # new short springs or light nodes
             needed = math.ceil(self.frame_period_s / (STABILITY_MARGIN * self.stable_dt_s))
             self.params = self.params.with_changes(substeps=min(needed, 10_000))
@@ -145,12 +155,19 @@ class LiverModel:
         self.positions = self.mesh.points.copy()
         self.velocities = np.zeros_like(self.positions)
         self._previous_pose: ToolPose | None = None
+        self._solver.reset()
         if self.held_nodes.size:
             self.hold(np.zeros(0, dtype=np.int64))
 
     def warm_up(self) -> None:
         """Compile the kernels (numba, cached on disk) before a timed loop starts."""
         self._advance(ToolPose(np.full(3, 1e3)), substeps=0)
+        self._solver.warm_up()
+        state = self.positions.copy(), self.velocities.copy()
+        self._implicit_frame(self._tool_state(ToolPose(np.full(3, 1e3))), 1)
+        self._spring_forces()
+        self.positions[:], self.velocities[:] = state
+        self._solver.reset()
         self._previous_pose = None
         self._detector().stretches(self.positions)
         estimate_stable_time_step(self.springs, self.masses_kg, self.params.environment_damping_per_s,
@@ -178,6 +195,8 @@ class LiverModel:
             self.positions[self.held_nodes] = held_positions
         liver_force, tool = self._advance(None if holding else pose, self.params.substeps)
         if holding:
+            if self.implicit:  # the explicit kernels leave the last step's forces in the work array
+                self._spring_forces()
             liver_force = -self._work.force[self.held_nodes].sum(axis=0)
         self.time_s += self.frame_period_s
         divergence = self._check_divergence()
@@ -221,15 +240,58 @@ class LiverModel:
         """Run `substeps` steps with the tool moving from the previous pose to `pose` (contact.tool_state).
         Returns the contact force on the liver (N) and the tool's state (its candidates' contact geometry)."""
         params = self.params
-        tool = tool_state(self.tool, pose, self._previous_pose, params, self.local_model_reach_m, self.positions,
-                          self.mesh.skin_nodes, self._centre)
+        tool = self._tool_state(pose)
         self._previous_pose = pose
+        if self.implicit:
+            return self._implicit_frame(tool, substeps), tool
         settings = kernels.StepSettings(params.dt_s, substeps, params.environment_damping_per_s,
                                         np.asarray(params.gravity_m_s2, dtype=np.float64),
                                         params.integrator == "symplectic_euler")
         liver_force = kernels.run_frame(self.positions, self.velocities, self.inv_mass, self.external_forces_n,
                                         self._spring_arrays, settings, tool, self._work)
         return liver_force, tool
+
+    def _tool_state(self, pose: ToolPose | None) -> kernels.ToolState:
+        return tool_state(self.tool, pose, self._previous_pose, self.params, self.local_model_reach_m,
+                          self.positions, self.mesh.skin_nodes, self._centre)
+
+    def _implicit_frame(self, tool: kernels.ToolState, substeps: int) -> np.ndarray:
+        """`substeps` backward-Euler steps with the tool's contacts taken where its core is at the end of
+        each step (implicit.round_tool_node_contacts, implicit.box_node_contacts); for a box, the
+        candidates' contact geometry at the end is left in tool.gap/point/direction (as run_frame does).
+        Returns the contact force on the liver at the end (N)."""
+        params = self.params
+        dt = params.dt_s
+        gravity = np.asarray(params.gravity_m_s2, dtype=np.float64)
+        x, v = self.positions, self.velocities
+        liver_force = np.zeros(3)
+        for step in range(substeps):
+            shift = tool.velocity_m_s * ((step + 1) * dt)
+            if tool.kind == kernels.TOOL_NONE:
+                contacts = None
+            elif tool.kind == kernels.TOOL_BOX:
+                contacts = box_node_contacts(x, v, tool.candidates, tool.core_a + shift, tool.axes,
+                                             tool.half_extents_m, tool.velocity_m_s, dt, tool.stiffness_n_per_m,
+                                             tool.damping_ns_per_m)
+            else:
+                contacts = round_tool_node_contacts(x, v, tool.candidates, tool.core_a + shift, tool.core_b + shift,
+                                                    tool.radius_m, tool.inward_point, tool.velocity_m_s, dt,
+                                                    tool.stiffness_n_per_m, tool.damping_ns_per_m)
+            liver_force = self._solver.step(x, v, self.inv_mass, self.external_forces_n, dt,
+                                            params.environment_damping_per_s, gravity, contacts)
+        if tool.kind == kernels.TOOL_BOX:  # the contact geometry the box's local model is fitted to
+            kernels.box_tool_contacts(x, v, tool.candidates, tool.core_a + tool.velocity_m_s * (substeps * dt),
+                                      tool.axes, tool.half_extents_m, tool.velocity_m_s, tool.stiffness_n_per_m,
+                                      tool.damping_ns_per_m, np.zeros_like(x), tool.gap, tool.point, tool.direction)
+        return liver_force
+
+    def _spring_forces(self) -> None:
+        """work.force ← external forces + the springs' Eq. 1 forces at the current state."""
+        f = self._work.force
+        f[:] = self.external_forces_n
+        s = self._spring_arrays
+        kernels.spring_forces_serial(self.positions, self.velocities, s.node_i, s.node_j, s.rest_m, s.lambda1_n,
+                                     s.lambda2_n, s.mu_ns_per_m, f)
 
     def _check_divergence(self) -> str | None:
         """None, or the cause when the state is non-finite or a node outruns max_node_speed_m_s."""
@@ -242,7 +304,7 @@ class LiverModel:
         else:
             cause = "non-finite positions or velocities"
         dt = self.params.dt_s
-        if dt > self.stable_dt_s:
+        if dt > self.stable_dt_s:  # never for the implicit integrator (stable_dt_s is inf)
             needed = math.ceil(self.frame_period_s / self.stable_dt_s)
             cause += (f"; time step {dt:.3g} s is above the stability bound {self.stable_dt_s:.3g} s of "
                       f"{self.params.integrator} (raise substeps to at least {needed})")

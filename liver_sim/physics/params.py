@@ -1,6 +1,7 @@
-"""Model constants: the spring laws of the capsule and the parenchyma, and the scene (paper P2–P8, P10: docs/paper.md).
+"""Model constants: the tissue (or the paper's spring laws), the integrator and the scene (paper P2–P8, P10:
+docs/paper.md; materials: docs/materials.md).
 
-Every quantity is in SI units; the field names carry them.  `validate()` refuses
+Every quantity is in SI units (the modulus in kPa); the field names carry them.  `validate()` refuses
 out-of-range values with a ValueError that names the parameter.
 """
 from __future__ import annotations
@@ -8,7 +9,13 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, fields, replace
 
-INTEGRATORS = ("symplectic_euler", "explicit_euler")
+#: The integrators and their steps per 150 Hz frame when `substeps` is not given: linearised backward
+#: Euler is stable at one step per frame; the explicit ones need the parenchyma's viscous bound (~105 µs).
+INTEGRATOR_SUBSTEPS = {"implicit_euler": 1, "symplectic_euler": 72, "explicit_euler": 72}
+INTEGRATORS = tuple(INTEGRATOR_SUBSTEPS)
+#: Where the springs' λ1, λ2, μ come from: the tissue's properties and the mesh (physics.materials), or the
+#: paper's per-spring constants (`capsule`, `parenchyma`; its figures and the traction test R1).
+SPRING_CONSTANTS = ("material", "paper")
 
 
 @dataclass(frozen=True)
@@ -29,6 +36,39 @@ class SpringLaw:
 
 #: Fig. 2 of the paper plots Eq. 1 with these stiffnesses.
 FIG2_LAW = SpringLaw(lambda1_n=50.0, lambda2_n=0.35, mu_ns_per_m=0.0)
+#: Fig. 2's cubic-to-linear stiffness ratio λ1/λ2.
+CUBIC_RATIO = FIG2_LAW.lambda1_n / FIG2_LAW.lambda2_n
+
+
+@dataclass(frozen=True)
+class TissueProperties:
+    """Continuum properties of the liver; physics.materials derives every spring's Eq. 1 coefficients from
+    them and the mesh.  Defaults and their sources: docs/materials.md.
+
+    Parenchyma: Young's modulus (kPa), Poisson's ratio (the network matches the tissue's indentation
+    modulus E/(1 − ν²), see materials.network_young_modulus_pa) and viscosity (Pa·s, Kelvin–Voigt).
+    Capsule: a membrane of stiffness E·t (N/m) and viscosity η·t (N·s/m).  `cubic_ratio`: λ1/λ2 (Fig. 2).
+    """
+
+    parenchyma_young_modulus_kpa: float = 2.0
+    parenchyma_poisson_ratio: float = 0.45
+    parenchyma_viscosity_pa_s: float = 500.0
+    capsule_stiffness_n_per_m: float = 500.0
+    capsule_viscosity_ns_per_m: float = 0.025
+    cubic_ratio: float = CUBIC_RATIO
+
+    def validate(self) -> "TissueProperties":
+        """Return self, or raise ValueError naming the first value out of range (finite and >= 0;
+        Poisson's ratio in [0, 0.5))."""
+        for f in fields(self):
+            value = getattr(self, f.name)
+            numeric = isinstance(value, (int, float)) and not isinstance(value, bool)
+            if not (numeric and math.isfinite(value) and value >= 0.0):
+                raise ValueError(f"parameter {f.name} must be finite and >= 0, got {value!r}")
+        if not self.parenchyma_poisson_ratio < 0.5:
+            raise ValueError("parameter parenchyma_poisson_ratio must be in [0, 0.5), "
+                             f"got {self.parenchyma_poisson_ratio!r}")
+        return self
 
 
 @dataclass(frozen=True)
@@ -37,20 +77,27 @@ class ModelParams:
 
     The capsule (Glisson's capsule, skin triangle edges) is stiff and barely viscous;
     the parenchyma (tet edges) is soft and strongly viscous (P6).  Both keep Fig. 2's
-    cubic-to-linear ratio λ1/λ2 ≈ 143, linear below ~10 % strain.
+    cubic-to-linear ratio λ1/λ2 ≈ 143, linear below ~10 % strain.  With `spring_constants`
+    'material' (default) the springs' coefficients come from `tissue` and the mesh, so a finer
+    mesh of the same liver is as stiff; with 'paper', every spring has the paper's per-spring
+    `capsule` and `parenchyma` laws (forces, so a finer mesh is stiffer).
+    `substeps` None: the integrator's own (INTEGRATOR_SUBSTEPS); `with_changes(integrator=…)` without
+    `substeps` takes the new integrator's.
     With `tearing`, an interior face whose stretch across it exceeds `tear_strain_parenchyma`
     (`tear_strain_capsule` for a face with an edge on the capsule) opens (P13, §2.6).
     """
 
+    spring_constants: str = "material"
+    tissue: TissueProperties = TissueProperties()
     capsule: SpringLaw = SpringLaw(lambda1_n=1430.0, lambda2_n=10.0, mu_ns_per_m=0.02)
     parenchyma: SpringLaw = SpringLaw(lambda1_n=71.5, lambda2_n=0.5, mu_ns_per_m=5.0)
     density_kg_m3: float = 1060.0
     min_node_mass_fraction: float = 0.4
     environment_damping_per_s: float = 3.0
     gravity_m_s2: tuple = (0.0, 0.0, 0.0)
-    integrator: str = "symplectic_euler"
+    integrator: str = "implicit_euler"
     frame_rate_hz: float = 150.0
-    substeps: int = 72
+    substeps: int | None = None
     fixed_nodes: tuple | None = None
     contact_stiffness_n_per_m: float = 300.0
     contact_damping_ns_per_m: float = 1.0
@@ -59,13 +106,19 @@ class ModelParams:
     tear_strain_parenchyma: float = 0.4
     tear_strain_capsule: float = 0.5
 
+    def __post_init__(self):
+        if self.substeps is None and self.integrator in INTEGRATOR_SUBSTEPS:
+            object.__setattr__(self, "substeps", INTEGRATOR_SUBSTEPS[self.integrator])
+
     @property
     def dt_s(self) -> float:
         """Integration time step: one frame divided into `substeps`."""
         return 1.0 / (self.frame_rate_hz * self.substeps)
 
     def with_changes(self, **changes) -> "ModelParams":
-        """A validated copy with some fields replaced."""
+        """A validated copy with some fields replaced (a new integrator without `substeps`: its own)."""
+        if "integrator" in changes and "substeps" not in changes:
+            changes["substeps"] = None
         return replace(self, **changes).validate()
 
     def validate(self) -> "ModelParams":
@@ -94,6 +147,10 @@ class ModelParams:
         for name, value in non_negative.items():
             if not (math.isfinite(value) and value >= 0.0):
                 raise ValueError(f"parameter {name} must be finite and >= 0, got {value!r}")
+        if self.spring_constants not in SPRING_CONSTANTS:
+            raise ValueError(f"parameter spring_constants must be one of {SPRING_CONSTANTS}, "
+                             f"got {self.spring_constants!r}")
+        self.tissue.validate()
         if self.integrator not in INTEGRATORS:
             raise ValueError(f"parameter integrator must be one of {INTEGRATORS}, got {self.integrator!r}")
         if not (isinstance(self.substeps, int) and 1 <= self.substeps <= 10_000):

@@ -23,10 +23,12 @@ from liver_sim.mesh.liver_shape import default_liver
 from liver_sim.parameters import Param, realtime_priority_parameter
 from liver_sim.physics.contact import ToolPose, ToolShape
 from liver_sim.physics.model import FrameResult, LiverModel
-from liver_sim.physics.params import INTEGRATORS, ModelParams, SpringLaw
+from liver_sim.physics.params import INTEGRATOR_SUBSTEPS, INTEGRATORS, SPRING_CONSTANTS, ModelParams, SpringLaw, \
+    TissueProperties
 from liver_sim.physics.tool_use import TOOL_MODES, ToolUse
 
 DEFAULTS = ModelParams()
+TISSUE = DEFAULTS.tissue
 PARAMETERS = {
     "mesh_path": Param("", "volume or closed-surface mesh file (metres); empty: the embedded default liver"),
     "mesh_scale": Param(1.0, "factor from mesh_path's units to metres (dimensionless; 0.01: centimetres, 0.001: "
@@ -35,14 +37,34 @@ PARAMETERS = {
     "frame_id": Param("liver", "frame of every published position"),
     "rate_hz": Param(DEFAULTS.frame_rate_hz, "physics frame rate (Hz)", 1.0, 1000.0),
     "realtime_priority": realtime_priority_parameter(60),
-    "substeps": Param(DEFAULTS.substeps, "integration steps per frame", 1, 10_000),
-    "integrator": Param(DEFAULTS.integrator, "symplectic_euler or explicit_euler (Eq. 2)", choices=INTEGRATORS),
-    "capsule_lambda1_n": Param(DEFAULTS.capsule.lambda1_n, "capsule spring cubic stiffness λ1 of Eq. 1 (N)", 0.0, 1e6),
-    "capsule_lambda2_n": Param(DEFAULTS.capsule.lambda2_n, "capsule linear stiffness λ2 of Eq. 1 (N)", 0.0, 1e6),
-    "capsule_mu_ns_per_m": Param(DEFAULTS.capsule.mu_ns_per_m, "capsule viscosity μ of Eq. 1 (N·s/m)", 0.0, 1e4),
-    "parenchyma_lambda1_n": Param(DEFAULTS.parenchyma.lambda1_n, "parenchyma cubic stiffness λ1 (N)", 0.0, 1e6),
-    "parenchyma_lambda2_n": Param(DEFAULTS.parenchyma.lambda2_n, "parenchyma linear stiffness λ2 (N)", 0.0, 1e6),
-    "parenchyma_mu_ns_per_m": Param(DEFAULTS.parenchyma.mu_ns_per_m, "parenchyma viscosity μ (N·s/m)", 0.0, 1e4),
+    "integrator": Param(DEFAULTS.integrator, "implicit_euler (linearised backward Euler), symplectic_euler or "
+                        "explicit_euler (Eq. 2)", choices=INTEGRATORS),
+    "substeps": Param(0, "integration steps per frame; 0: the integrator's own ("
+                      + ", ".join(f"{k} {n}" for k, n in INTEGRATOR_SUBSTEPS.items()) + ")", 0, 10_000),
+    "spring_constants": Param(DEFAULTS.spring_constants, "material: each spring's λ1, λ2, μ from the tissue "
+                              "properties and the mesh; paper: the paper's per-spring constants below",
+                              choices=SPRING_CONSTANTS),
+    "parenchyma_young_modulus_kpa": Param(TISSUE.parenchyma_young_modulus_kpa, "parenchyma Young's modulus (kPa)",
+                                          0.01, 1e4),
+    "parenchyma_poisson_ratio": Param(TISSUE.parenchyma_poisson_ratio, "parenchyma Poisson's ratio (the network "
+                                      "matches the indentation modulus E/(1-ν²))", 0.0, 0.499),
+    "parenchyma_viscosity_pa_s": Param(TISSUE.parenchyma_viscosity_pa_s, "parenchyma viscosity η (Pa·s)", 0.0, 1e6),
+    "capsule_stiffness_n_per_m": Param(TISSUE.capsule_stiffness_n_per_m, "capsule membrane stiffness E·t (N/m)",
+                                       0.0, 1e6),
+    "capsule_viscosity_ns_per_m": Param(TISSUE.capsule_viscosity_ns_per_m, "capsule membrane viscosity η·t (N·s/m)",
+                                        0.0, 1e4),
+    "capsule_lambda1_n": Param(DEFAULTS.capsule.lambda1_n, "paper: capsule spring cubic stiffness λ1 of Eq. 1 (N)",
+                               0.0, 1e6),
+    "capsule_lambda2_n": Param(DEFAULTS.capsule.lambda2_n, "paper: capsule linear stiffness λ2 of Eq. 1 (N)",
+                               0.0, 1e6),
+    "capsule_mu_ns_per_m": Param(DEFAULTS.capsule.mu_ns_per_m, "paper: capsule viscosity μ of Eq. 1 (N·s/m)",
+                                 0.0, 1e4),
+    "parenchyma_lambda1_n": Param(DEFAULTS.parenchyma.lambda1_n, "paper: parenchyma cubic stiffness λ1 (N)",
+                                  0.0, 1e6),
+    "parenchyma_lambda2_n": Param(DEFAULTS.parenchyma.lambda2_n, "paper: parenchyma linear stiffness λ2 (N)",
+                                  0.0, 1e6),
+    "parenchyma_mu_ns_per_m": Param(DEFAULTS.parenchyma.mu_ns_per_m, "paper: parenchyma viscosity μ (N·s/m)",
+                                    0.0, 1e4),
     "density_kg_m3": Param(DEFAULTS.density_kg_m3, "tissue density for the lumped masses (kg/m³)", 1.0, 1e5),
     "environment_damping_per_s": Param(DEFAULTS.environment_damping_per_s,
                                        "environmental viscosity c: a −= c·v (1/s)", 0.0, 1e4),
@@ -90,12 +112,16 @@ def model_params(values: dict) -> ModelParams:
     """The ModelParams named by the node's parameter values (validated)."""
     fixed = tuple(values["fixed_nodes"]) if list(values["fixed_nodes"]) != [-1] else None
     return ModelParams(
+        spring_constants=values["spring_constants"],
+        tissue=TissueProperties(values["parenchyma_young_modulus_kpa"], values["parenchyma_poisson_ratio"],
+                                values["parenchyma_viscosity_pa_s"], values["capsule_stiffness_n_per_m"],
+                                values["capsule_viscosity_ns_per_m"]),
         capsule=SpringLaw(values["capsule_lambda1_n"], values["capsule_lambda2_n"], values["capsule_mu_ns_per_m"]),
         parenchyma=SpringLaw(values["parenchyma_lambda1_n"], values["parenchyma_lambda2_n"],
                              values["parenchyma_mu_ns_per_m"]),
         density_kg_m3=values["density_kg_m3"], environment_damping_per_s=values["environment_damping_per_s"],
         gravity_m_s2=tuple(values["gravity_m_s2"]), integrator=values["integrator"],
-        frame_rate_hz=values["rate_hz"], substeps=values["substeps"], fixed_nodes=fixed,
+        frame_rate_hz=values["rate_hz"], substeps=values["substeps"] or None, fixed_nodes=fixed,
         contact_stiffness_n_per_m=values["contact_stiffness_n_per_m"],
         contact_damping_ns_per_m=values["contact_damping_ns_per_m"], tearing=values["tearing"],
         tear_strain_parenchyma=values["tear_strain_parenchyma"],
@@ -194,5 +220,6 @@ class FramePipeline:
     def _topology_text(self, cause: str) -> str:
         model = self.model
         mesh = model.mesh
+        stability = "implicit" if model.implicit else f"stable below {model.stable_dt_s * 1e6:.0f} us"
         return (f"{cause}: {len(mesh.points)} nodes, {len(mesh.tets)} tets, {len(mesh.skin)} skin triangles; "
-                f"{model.params.substeps} substeps per frame (stable below {model.stable_dt_s * 1e6:.0f} us)")
+                f"{model.params.substeps} substeps per frame ({stability})")

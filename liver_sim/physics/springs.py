@@ -16,6 +16,7 @@ import scipy.sparse
 import scipy.sparse.linalg
 
 from liver_sim.mesh.tetmesh import TRIANGLE_EDGES, TetMesh, isin_keys, unique_edges
+from liver_sim.physics.materials import material_coefficients
 from liver_sim.physics.params import ModelParams
 
 
@@ -48,7 +49,9 @@ def build_springs(mesh: TetMesh, params: ModelParams, rest_points: np.ndarray | 
     """Springs on `mesh`'s edges with rest lengths from `rest_points` (default: the mesh nodes).
 
     Capsule springs sit on the edges of `capsule_triangles` (default: the whole skin); skin opened
-    by a tear or a cut is parenchyma surface and carries none.
+    by a tear or a cut is parenchyma surface and carries none.  Their coefficients: from
+    `params.tissue` and the mesh (materials.material_coefficients) with spring_constants 'material',
+    else the paper's `params.parenchyma` on every edge plus `params.capsule` on capsule edges.
     """
     points = mesh.points if rest_points is None else rest_points
     edges = mesh.edges
@@ -57,20 +60,18 @@ def build_springs(mesh: TetMesh, params: ModelParams, rest_points: np.ndarray | 
     else:
         capsule_edges = unique_edges(np.asarray(capsule_triangles, dtype=np.int64).reshape(-1, 3), TRIANGLE_EDGES)
     on_skin = _rows_in(edges, capsule_edges) if len(capsule_edges) else np.zeros(len(edges), dtype=bool)
-    par, cap = params.parenchyma, params.capsule
     node_i = np.ascontiguousarray(edges[:, 0])
     node_j = np.ascontiguousarray(edges[:, 1])
     rest = np.linalg.norm(points[node_j] - points[node_i], axis=1)
-    return SpringNetwork(
-        node_i=node_i,
-        node_j=node_j,
-        rest_length_m=rest,
-        lambda1_n=par.lambda1_n + cap.lambda1_n * on_skin,
-        lambda2_n=par.lambda2_n + cap.lambda2_n * on_skin,
-        mu_ns_per_m=par.mu_ns_per_m + cap.mu_ns_per_m * on_skin,
-        capsule_springs=int(on_skin.sum()),
-        parenchyma_springs=int(len(edges)),
-    )
+    if params.spring_constants == "material":
+        lambda1, lambda2, mu = material_coefficients(mesh, params.tissue, rest_points, capsule_triangles)
+    else:
+        par, cap = params.parenchyma, params.capsule
+        lambda1 = par.lambda1_n + cap.lambda1_n * on_skin
+        lambda2 = par.lambda2_n + cap.lambda2_n * on_skin
+        mu = par.mu_ns_per_m + cap.mu_ns_per_m * on_skin
+    return SpringNetwork(node_i=node_i, node_j=node_j, rest_length_m=rest, lambda1_n=lambda1, lambda2_n=lambda2,
+                         mu_ns_per_m=mu, capsule_springs=int(on_skin.sum()), parenchyma_springs=int(len(edges)))
 
 
 def _rows_in(rows: np.ndarray, table: np.ndarray) -> np.ndarray:
