@@ -1,13 +1,14 @@
 """The documentation agrees with the code (no ROS): docs/contract.md's parameter tables hold every parameter
 each node declares and nothing else, its topics table every topic of msg_defs.topics.TOPICS with that
 topic's type and QoS, its run-time statement the bridge's RUNTIME_PARAMETERS; and every file, module and
-anchor the README and docs/*.md name exists."""
+anchor the README and docs/*.md name exists; the parameter files set only declared parameters."""
 from __future__ import annotations
 
 import re
 from pathlib import Path
 
 import pytest
+import yaml
 
 from haptic_bridge.parameters import PARAMETERS as BRIDGE
 from haptic_bridge.tick import RUNTIME_PARAMETERS
@@ -150,3 +151,11 @@ def test_named_files_modules_and_links_exist(doc):
                                                     module.read_text(), flags=re.M)):
             missing.append(reference)
     assert not missing, f"{doc.relative_to(ROOT)} names what does not exist: {missing}"
+
+
+@pytest.mark.parametrize("node", NODES)
+def test_config_files_set_only_declared_parameters(node):
+    """config/<node>.yaml, which the contract names as each node's parameter file, sets only its parameters."""
+    values = yaml.safe_load((ROOT / "config" / f"{node}.yaml").read_text())[node]["ros__parameters"]
+    unknown = sorted(set(values) - set(NODES[node]))
+    assert not unknown, f"config/{node}.yaml: {unknown} are not parameters of {node}"
