@@ -41,3 +41,23 @@ def largest_force_jump_n(forces_n: np.ndarray, contact_force_n: float = CONTACT_
 def contact_fraction(forces_n: np.ndarray, contact_force_n: float = CONTACT_FORCE_N) -> float:
     """Share of the commands given in contact."""
     return float((np.linalg.norm(forces_n, axis=1) > contact_force_n).mean()) if len(forces_n) else 0.0
+
+
+def held_wrench_baseline(tick_s: np.ndarray, wrench_arrival_s: np.ndarray, wrench_n: np.ndarray,
+                         pose_arrival_s: np.ndarray, bridge_parameters: dict) -> np.ndarray:
+    """The (K, 3) commands (N) of Fig. 8's baseline — a bridge with `local_model: none`, which holds the newest
+    physics contact force — ticked offline at `tick_s` (s, e.g. when the live bridge sent its commands), with
+    the wrenches and tool poses as they arrived (`wrench_arrival_s`, `pose_arrival_s`, s, ascending, on the
+    same clock): the node's own BridgeTick with `bridge_parameters`, ages counted from those arrivals. No
+    second live bridge needed, hence no second 1 kHz process competing for the cores."""
+    from haptic_bridge.tick import BridgeTick
+
+    tick = BridgeTick({**bridge_parameters, "local_model": "none"})
+    newest_wrench = np.searchsorted(wrench_arrival_s, tick_s, side="right") - 1
+    newest_pose = np.searchsorted(pose_arrival_s, tick_s, side="right") - 1
+    commands = np.zeros((len(tick_s), 3))
+    for k, t in enumerate(tick_s):
+        w, p = newest_wrench[k], newest_pose[k]
+        source, source_age = (wrench_n[w], t - wrench_arrival_s[w]) if w >= 0 else (None, np.inf)
+        commands[k] = tick.step(t, None, t - pose_arrival_s[p] if p >= 0 else np.inf, source, source_age)
+    return commands

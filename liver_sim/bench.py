@@ -256,48 +256,67 @@ LOOP_TARGETS = {"physics_rate_hz": (147.0, 153.0), "haptic_rate_hz_min": 995.0, 
 FIG8_MAX_PERIOD_S = 0.0015
 
 
-def run_loop_bench(duration_s: float = 30.0, log_dir=None, progress=None, observers: dict | None = None) -> dict:
-    """All four nodes plus a baseline bridge without local model, in closed loop for `duration_s` (R4).
+def run_loop_bench(duration_s: float = 30.0, log_dir=None, progress=None, observers: dict | None = None,
+                   extra_load: bool = False) -> dict:
+    """The loop benchmark's JSON object (:func:`loop_run`); with `extra_load`, the same run follows with one
+    core-bound process at normal priority beside the network, reported under `with_extra_load`."""
+    from pathlib import Path
+
+    log_dir = Path(log_dir or "out/bench_loop/logs")
+    report = loop_run(duration_s, log_dir, progress, observers)
+    if extra_load:
+        (progress or (lambda line: None))("the same run with one core-bound process at normal priority beside it:")
+        loaded = loop_run(duration_s, log_dir.with_name(log_dir.name + "_extra_load"), progress, observers, 1)
+        report["with_extra_load"] = {key: loaded[key] for key in ("results", "processes", "cores_used",
+                                                                   "load_average", "met")}
+    return report
+
+
+def loop_run(duration_s: float, log_dir, progress=None, observers: dict | None = None, extra_load: int = 0) -> dict:
+    """One run of the four nodes in closed loop for `duration_s` (R4), watched by a listener as a rig would.
 
     Rates and period errors are given twice: as each node's own loop measured them (diagnostics)
     and as the messages went on the wire (DDS publication times), over the `duration_s` in which all
     nodes ran.  The pose-to-force latency runs from the publication of a tool pose on /tool/pose to
-    that of the force command computed from it.  `observers` (label -> argv) run beside the network
-    (NetworkPlan.observers), e.g. a recorder.
+    that of the force command computed from it.  The Fig. 8 baseline (local_model none) is the node's
+    BridgeTick run offline at the live bridge's tick times on the physics wrenches and tool poses the
+    listener received (analysis.held_wrench_baseline): no second live bridge.  `processes` gives what
+    each process cost over the window (network.process_costs: share of one core, context switches per
+    second), `load_average` the machine's before and after.  `observers` (label -> argv) run beside the
+    network (NetworkPlan.observers), e.g. a recorder; `extra_load` core-bound processes at normal priority
+    beside it (network.run_network).
     """
-    from pathlib import Path
-
-    from liver_sim.analysis import contact_fraction, largest_force_jump_n, rate_figures
+    from liver_sim.analysis import contact_fraction, held_wrench_baseline, largest_force_jump_n, rate_figures
     from liver_sim.network import closed_loop_plan, run_network
+    from liver_sim.sessions.parameters import node_parameters
 
-    plan = closed_loop_plan(compare_without_local_model=True, extra={"phantom_sim": {"loop_script": True}})
+    plan = closed_loop_plan(extra={"phantom_sim": {"loop_script": True}})
     plan.observers.update(observers or {})
-    snapshot = run_network(plan, duration_s, Path(log_dir or "out/bench_loop/logs"),
-                           progress or (lambda line: None))
+    load_before = os.getloadavg()
+    snapshot = run_network(plan, duration_s, log_dir, progress or (lambda line: None), extra_load=extra_load)
+    load_after = os.getloadavg()
     start, end = snapshot["window_s"]
-    sent = snapshot["force_published_s"]
-
-    def window(label: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(sent s, forces N, pose-to-force s) of the commands of `label` sent while all nodes ran."""
-        inside = (sent[label] >= start) & (sent[label] <= end)
-        return sent[label][inside], snapshot["forces"][label][1][inside], snapshot["pose_to_force_s"][label][inside]
-
-    sent_local, force, latency = window("local_model")
-    sent_none, baseline, _ = window("without_local_model")
+    sent = snapshot["force_published_s"]["local_model"]
+    inside = (sent >= start) & (sent <= end)
+    sent_local = sent[inside]
+    force = snapshot["forces"]["local_model"][1][inside]
+    latency = snapshot["pose_to_force_s"]["local_model"][inside]
     latency = latency[np.isfinite(latency)]
+    baseline = held_wrench_baseline(sent_local, snapshot["wrench_arrival_s"], snapshot["wrench_n"],
+                                    snapshot["tool_arrival_s"], node_parameters(())["haptic_bridge"])
     nodes_sent = snapshot["nodes_published_s"]
     jump_local = largest_force_jump_n(force, times_s=sent_local, max_period_s=FIG8_MAX_PERIOD_S)
-    jump_none = largest_force_jump_n(baseline, times_s=sent_none, max_period_s=FIG8_MAX_PERIOD_S)
-    diagnostics = snapshot["diagnostics"]
+    jump_none = largest_force_jump_n(baseline, times_s=sent_local, max_period_s=FIG8_MAX_PERIOD_S)
     figures = {
         "physics_on_wire": rate_figures(nodes_sent[(nodes_sent >= start) & (nodes_sent <= end)], 150.0),
         "haptic_on_wire": rate_figures(sent_local, 1000.0),
-        "node_loops": diagnostics,
+        "node_loops": snapshot["diagnostics"],
         "pose_to_force_p50_s": float(np.percentile(latency, 50)) if latency.size else None,
         "pose_to_force_p99_s": float(np.percentile(latency, 99)) if latency.size else None,
         "contact_fraction": contact_fraction(force),
         "largest_jump_with_local_model_n": jump_local,
         "largest_jump_without_local_model_n": jump_none,
+        "fig8_baseline": "offline: BridgeTick(local_model none) at the live bridge's tick times",
         "fig8_smoothness_ratio": jump_none / jump_local if jump_local > 0 else None,
     }
     physics, haptic = figures["physics_on_wire"], figures["haptic_on_wire"]
@@ -310,8 +329,11 @@ def run_loop_bench(duration_s: float = 30.0, log_dir=None, progress=None, observ
         "pose_to_force_p99_s_max": (figures["pose_to_force_p99_s"] or 1.0) <= t["pose_to_force_p99_s_max"],
         "fig8_smoothness_ratio_min": (figures["fig8_smoothness_ratio"] or 0.0) >= t["fig8_smoothness_ratio_min"],
     }
+    costs = snapshot["process_costs"]
     return {"benchmark": "loop", "machine": machine(), "duration_s": duration_s, "results": figures,
-            "targets": LOOP_TARGETS, "met": met}
+              "processes": costs, "cores_used": sum(c["cpu_share_of_one_core"] for c in costs.values()),
+              "load_average": {"before": list(load_before), "after": list(load_after)},
+              "targets": LOOP_TARGETS, "met": met}
 
 
 #: A topology change of the default liver should fit in one 150 Hz frame (s).

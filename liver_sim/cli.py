@@ -168,6 +168,8 @@ def add_bench_command(commands) -> None:
     loop.add_argument("--json", action="store_true", help="print one JSON object")
     loop.add_argument("--duration", type=float, default=30.0, help="seconds of closed loop (default: 30)")
     loop.add_argument("--out", type=Path, default=Path("out/bench_loop"), help="folder for the nodes' logs")
+    loop.add_argument("--extra-load", action="store_true",
+                      help="then the same run beside one core-bound process at normal priority (with_extra_load)")
     loop.set_defaults(handler=bench_loop)
     topology = kinds.add_parser("topology", help="time of a tear and of a cut for the default liver and a "
                                                   "~10k-tet liver (target: one 150 Hz frame for the default liver)")
@@ -239,7 +241,8 @@ def bench_topology(args) -> int:
 def bench_loop(args) -> int:
     from liver_sim.bench import run_loop_bench
 
-    report = run_loop_bench(args.duration, args.out / "logs", None if args.json else print)
+    report = run_loop_bench(args.duration, args.out / "logs", None if args.json else print,
+                            extra_load=args.extra_load)
     if args.json:
         print(json.dumps(report, default=float))
         return 0

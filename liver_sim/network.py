@@ -6,6 +6,8 @@ environment and on loopback unless the environment says otherwise.
 from __future__ import annotations
 
 import os
+import subprocess
+import sys
 import threading
 import time
 from dataclasses import dataclass, field
@@ -15,7 +17,6 @@ from pathlib import Path
 from liver_sim.mesh.liver_shape import default_liver
 from liver_sim.processes import NodeProcesses, command_line, log_tail, printable
 from liver_sim.scenarios import press_anchor
-from msg_defs.topics import BASELINE_FORCE_TOPIC
 
 #: The scripted hand waits this long (s) before moving: DDS discovery of a new process takes seconds,
 #: and the press must not begin before the tool node relays the stylus.
@@ -40,12 +41,11 @@ class NetworkPlan:
     observers: dict[str, list[str]] = field(default_factory=dict)
 
 
-def closed_loop_plan(compare_without_local_model: bool = False, extra: dict | None = None) -> NetworkPlan:
+def closed_loop_plan(extra: dict | None = None) -> NetworkPlan:
     """The four nodes in closed loop with the simulated PHANToM pressing the top of the liver.
 
-    With `compare_without_local_model`, a second bridge renders the physics wrench held between
-    updates (`local_model: none`) on BASELINE_FORCE_TOPIC, from the same inputs (Fig. 8).
-    `extra` maps an executable to more `-p` overrides.
+    `extra` maps an executable to more `-p` overrides.  (Fig. 8's baseline bridge without local model
+    runs offline on what the network sent: analysis.held_wrench_baseline, `liver-sim resimulate --compare`.)
     """
     extra = extra or {}
     plan = NetworkPlan()
@@ -56,18 +56,53 @@ def closed_loop_plan(compare_without_local_model: bool = False, extra: dict | No
                                                                 "start_delay_s": DEVICE_START_DELAY_S,
                                                                 **extra.get("phantom_sim", {})})
     plan.force_topics["local_model"] = ("/phantom/servo_cf", "wrench_stamped")
-    if compare_without_local_model:
-        plan.commands["haptic_bridge_none"] = command_line(
-            "haptic_bridge", {"local_model": "none", "force_topic": BASELINE_FORCE_TOPIC, "drives_device": False},
-            node_name="haptic_bridge_without_local_model")
-        plan.force_topics["without_local_model"] = (BASELINE_FORCE_TOPIC, "wrench_stamped")
     return plan
 
 
+#: A process that keeps one core busy at normal priority (`extra_load`): what a person runs beside the rig.
+CORE_BOUND_PROCESS = [sys.executable, "-c", "while True: pass"]
+
+
+def process_counters(pid: int) -> dict | None:
+    """CPU time (s, user + system, all threads: /proc/<pid>/stat) and voluntary and involuntary context
+    switches (summed over /proc/<pid>/task/*/status) of `pid`; None when it is gone."""
+    try:
+        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+        switches = {"voluntary_ctxt_switches": 0, "nonvoluntary_ctxt_switches": 0}
+        for task in Path(f"/proc/{pid}/task").iterdir():
+            try:
+                for line in (task / "status").read_text().splitlines():
+                    key, _, value = line.partition(":")
+                    if key in switches:
+                        switches[key] += int(value)
+            except OSError:  # a thread that ended meanwhile
+                continue
+    except OSError:
+        return None
+    return {"cpu_s": (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK"),
+            "voluntary": switches["voluntary_ctxt_switches"], "involuntary": switches["nonvoluntary_ctxt_switches"]}
+
+
+def process_costs(before: dict, after: dict, wall_s: float) -> dict:
+    """{label: cpu_share_of_one_core, voluntary_switches_per_s, involuntary_switches_per_s} between two
+    samples {label: process_counters(pid)} taken `wall_s` apart; labels missing from either are left out."""
+    costs = {}
+    for label, first in before.items():
+        last = after.get(label)
+        if first is None or last is None:
+            continue
+        costs[label] = {"cpu_share_of_one_core": (last["cpu_s"] - first["cpu_s"]) / wall_s,
+                        "voluntary_switches_per_s": (last["voluntary"] - first["voluntary"]) / wall_s,
+                        "involuntary_switches_per_s": (last["involuntary"] - first["involuntary"]) / wall_s}
+    return costs
+
+
 def run_network(plan: NetworkPlan, duration_s: float, log_dir: Path, progress=print,
-                settle_s: float = 1.0) -> dict:
+                settle_s: float = 1.0, extra_load: int = 0) -> dict:
     """Start the plan's processes, listen for `duration_s` after they are up, stop them; return the snapshot
-    (NetworkListener.snapshot) with `window_s`, the (start, end) of those `duration_s` (monotonic s).
+    (NetworkListener.snapshot) with `window_s`, the (start, end) of those `duration_s` (monotonic s), and
+    `process_costs` over them (:func:`process_costs`: each node, observer, `listener` — this process — and
+    each of the `extra_load` CORE_BOUND_PROCESSes started at normal priority once the network is up).
 
     Raises NodeFailure naming any process that exited early or with a non-zero status at stop, with the tail
     of its log (in log_dir); RuntimeError if the network does not come up.
@@ -90,6 +125,7 @@ def run_network(plan: NetworkPlan, duration_s: float, log_dir: Path, progress=pr
     spinner = threading.Thread(target=spin, args=(executor, context), daemon=True)
     spinner.start()
     processes = None
+    loads = []
     try:
         processes = NodeProcesses(log_dir, progress)
         for label, args in plan.observers.items():
@@ -108,14 +144,25 @@ def run_network(plan: NetworkPlan, duration_s: float, log_dir: Path, progress=pr
         if late:
             _wait_until(listener, processes, f"the tool pose from {', '.join(late)}",
                         lambda heard: len(heard.snapshot()["tool_arrival_s"]) > 0)
+        for k in range(extra_load):
+            loads.append(subprocess.Popen(CORE_BOUND_PROCESS))
+            progress(f"  extra load {k + 1}: pid {loads[-1].pid}, one core busy at normal priority")
         time.sleep(settle_s)
+        pids = {label: process.pid for label, process in processes.processes.items()}
+        pids.update({"listener": os.getpid(), **{f"extra_load_{k + 1}": p.pid for k, p in enumerate(loads)}})
+        before = {label: process_counters(pid) for label, pid in pids.items()}
         start = time.monotonic()
         while time.monotonic() - start < duration_s:
             time.sleep(min(1.0, duration_s - (time.monotonic() - start)))
             processes.check("while running")
             progress(f"  {time.monotonic() - start:5.1f} / {duration_s:.1f} s")
         window = (start, time.monotonic())
+        costs = process_costs(before, {label: process_counters(pid) for label, pid in pids.items()},
+                              window[1] - window[0])
     finally:
+        for load in loads:
+            load.kill()
+            load.wait()
         if processes is not None:
             processes.stop([label for label in plan.commands if label in processes.processes])
             if plan.observers:
@@ -126,7 +173,7 @@ def run_network(plan: NetworkPlan, duration_s: float, log_dir: Path, progress=pr
         spinner.join(timeout=2.0)
         listener.destroy_node()
     processes.check_exit_codes()
-    return {**snapshot, "window_s": window}
+    return {**snapshot, "window_s": window, "process_costs": costs}
 
 
 def _recorder_ready(listener, log: Path) -> bool:

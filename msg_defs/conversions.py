@@ -60,7 +60,16 @@ def _unit_quaternion(value, name: str) -> np.ndarray:
     """A finite, non-zero (x, y, z, w) quaternion, normalised, or ValueError naming `name`.
 
     Scaled by its largest component before the norm, so that neither huge (1e200) nor tiny (1e-200)
-    components overflow or underflow into a zero quaternion."""
+    components overflow or underflow into a zero quaternion.  Four finite floats (a decoded message, a (4,)
+    array) take a scalar path: a 1 kHz loop calls this for every pose."""
+    if type(value) is tuple or (type(value) is np.ndarray and value.shape == (4,)):
+        components = tuple(map(float, value))
+        if len(components) == 4 and all(map(math.isfinite, components)):
+            largest = max(map(abs, components))
+            if largest > 0.0:
+                x, y, z, w = (c / largest for c in components)
+                norm = math.sqrt(x * x + y * y + z * z + w * w)
+                return np.array((x / norm, y / norm, z / norm, w / norm))
     q = _finite(value, (4,), name)
     largest = float(np.abs(q).max())
     if not largest > 0.0:
@@ -290,7 +299,10 @@ def pose_to_arrays(msg_pose: Pose | PoseStamped) -> tuple[np.ndarray, np.ndarray
 
 def pose_stamped_bytes(position, orientation_xyzw, stamp, frame_id: str) -> bytes:
     """Serialized :func:`pose_stamped` (for ``Publisher.publish(bytes)``), without a message object."""
-    x, y, z = _finite(position, (3,), "position").tolist()
+    if type(position) is np.ndarray and position.shape == (3,):
+        x, y, z = _finite_floats(tuple(position.tolist()), (3,), "position")
+    else:
+        x, y, z = _finite(position, (3,), "position").tolist()
     quaternion = _unit_quaternion(orientation_xyzw, "orientation_xyzw").tolist()
     return cdr.encode(*_stamp_parts(stamp), frame_id, (x, y, z, *quaternion))
 

@@ -28,3 +28,37 @@ def test_largest_jump_ignores_pairs_sent_further_apart_than_a_tick():
     sent = np.array([0.0, 0.001, 0.020, 0.021, 0.022])  # a 19 ms scheduling gap before the third
     assert np.isclose(largest_force_jump_n(forces), 0.49)
     assert np.isclose(largest_force_jump_n(forces, times_s=sent, max_period_s=0.0015), 0.02)
+
+
+def test_the_offline_baseline_holds_the_newest_physics_force_between_frames():
+    from haptic_bridge.parameters import PARAMETERS
+    from liver_sim.analysis import held_wrench_baseline
+
+    p = {name: spec.default for name, spec in PARAMETERS.items()}
+    ticks = 1.0 + np.arange(2000) * 1e-3
+    wrench_at = 1.0 + np.arange(0, 2.0, 1 / 150)
+    wrench = np.zeros((len(wrench_at), 3))
+    wrench[:, 2] = 0.5
+    poses_at = ticks - 0.0002
+    commands = held_wrench_baseline(ticks, wrench_at, wrench, poses_at, p)
+    assert commands.shape == (2000, 3)
+    assert np.all(commands[:, :2] == 0.0)
+    # soft start and the rate limit ramp up to the held force, which is then held exactly
+    assert commands[0, 2] < 0.5 and np.allclose(commands[-500:, 2], 0.5)
+    # before any wrench arrived the baseline renders zero
+    early = held_wrench_baseline(ticks[:5], wrench_at + 10.0, wrench, poses_at, p)
+    assert np.all(early == 0.0)
+
+
+def test_process_costs_are_shares_of_a_core_and_switches_per_second():
+    import os
+
+    from liver_sim.network import process_costs, process_counters
+
+    now = process_counters(os.getpid())
+    assert set(now) == {"cpu_s", "voluntary", "involuntary"} and now["cpu_s"] > 0.0
+    assert process_counters(2 ** 22 + 12345) is None
+    before = {"a": {"cpu_s": 1.0, "voluntary": 10, "involuntary": 2}, "gone": None}
+    after = {"a": {"cpu_s": 1.5, "voluntary": 1010, "involuntary": 22}, "gone": None}
+    assert process_costs(before, after, 2.0) == {"a": {"cpu_share_of_one_core": 0.25, "voluntary_switches_per_s": 500.0,
+                                                       "involuntary_switches_per_s": 10.0}}

@@ -214,6 +214,36 @@ def test_liver_tool_maps_device_samples_into_the_liver_frame(ros, ros_env):
     np.testing.assert_allclose(positions(tool_poses[-1:])[0], [0.1, -0.2, 0.07], atol=1e-9)
 
 
+def test_liver_tool_forwards_each_device_sample_once(ros, ros_env):
+    tool_poses = ros.collect("tool_pose")
+    diagnostics = ros.collect("diagnostics")
+    device = ros.node.create_publisher(PoseStamped, TOPICS["measured_cp"].name, TOPICS["measured_cp"].qos)
+    sent = []
+
+    def send():
+        message = PoseStamped()
+        message.header.stamp = conversions.stamp_from_seconds(100.0 + 0.001 * len(sent))
+        message.pose.position.z = 0.01
+        message.pose.orientation.w = 1.0
+        device.publish(message)
+        sent.append(conversions.seconds_from_stamp(message.header.stamp))
+
+    ros.node.create_timer(0.005, send)
+    process = start("liver_tool", {"source": "device"}, ros_env)
+    try:
+        ros.wait_until(lambda: len(tool_poses) >= 100, "100 forwarded tool poses", process)
+        ros.wait_until(lambda: statuses(diagnostics, "liver_tool: loop"), "the tool's diagnostics", process)
+    finally:
+        stop(process)
+    stamps = [conversions.seconds_from_stamp(m.header.stamp) for m in tool_poses]
+    assert len(stamps) == len(set(stamps)), "each device sample is forwarded once, never repeated"
+    assert set(stamps) <= set(sent), "a pose is published only for a device sample (no loop of its own)"
+    status = statuses(diagnostics, "liver_tool: loop")[-1]
+    assert int(status["published"]) <= len(sent)
+    # the collector is frozen after start-up and runs no automatic full collection
+    assert int(status["gc_frozen_objects"]) > 0 and status["gc_automatic_full_collection"] == "False"
+
+
 def test_liver_tool_plays_a_script(ros, ros_env):
     tool_poses = ros.collect("tool_pose")
     process = start("liver_tool", dict(SHORT_SCRIPT, source="script", anchor_m=[0.02, -0.01, 0.0]), ros_env)

@@ -67,3 +67,88 @@ def test_realtime_priority_zero_leaves_the_process_alone_and_a_refusal_is_explai
     assert refused.startswith("realtime_priority 100 refused") and "normal scheduling" in refused
     assert os.sched_getscheduler(0) == before
 
+
+
+def test_a_gap_gets_its_cause_named_from_what_the_thread_did_meanwhile():
+    """Sleeping is not runnable (blocked off CPU); spinning beside a busier thread with one core is
+    runnable (waiting for a CPU); a collection that fills the gap is garbage collection."""
+    import gc
+    import os
+    import subprocess
+    import sys
+    import threading
+    import time
+
+    from liver_sim.nodes.common import GARBAGE, GapCauses
+
+    causes = GapCauses()
+    causes.sample()
+    start = time.monotonic()
+    time.sleep(0.02)
+    assert causes.name(start, time.monotonic()).startswith("blocked off CPU")
+
+    GARBAGE.passes.append((start + 1.0, start + 1.018, 2))  # a full collection of 18 ms within a 20 ms gap
+    assert causes.name(start + 1.0, start + 1.02).startswith("garbage collection: generation 2")
+    assert causes.counts == {"garbage collection": 1, "waiting for a CPU": 0, "blocked off CPU": 1}
+    assert causes.summary()["gaps_named"] == 2 and causes.largest[1].startswith("blocked off CPU")
+    assert [cause for _, _, cause in causes.new_events()][0].startswith("blocked")
+    assert causes.new_events() == []
+    gc.collect()  # the fake pass leaves the log
+
+    if not hasattr(os, "sched_setaffinity"):
+        return
+    named = []
+
+    def contended():
+        os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})  # this thread only
+        own = GapCauses()
+        own.sample()
+        begin = time.monotonic()
+        while time.monotonic() - begin < 0.3:
+            pass
+        named.append(own.name(begin, time.monotonic()))
+
+    # a process spinning on the same core makes the thread wait for it (another thread would only hold the GIL)
+    core = min(os.sched_getaffinity(0))
+    hog = subprocess.Popen([sys.executable, "-c", f"import os; os.sched_setaffinity(0, {{{core}}})\nwhile True: pass"])
+    try:
+        time.sleep(0.2)
+        thread = threading.Thread(target=contended)
+        thread.start()
+        thread.join()
+    finally:
+        hog.kill()
+        hog.wait()
+    assert named[0].startswith("waiting for a CPU"), named[0]
+
+
+def test_loop_statistics_keep_a_ring_of_the_newest_periods():
+    from liver_sim.nodes.common import Latest, LoopStats
+
+    stats = LoopStats(0.001, window=10)
+    for k in range(25):
+        stats.record(0.002 if k < 15 else 0.001, overrun=k == 3)
+    summary = stats.summary()
+    assert summary["ticks"] == 25 and summary["overruns"] == 1 and summary["max_gap_s"] == 0.002
+    assert summary["rate_hz"] == pytest.approx(1000.0)  # only the newest 10 periods
+    assert LoopStats(0.001).summary()["rate_hz"] == 0.0
+    latest = Latest()
+    assert latest.get()[0] is None
+    latest.set("x", 5.0)
+    assert latest.get() == ("x", 5.0)
+
+
+def test_freezing_the_collector_moves_everything_to_the_permanent_generation_and_stops_full_collections():
+    import subprocess
+    import sys
+
+    script = ("import gc; from liver_sim.nodes.common import freeze_garbage, garbage_fields, collect_garbage\n"
+              "freeze_garbage(); f = garbage_fields(); collect_garbage()\n"
+              "assert f['gc_frozen_objects'] > 1000, f\n"
+              "assert f['gc_automatic_full_collection'] is False, f\n"
+              "junk = [[[] for _ in range(100)] for _ in range(10000)]\n"
+              # freeze_garbage's own and collect_garbage's; none for the junk
+              "assert garbage_fields()['gc_full_collections'] == 2, garbage_fields()\n"
+              "print('ok')")
+    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=60)
+    assert out.stdout.strip() == "ok", out.stderr

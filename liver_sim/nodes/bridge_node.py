@@ -242,7 +242,7 @@ class BridgeShell:
                   for e in report.pop("events")]
         for line in events:
             logger.error(line)
-        stats = self._loop.stats.summary()
+        stats = self._loop.report()
         _, pose_received = self._pose.get()
         _, source_received = self._source.get()
         state = self.tick.safety.state
@@ -256,7 +256,11 @@ class BridgeShell:
                  "device_scale": self.scale if self._map_problem is None else float("nan"), **report,
                  "max_gap_1s_at": wall_time(report["max_gap_1s_at_s"]), "max_gap_at": wall_time(report["max_gap_at_s"])}
         del extra["max_gap_1s_at_s"], extra["max_gap_at_s"], extra["error"]
+        if stats["new_gaps"]:
+            logger.warning(f"loop {stats['new_gaps']}")
         problems = [] if on_rate(stats, self.p["rate_hz"]) else ["below rate"]
+        if stats["new_gaps"]:
+            problems.append(stats["new_gaps"])
         if state != "ok":
             problems.append(f"watchdog {state}")
         if self._map_problem:

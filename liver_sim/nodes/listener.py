@@ -16,14 +16,17 @@ from msg_defs.topics import TOPICS, batch_qos
 
 #: How often (Hz) the listener takes the 1 kHz and 150 Hz streams, in batches.
 POLL_RATE_HZ = 200.0
+#: Messages each stream keeps between two polls: 5 s of the 1 kHz commands, so that a listener starved of CPU
+#: for seconds (normal priority beside real-time nodes and a busy machine) loses nothing it must measure.
+HISTORY_DEPTH = 5000
 
 
 class NetworkListener(Node):
     """Listens to the force commands, the tool pose, the nodes, the physics wrench, /liver/surface and /diagnostics.
 
     `force_topics` maps a label to (topic, force_output format), e.g. {'local_model': ('/phantom/servo_cf',
-    'wrench_stamped')}. The force commands, tool poses and nodes are taken in batches by a POLL_RATE_HZ
-    loop (cheaper than a callback each) and timed by DDS: `*_arrival_s` is when the message reached
+    'wrench_stamped')}. The force commands, tool poses, nodes and physics wrenches are taken in batches by a
+    POLL_RATE_HZ loop (cheaper than a callback each) and timed by DDS: `*_arrival_s` is when the message reached
     this process (the rmw's receive time, on the time.monotonic() scale). Messages are decoded in
     `snapshot()`, only those not decoded by an earlier call. `peak_nodes` are the node positions
     farthest (largest coordinate change) from the first ones received with the same node count;
@@ -37,9 +40,8 @@ class NetworkListener(Node):
         self._monotonic_minus_wall_s = time.monotonic() - time.time()
         self._force_formats = {label: fmt for label, (_, fmt) in force_topics.items()}
         self._received = {("force", label): [] for label in force_topics}
-        self._received["tool_pose"], self._received["nodes"] = [], []
+        self._received["tool_pose"], self._received["nodes"], self._received["tool_wrench"] = [], [], []
         self._decoded = {key: [] for key in self._received}
-        self.wrenches = []
         self.diagnostics: dict[str, dict] = {}
         self.initial_surface = self.surface = None
         self.surface_messages = 0
@@ -50,13 +52,12 @@ class NetworkListener(Node):
             self._take(("force", label), conversions.force_message_type(fmt), topic, TOPICS["servo_cf"])
         self._take("tool_pose", TOPICS["tool_pose"].type, TOPICS["tool_pose"].name, TOPICS["tool_pose"])
         self._take("nodes", TOPICS["nodes"].type, TOPICS["nodes"].name, TOPICS["nodes"])
-        self.create_subscription(TOPICS["tool_wrench"].type, TOPICS["tool_wrench"].name, self._on_wrench,
-                                 TOPICS["tool_wrench"].qos)
+        self._take("tool_wrench", TOPICS["tool_wrench"].type, TOPICS["tool_wrench"].name, TOPICS["tool_wrench"])
         self.create_subscription(TOPICS["surface"].type, TOPICS["surface"].name, self._on_surface,
                                  TOPICS["surface"].qos)
         self.create_subscription(TOPICS["diagnostics"].type, TOPICS["diagnostics"].name, self._on_diagnostics,
                                  TOPICS["diagnostics"].qos)
-        self._poller = RateLoop(POLL_RATE_HZ, lambda now: self._polled.poll(), f"{name}_poll")
+        self._poller = RateLoop(POLL_RATE_HZ, lambda now: self._polled.poll(), f"{name}_poll", freeze=False)
         self._poller.start()
 
     def destroy_node(self) -> None:
@@ -71,7 +72,7 @@ class NetworkListener(Node):
         def keep(data: bytes, info: dict) -> None:
             with self._lock:
                 received.append((data, info))
-        self._polled.subscribe(msg_type, topic, batch_qos(row), keep, raw=True, every=True)
+        self._polled.subscribe(msg_type, topic, batch_qos(row, HISTORY_DEPTH), keep, raw=True, every=True)
 
     def _new(self, key) -> list:
         """The messages under `key` not decoded yet: (arrival here s, publication s, bytes), both times as
@@ -126,11 +127,15 @@ class NetworkListener(Node):
                 self._peak_displacement, self.peak_nodes = displacement, positions
         return tuple(np.array([d[i] for d in decoded]) for i in range(3))
 
-    def _on_wrench(self, message) -> None:
-        f = message.wrench.force
-        with self._lock:
-            self.wrenches.append((time.monotonic(), conversions.seconds_from_stamp(message.header.stamp),
-                                  np.array([f.x, f.y, f.z])))
+    def _decode_wrenches(self) -> tuple:
+        """(arrival_s, forces (K, 3) N) of the physics wrenches so far."""
+        decoded = self._decoded["tool_wrench"]
+        for arrival, _, data in self._new("tool_wrench"):
+            try:
+                decoded.append((arrival, conversions.force_from_bytes("wrench_stamped", data)))
+            except ValueError:
+                continue  # a refused wrench is the bridge's business
+        return np.array([d[0] for d in decoded]), np.array([d[1] for d in decoded]).reshape(-1, 3)
 
     def _on_surface(self, message) -> None:
         try:
@@ -159,6 +164,7 @@ class NetworkListener(Node):
         decoded = {label: self._decode_forces(label) for label in self._force_formats}
         tool_arrival, tool_published, tool_stamp, tool_position = self._decode_tool_poses()
         nodes_arrival, nodes_published, nodes_stamp = self._decode_nodes()
+        wrench_arrival, wrench = self._decode_wrenches()
         published_by_stamp = dict(zip(tool_stamp.tolist(), tool_published.tolist()))
         with self._lock:
             return {
@@ -167,8 +173,8 @@ class NetworkListener(Node):
                 "pose_to_force_s": {label: np.array([sent - published_by_stamp.get(stamp, np.nan)
                                                      for sent, stamp in zip(sent_s, stamps)])
                                     for label, (_, sent_s, _, stamps) in decoded.items()},
-                "wrench_arrival_s": np.array([s[0] for s in self.wrenches]),
-                "wrench_n": np.array([s[2] for s in self.wrenches]).reshape(-1, 3),
+                "wrench_arrival_s": wrench_arrival,
+                "wrench_n": wrench,
                 "tool_arrival_s": tool_arrival,
                 "tool_position_m": tool_position,
                 "nodes_arrival_s": nodes_arrival,

@@ -99,7 +99,7 @@ class PhantomNode(Node):
         extra = {"commanded_force_n": float(np.linalg.norm(self.sim.force)),
                  "command_age_s": float(time.monotonic() - received), "bad_commands": self.bad_commands,
                  "script_time_s": self.sim.time_s}
-        status = loop_status(f"{self.get_name()}: loop", self._loop.stats.summary(), self.p["rate_hz"], extra)
+        status = loop_status(f"{self.get_name()}: loop", self._loop.report(), self.p["rate_hz"], extra)
         publish_diagnostics(self, self._diagnostics, [status])
 
 

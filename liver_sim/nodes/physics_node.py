@@ -134,7 +134,7 @@ class PhysicsNode(Node):
             self._frame_seconds.append(time.perf_counter() - started)
 
     def _publish_diagnostics(self) -> None:
-        stats = self._loop.stats.summary()
+        stats = self._loop.report()
         with self._frame_seconds_lock:
             compute, self._frame_seconds = np.array(self._frame_seconds), []
         _, received = self._pose.get()

@@ -123,7 +123,7 @@ class ToolNode(Node):
             extra["sample_age_s"] = (float(time.monotonic() - self._last_arrival) if self._last_arrival is not None
                                      else float("inf"))
         else:
-            stats = self._loop.stats.summary()
+            stats = self._loop.report()
         publish_diagnostics(self, self._diagnostics,
                             [loop_status(f"{self.get_name()}: loop", stats, self.p["rate_hz"], extra)])
 
