@@ -75,7 +75,7 @@ def _time_numpy(model: LiverModel, min_seconds: float) -> float:
     steps, start = 0, time.perf_counter()
     while time.perf_counter() - start < min_seconds or steps < 3:
         x, v = reference.step(x, v, model.springs, model.inv_mass, p.dt_s, p.environment_damping_per_s,
-                              p.gravity_m_s2, p.integrator)
+                              p.gravity_m_s2, p.integrator, model.support)
         steps += 1
     return (time.perf_counter() - start) / steps * 1e6
 
@@ -87,7 +87,7 @@ def _oracle_difference(model: LiverModel) -> float:
     model.step_frame(None)
     for _ in range(p.substeps):
         x, v = reference.step(x, v, model.springs, model.inv_mass, p.dt_s, p.environment_damping_per_s,
-                              p.gravity_m_s2, p.integrator)
+                              p.gravity_m_s2, p.integrator, model.support)
     return float(np.abs(model.positions - x).max())
 
 

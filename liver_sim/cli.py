@@ -132,6 +132,24 @@ def mesh_build(args) -> int:
     return 0
 
 
+def add_validate_command(commands) -> None:
+    """``liver-sim validate [--json] [--out DIR]``: behaviours B1–B4, traction with the liver's materials and the
+    local model's continuity, each figure beside its threshold."""
+    parser = commands.add_parser("validate", help="the paper's behaviours (B1-B4), traction with the liver's "
+                                 "materials and the local model's continuity, as figures against thresholds")
+    parser.add_argument("--json", action="store_true", help="print the figures as JSON on stdout (progress on stderr)")
+    parser.add_argument("--out", type=Path, default=None, metavar="DIR",
+                        help="write a plot per behaviour and validate.json to DIR")
+    parser.set_defaults(handler=validate)
+
+
+def validate(args) -> int:
+    from liver_sim.validate import main_validate
+
+    stream = sys.stderr if args.json else sys.stdout
+    return main_validate(args.json, args.out, progress=lambda text: print(text, file=stream, flush=True))
+
+
 def add_traction_command(commands) -> None:
     """``liver-sim traction [--out DIR]``: the traction test of Figs. 4–5."""
     parser = commands.add_parser("traction", help="traction test of a cylinder beside the connector law (Figs. 4-5)")
@@ -293,8 +311,8 @@ def demo(args) -> int:
 
 
 #: The subcommands, in the order `liver-sim --help` lists them.
-COMMANDS = (add_mesh_command, add_traction_command, add_bench_command, add_demo_command, add_record_command,
-            add_replay_command, add_resimulate_command, add_report_command, add_bag_command)
+COMMANDS = (add_mesh_command, add_traction_command, add_validate_command, add_bench_command, add_demo_command,
+            add_record_command, add_replay_command, add_resimulate_command, add_report_command, add_bag_command)
 
 
 def build_parser() -> argparse.ArgumentParser:

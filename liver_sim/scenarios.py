@@ -79,15 +79,27 @@ def press_release(model: LiverModel, settings: ScriptSettings | None = None, pro
     return trace
 
 
-def deformation_m(rest: np.ndarray, current: np.ndarray) -> np.ndarray:
-    """Per-node distance (m) between the rest shape and the current one with its best rigid motion
-    removed (Kabsch): the change of shape, without the organ turning about its fixed nodes."""
+def rigid_fit(rest: np.ndarray, current: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The rotation R (3×3) and translation t of the rigid motion nearest `current` (Kabsch, least squares):
+    current ≈ rest·Rᵀ + t."""
     rest_centre, current_centre = rest.mean(axis=0), current.mean(axis=0)
     u, _, vt = np.linalg.svd((current - current_centre).T @ (rest - rest_centre))
-    flip = np.diag([1.0, 1.0, np.sign(np.linalg.det(u @ vt))])
-    rotation = u @ flip @ vt
-    aligned = (current - current_centre) @ rotation + rest_centre
-    return np.linalg.norm(aligned - rest, axis=1)
+    rotation = u @ np.diag([1.0, 1.0, np.sign(np.linalg.det(u @ vt))]) @ vt
+    return rotation, current_centre - rest_centre @ rotation.T
+
+
+def rigid_rotation_deg(rest: np.ndarray, current: np.ndarray) -> float:
+    """Angle (degrees) of the rotation of the rigid motion nearest `current` (rigid_fit): how far the organ
+    turned as a whole."""
+    rotation, _ = rigid_fit(rest, current)
+    return float(np.degrees(np.arccos(np.clip((np.trace(rotation) - 1.0) / 2.0, -1.0, 1.0))))
+
+
+def deformation_m(rest: np.ndarray, current: np.ndarray) -> np.ndarray:
+    """Per-node distance (m) between the rest shape and the current one with its best rigid motion
+    removed (rigid_fit): the change of shape, without the organ turning on its supports."""
+    rotation, shift = rigid_fit(rest, current)
+    return np.linalg.norm((current - shift) @ rotation - rest, axis=1)
 
 
 def recovery_time_s(trace: Trace, fraction: float = 0.1, measure: str = "max_deformation_m") -> float:

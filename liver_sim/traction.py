@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import csv
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -16,7 +16,7 @@ import numpy as np
 from liver_sim.mesh.stuffing import tetrahedralize_implicit
 from liver_sim.mesh.tetmesh import TetMesh
 from liver_sim.physics.model import LiverModel
-from liver_sim.physics.params import FIG2_LAW, ModelParams, SpringLaw
+from liver_sim.physics.params import FIG2_LAW, ModelParams, SpringLaw, TissueProperties
 
 CYLINDER_RADIUS_M = 0.02
 CYLINDER_LENGTH_M = 0.10
@@ -65,10 +65,14 @@ def relax(model: LiverModel, rate_tolerance_per_s: float = 1e-3, max_frames: int
     raise RuntimeError(f"no static equilibrium within {max_frames} frames")
 
 
-def run_traction(law: SpringLaw = FIG2_LAW, mesh: TetMesh | None = None, progress=None) -> TractionResult:
+def run_traction(law: SpringLaw = FIG2_LAW, mesh: TetMesh | None = None, progress=None,
+                 tissue: TissueProperties | None = None) -> TractionResult:
     """Pull the cylinder at force levels spanning TARGET_STRAINS and measure the elongation at rest.
 
-    Every spring follows `law` (Fig. 2's by default: the paper's per-spring constants, symplectic Euler).  Only the equilibrium is measured, which
+    Every spring follows `law` (Fig. 2's by default: the paper's per-spring constants, symplectic Euler);
+    with `tissue`, the springs get the liver's materials instead (physics.materials: parenchyma on the tet
+    edges, capsule on the skin), whose law has Fig. 2's shape with the tissue's cubic_ratio (`law` is
+    then that shape, scaled).  Only the equilibrium is measured, which
     neither mass nor damping change, so a heavy density and strong environmental damping make
     the relaxation quick, and the substeps are set from the model's stability bound.
     """
@@ -79,12 +83,20 @@ def run_traction(law: SpringLaw = FIG2_LAW, mesh: TetMesh | None = None, progres
     length = z.max() - z.min()
     viscous = SpringLaw(law.lambda1_n, law.lambda2_n, mu_ns_per_m=0.02)
     params = ModelParams(spring_constants="paper", capsule=SpringLaw(0.0, 0.0, 0.0), parenchyma=viscous,
-                         integrator="symplectic_euler", fixed_nodes=tuple(top.tolist()),
+                         integrator="symplectic_euler", fixed_nodes=tuple(top.tolist()), support="paper",
                          environment_damping_per_s=30.0, density_kg_m3=1e5, substeps=1).validate()
     # the stability bound at rest, for springs stiffened as they are at the largest strain
     strain = 1.5 * TARGET_STRAINS[-1]
-    stiffened = SpringLaw(law.lambda1_n, law.lambda2_n + 3 * law.lambda1_n * strain ** 2, viscous.mu_ns_per_m)
-    stable = LiverModel(mesh, params.with_changes(parenchyma=stiffened)).stable_dt_s
+    stiffening = 1.0 + 3 * law.lambda1_n / law.lambda2_n * strain ** 2
+    if tissue is not None:
+        law = SpringLaw(tissue.cubic_ratio, 1.0, 0.0)
+        params = params.with_changes(spring_constants="material", tissue=tissue)
+        stiffened = replace(tissue, parenchyma_young_modulus_kpa=tissue.parenchyma_young_modulus_kpa * stiffening,
+                            capsule_stiffness_n_per_m=tissue.capsule_stiffness_n_per_m * stiffening)
+        stable = LiverModel(mesh, params.with_changes(tissue=stiffened)).stable_dt_s
+    else:
+        stiffened = SpringLaw(law.lambda1_n, law.lambda2_n * stiffening, viscous.mu_ns_per_m)
+        stable = LiverModel(mesh, params.with_changes(parenchyma=stiffened)).stable_dt_s
     model = LiverModel(mesh, params.with_changes(substeps=math.ceil(1.0 / (params.frame_rate_hz * 0.8 * stable))))
 
     def elongation_at(total_force_n: float) -> float:

@@ -60,4 +60,4 @@ def test_b2_returns_to_its_initial_shape_after_release(viscous):
 def test_b3_viscous_parenchyma_returns_more_slowly(viscous, capsule_like):
     slow = recovery_time_s(viscous[1], 0.5, "max_displacement_m")
     quick = recovery_time_s(capsule_like[1], 0.5, "max_displacement_m")
-    assert slow > 1.25 * quick  # deterministic: 0.35 s against 0.25 s with the defaults
+    assert slow > 1.25 * quick  # deterministic: 0.073 s against 0.033 s with the defaults (held as an organ)

@@ -67,6 +67,10 @@ def test_integrate_applies_gravity_environment_damping_and_fixed_nodes():
     np.testing.assert_allclose(x[1], 0.0)
 
 
+#: The box is held as in the paper's scene (its central tet fixed), which these tests are written for.
+PAPER_SCENE = ModelParams(support="paper")
+
+
 @pytest.fixture(scope="module")
 def box():
     return box_mesh(4, 3, 3, 0.02)
@@ -107,7 +111,8 @@ def test_model_frame_equals_numpy_oracle_steps(box, integrator, parallel):
     model.positions[:], model.velocities[:] = x, v
     model.step_frame(None)
     for _ in range(params.substeps):
-        x, v = reference.step(x, v, model.springs, model.inv_mass, params.dt_s, 1.5, params.gravity_m_s2, integrator)
+        x, v = reference.step(x, v, model.springs, model.inv_mass, params.dt_s, 1.5, params.gravity_m_s2,
+                              integrator, model.support)
     np.testing.assert_allclose(model.positions, x, rtol=1e-9, atol=1e-12)
     np.testing.assert_allclose(model.velocities, v, rtol=1e-9, atol=1e-12)
 
@@ -122,7 +127,7 @@ def total_energy(model):
 
 
 def test_energy_decays_with_damping(box):
-    model = LiverModel(box)
+    model = LiverModel(box, PAPER_SCENE)
     model.positions[:] = perturbed_state(box)[0]
     energies = [total_energy(model)]
     for _ in range(60):
@@ -137,7 +142,7 @@ def test_fixed_nodes_default_to_the_middle_tet_and_stay_put(box):
     assert len(fixed) == 4
     centroid = box.points[fixed].mean(axis=0)
     assert np.linalg.norm(centroid - box.points.mean(axis=0)) < 0.02
-    model = LiverModel(box)
+    model = LiverModel(box, PAPER_SCENE)
     model.positions[:] = perturbed_state(box)[0]
     before = model.positions[fixed].copy()
     for _ in range(10):
@@ -163,25 +168,25 @@ def test_out_of_range_parameters_are_refused_by_name(change, name):
 
 
 def test_stable_time_step_predicts_divergence(box):
-    stable = LiverModel(box, ModelParams(integrator="symplectic_euler")).stable_dt_s
+    stable = LiverModel(box, ModelParams(support="paper", integrator="symplectic_euler")).stable_dt_s
     assert 0 < stable < math.inf
-    assert LiverModel(box).stable_dt_s == math.inf  # the implicit integrator has no bound
+    assert LiverModel(box, PAPER_SCENE).stable_dt_s == math.inf  # the implicit integrator has no bound
     # Just below the bound the model stays finite.
     steps_ok = math.ceil(1.0 / (150.0 * stable * 0.9))
-    ok = LiverModel(box, ModelParams(integrator="symplectic_euler", substeps=steps_ok))
+    ok = LiverModel(box, ModelParams(support="paper", integrator="symplectic_euler", substeps=steps_ok))
     ok.positions[:] = perturbed_state(box)[0]
     assert all(ok.step_frame(None).divergence is None for _ in range(30))
 
 
 def test_undamped_explicit_euler_has_no_stable_step(box):
     law = SpringLaw(43.0, 0.3, 0.0)
-    params = ModelParams(integrator="explicit_euler", spring_constants="paper", capsule=law, parenchyma=law,
-                         environment_damping_per_s=0.0)
+    params = ModelParams(support="paper", integrator="explicit_euler", spring_constants="paper", capsule=law,
+                         parenchyma=law, environment_damping_per_s=0.0)
     assert LiverModel(box, params).stable_dt_s == 0.0
 
 
 def test_divergence_is_reported_with_its_cause_and_the_model_resets(box):
-    params = ModelParams(integrator="symplectic_euler", substeps=1, contact_stiffness_n_per_m=300.0)
+    params = ModelParams(support="paper", integrator="symplectic_euler", substeps=1, contact_stiffness_n_per_m=300.0)
     model = LiverModel(box, params)
     model.positions[:] = perturbed_state(box)[0] * 1.3
     reports = [model.step_frame(None).divergence for _ in range(40)]
@@ -192,7 +197,7 @@ def test_divergence_is_reported_with_its_cause_and_the_model_resets(box):
 
 
 def test_non_finite_state_is_caught_within_one_frame(box):
-    model = LiverModel(box)
+    model = LiverModel(box, PAPER_SCENE)
     model.velocities[5, 0] = math.nan
     result = model.step_frame(ToolPose(np.array([0.04, 0.03, 0.1])))
     assert result.divergence is not None and "non-finite" in result.divergence

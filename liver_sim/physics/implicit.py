@@ -29,6 +29,10 @@ The viscous tension's own x-derivative (non-symmetric) is omitted likewise.  Env
 a −= c_env·v gives D = −c_env·M.  Held nodes (inv_mass 0: fixed or grasped) keep Δv = 0 and do
 not move (as `kernels.integrate`): their rows and columns are replaced by the identity.
 
+Support (physics.support): a supported node n with stiffness k_n and damping c_n gets
+f_n = −k_n·(x_n − x_rest,n) − c_n·v_n, so K gets −k_n·I and D −c_n·I on its diagonal block, which
+adds h·c_n + h²·k_n to the node's shift (`_support_terms`).
+
 Contacts (`Contacts`): element e with nodes a (up to 3, padding −1), weights w_a, unit normal n
 (pushing the liver), stiffness k and damping c has depth δ = o − n·Σ w_a·x_a and depth rate
 δ̇ = s − n·Σ w_a·v_a, force F = max(0, k·δ + c·δ̇) and f_a = w_a·F·n; active, its Jacobian blocks
@@ -64,6 +68,7 @@ import numpy as np
 import scipy.sparse
 
 from liver_sim.physics.springs import SpringNetwork
+from liver_sim.physics.support import SupportArrays
 
 
 @dataclass(frozen=True, eq=False)
@@ -282,6 +287,25 @@ def _assemble(x, v, y, inv_mass, external, gravity, c_env, h, node_i, node_j, re
 
 
 @numba.njit(cache=True)
+def _support_terms(x, v, y, inv_mass, h, nodes, rest, stiffness, damping, f, ky, shift, diagonal, assemble_matrix):
+    """Add the support's forces at (x, v) to f and K·y to ky (free nodes); with assemble_matrix, also
+    h·c_n + h²·k_n to each free supported node's shift and diagonal block (after _assemble)."""
+    for s in range(nodes.shape[0]):
+        n = nodes[s]
+        if inv_mass[n] == 0.0:
+            continue
+        k, c = stiffness[s], damping[s]
+        for a in range(3):
+            f[n, a] -= k * (x[n, a] - rest[s, a]) + c * v[n, a]
+            ky[n, a] -= k * y[n, a]
+        if assemble_matrix:
+            extra = h * c + h * h * k
+            shift[n] += extra
+            for a in range(3):
+                diagonal[n, a, a] += extra
+
+
+@numba.njit(cache=True)
 def _apply(node_i, node_j, unit, iso, axial, shift, inv_mass, nodes, weights, normal, coefficient, p, out):
     """out = A·p, matrix-free: shift·p, each spring's B·(p_i − p_j) to i and its opposite to j, and the
     active contacts' (h·c + h²·k)·w_a·w_b·nnᵀ.  p must vanish on held nodes; out does there too."""
@@ -468,7 +492,8 @@ def _bdf2_start(x, v, x_last, v_last, x_prev, v_prev, inv_mass, second_order):
 
 @numba.njit(cache=True, nogil=True)
 def implicit_step(x, v, inv_mass, external, gravity, c_env, h, node_i, node_j, rest, lambda1, lambda2, mu,
-                  unit, iso, axial, shift, diagonal, nodes, weights, normal, offset, speed, stiffness,
+                  unit, iso, axial, shift, diagonal, support_nodes, support_rest, support_stiffness,
+                  support_damping, nodes, weights, normal, offset, speed, stiffness,
                   damping, coefficient, preconditioner, warm, tolerance, max_iterations, newton_tolerance,
                   max_newton, work):
     """One linearised backward-Euler step of x, v in place (see the module docstring), then Newton
@@ -486,6 +511,8 @@ def implicit_step(x, v, inv_mass, external, gravity, c_env, h, node_i, node_j, r
                 warm[n, a] = 0.0  # held: Δv = 0, and CG's vectors vanish there (see _apply)
     _assemble(x, v, v, inv_mass, external, gravity, c_env, h, node_i, node_j, rest, lambda1, lambda2, mu,
               unit, iso, axial, shift, diagonal, f, ky, True)
+    _support_terms(x, v, v, inv_mass, h, support_nodes, support_rest, support_stiffness, support_damping, f, ky,
+                   shift, diagonal, True)
     _contact_forces(x, v, v, inv_mass, h, nodes, weights, normal, offset, speed, stiffness, damping, f, ky,
                     coefficient)
     for n in range(x.shape[0]):
@@ -501,6 +528,8 @@ def implicit_step(x, v, inv_mass, external, gravity, c_env, h, node_i, node_j, r
         _advance(x, x0, v, v0, warm, inv_mass, h)
         _assemble(x, v, zero, inv_mass, external, gravity, c_env, h, node_i, node_j, rest, lambda1, lambda2, mu,
                   unit, iso, axial, shift, diagonal, f, ky, False)
+        _support_terms(x, v, zero, inv_mass, h, support_nodes, support_rest, support_stiffness, support_damping, f,
+                       ky, shift, diagonal, False)
         tx, ty, tz = _contact_forces(x, v, zero, inv_mass, h, nodes, weights, normal, offset, speed, stiffness,
                                      damping, f, ky, coefficient)
         contact[0], contact[1], contact[2] = tx, ty, tz
@@ -510,20 +539,23 @@ def implicit_step(x, v, inv_mass, external, gravity, c_env, h, node_i, node_j, r
         newton += 1
         _assemble(x, v, zero, inv_mass, external, gravity, c_env, h, node_i, node_j, rest, lambda1, lambda2, mu,
                   unit, iso, axial, shift, diagonal, f, ky, True)
+        _support_terms(x, v, zero, inv_mass, h, support_nodes, support_rest, support_stiffness, support_damping, f,
+                       ky, shift, diagonal, True)
         warm[:] = 0.0
     warm[:] = v - v0
     return contact, total_iterations, newton, residual
 
 
 class ImplicitEuler:
-    """Linearised backward Euler on one spring network: its per-spring matrix blocks and work arrays;
-    with `second_order`, BDF2 from the second step on (see the module docstring).
-    Build a new one after a topology change."""
+    """Linearised backward Euler on one spring network and its support (none by default): its per-spring
+    matrix blocks and work arrays; with `second_order`, BDF2 from the second step on (see the module
+    docstring).  Build a new one after a topology change."""
 
     def __init__(self, springs: SpringNetwork, n_nodes: int, cg_tolerance: float = 1e-3,
                  max_cg_iterations: int = 500, newton_tolerance_n: float = 1e-2, max_newton: int = 2,
-                 second_order: bool = True):
+                 second_order: bool = True, support: SupportArrays | None = None):
         self.springs = springs
+        self.support = support or SupportArrays.none()
         self.n_nodes = int(n_nodes)
         self.cg_tolerance = float(cg_tolerance)
         self.max_cg_iterations = int(max_cg_iterations)
@@ -570,7 +602,8 @@ class ImplicitEuler:
         contact, self.last_cg_iterations, self.last_newton_iterations, self.last_residual_n = implicit_step(
             x, v, inv_mass, external_force, np.asarray(gravity, dtype=np.float64), float(environment_damping),
             h, self._node_i, self._node_j, s.rest_length_m, s.lambda1_n, s.lambda2_n, s.mu_ns_per_m,
-            self._unit, self._iso, self._axial, self._shift, self._diagonal, contacts.nodes, contacts.weights,
+            self._unit, self._iso, self._axial, self._shift, self._diagonal, *self.support, contacts.nodes,
+            contacts.weights,
             contacts.normal, contacts.offset_m, contacts.normal_speed_m_s, contacts.stiffness_n_per_m,
             contacts.damping_ns_per_m, self._coefficient, self._preconditioner, self._warm, self.cg_tolerance,
             self.max_cg_iterations, self.newton_tolerance_n, self.max_newton, self._work)
@@ -586,7 +619,7 @@ class ImplicitEuler:
         self._history_dt = 0.0
 
     def matrix(self) -> scipy.sparse.csr_matrix:
-        """The spring, mass and damping part of the last assembled system matrix, (3N, 3N) sparse
+        """The spring, support, mass and damping part of the last assembled system matrix, (3N, 3N) sparse
         (contacts excluded; held nodes' rows and columns are the identity)."""
         springs = self.springs
         free = self._inv_mass > 0.0
@@ -611,5 +644,5 @@ class ImplicitEuler:
         v = np.zeros_like(x)
         contacts = node_contacts(np.array([0]), np.array([[0.0, 0.0, 1.0]]), np.array([0.0]), np.array([0.0]),
                                  1.0, 0.0)
-        probe = ImplicitEuler(springs, self.n_nodes, max_cg_iterations=1, max_newton=0)
+        probe = ImplicitEuler(springs, self.n_nodes, max_cg_iterations=1, max_newton=0, support=self.support)
         probe.step(x, v, np.ones(self.n_nodes), np.zeros_like(x), 1e-3, 0.0, np.zeros(3), contacts)

@@ -6,10 +6,10 @@ kernels are separate functions (a cached dispatcher must never be shared between
 a `parallel=True` and a serial build).  `liver_sim.physics.reference` is the
 plain-NumPy oracle of the spring and integration kernels.
 
-`run_frame` takes the state arrays and four named tuples (numba reads their fields as
-compile-time attributes, at no cost): the spring network (`SpringArrays`), the integration
-settings (`StepSettings`), the tool and its contact candidates (`ToolState`) and the work
-arrays (`WorkArrays`).
+`run_frame` takes the state arrays and five named tuples (numba reads their fields as
+compile-time attributes, at no cost): the spring network (`SpringArrays`), the support
+(`physics.support.SupportArrays`), the integration settings (`StepSettings`), the tool and its
+contact candidates (`ToolState`) and the work arrays (`WorkArrays`).
 """
 from __future__ import annotations
 
@@ -138,6 +138,16 @@ def spring_forces_parallel(x, v, node_i, node_j, rest, lambda1, lambda2, mu, par
             f[n, 0] += partial[c, n, 0]
             f[n, 1] += partial[c, n, 1]
             f[n, 2] += partial[c, n, 2]
+
+
+@numba.njit(cache=True)
+def support_forces(x, v, nodes, rest, stiffness, damping, f):
+    """Add the support's spring-dampers to f: −k_n·(x_n − rest_n) − c_n·v_n on each supported node n
+    (physics.support)."""
+    for s in range(nodes.shape[0]):
+        n = nodes[s]
+        for a in range(3):
+            f[n, a] -= stiffness[s] * (x[n, a] - rest[s, a]) + damping[s] * v[n, a]
 
 
 @numba.njit(cache=True)
@@ -272,9 +282,9 @@ def box_tool_contacts(x, v, candidates, centre, axes, half_extents, tool_velocit
 
 
 @numba.njit(cache=True, inline="always")
-def add_forces(x, v, external_force, springs, tool, work, shift, contact):
-    """work.force ← external force + Eq. 1 spring forces + Eq. 3 contact of the tool core moved by `shift`;
-    the contact force on the liver (N) goes to `contact` (left alone without a tool)."""
+def add_forces(x, v, external_force, springs, support, tool, work, shift, contact):
+    """work.force ← external force + Eq. 1 spring forces + the support + Eq. 3 contact of the tool core moved
+    by `shift`; the contact force on the liver (N) goes to `contact` (left alone without a tool)."""
     f = work.force
     f[:] = external_force
     s = springs
@@ -283,6 +293,7 @@ def add_forces(x, v, external_force, springs, tool, work, shift, contact):
                                work.partial, f)
     else:
         spring_forces_serial(x, v, s.node_i, s.node_j, s.rest_m, s.lambda1_n, s.lambda2_n, s.mu_ns_per_m, f)
+    support_forces(x, v, support.nodes, support.rest_m, support.stiffness_n_per_m, support.damping_ns_per_m, f)
     t = tool
     if t.kind == TOOL_BOX:
         contact[:] = box_tool_contacts(x, v, t.candidates, t.core_a + shift, t.axes, t.half_extents_m,
@@ -294,7 +305,7 @@ def add_forces(x, v, external_force, springs, tool, work, shift, contact):
 
 
 @numba.njit(cache=True, nogil=True)
-def run_frame(x, v, inv_mass, external_force, springs, settings, tool, work):
+def run_frame(x, v, inv_mass, external_force, springs, support, settings, tool, work):
     """`settings.substeps` steps of the model; the tool core moves at `tool.velocity_m_s` from its start.
 
     Runs without the GIL, so a node's executor thread keeps delivering messages meanwhile.
@@ -308,7 +319,7 @@ def run_frame(x, v, inv_mass, external_force, springs, settings, tool, work):
     for step in range(settings.substeps):
         for k in range(3):
             shift[k] = tool.velocity_m_s[k] * ((step + 1) * dt)
-        add_forces(x, v, external_force, springs, tool, work, shift, contact)
+        add_forces(x, v, external_force, springs, support, tool, work, shift, contact)
         integrate(x, v, work.force, inv_mass, dt, settings.environment_damping_per_s, settings.gravity_m_s2,
                   settings.symplectic)
     return contact

@@ -20,6 +20,7 @@ from liver_sim.physics.contact import ToolPose, ToolShape, pull_local_model, sur
 from liver_sim.physics.implicit import ImplicitEuler, box_node_contacts, round_tool_node_contacts
 from liver_sim.physics.params import ModelParams
 from liver_sim.physics.springs import build_springs, estimate_stable_time_step, stable_time_step
+from liver_sim.physics.support import build_support
 from liver_sim.physics.cutting import cut_along_path
 from liver_sim.physics.topology import NodeState, TearDetector, TopologyChange, apply_change, carry_over, tear
 
@@ -67,6 +68,9 @@ class LiverModel:
     `capsule_triangles` are the skin triangles carrying capsule springs (the whole skin until a tear
     or a cut opens faces); `apply_topology` replaces the mesh and increments `topology_version`.
     `held_nodes` (see `hold`) are moved by the tool, like the fixed nodes by the scene, not integrated.
+    `support` (physics.support) ties the supported capsule nodes to their rest positions; with
+    `params.support` 'organ' and `fixed_nodes` None, no node is fixed unless the support regions hold
+    no capsule node of the mesh (then the paper's central tet is, as with 'paper').
     """
 
     def __init__(self, mesh: TetMesh, params: ModelParams | None = None, tool: ToolShape | None = None,
@@ -79,7 +83,10 @@ class LiverModel:
         self.local_model_reach_m = float(local_model_reach_m)
         masses = scaled_masses(mesh.lumped_masses(self.params.density_kg_m3), self.params.min_node_mass_fraction)
         fixed = self.params.fixed_nodes
-        fixed = default_fixed_nodes(mesh) if fixed is None else np.unique(np.asarray(fixed, np.int64))
+        if fixed is None:  # the paper's scene, unless the organ's support holds the liver
+            held = len(build_support(mesh, mesh.skin, self.params).nodes) > 0
+            fixed = np.zeros(0, np.int64) if held else default_fixed_nodes(mesh)
+        fixed = np.unique(np.asarray(fixed, np.int64))
         if fixed.size and (fixed.min() < 0 or fixed.max() >= len(mesh.points)):
             raise ValueError(f"parameter fixed_nodes must index nodes 0..{len(mesh.points) - 1}")
         self.held_nodes = np.zeros(0, dtype=np.int64)
@@ -87,7 +94,8 @@ class LiverModel:
         self._set_mesh(mesh, mesh.skin, NodeState(mesh.points.copy(), np.zeros_like(mesh.points),
                                                   np.zeros_like(mesh.points), masses, fixed))
         self.stable_dt_s = math.inf if self.implicit else stable_time_step(
-            self.springs, self.masses_kg, self.params.environment_damping_per_s, self.params.integrator, mesh.points)
+            self.springs, self.masses_kg, self.params.environment_damping_per_s, self.params.integrator, mesh.points,
+            self.support)
         self._tear_detector: tuple[tuple, TearDetector] | None = None
         self.topology_version = 0
         self.divergences = 0
@@ -100,6 +108,7 @@ class LiverModel:
         self.capsule_triangles = np.ascontiguousarray(capsule_triangles, dtype=np.int64).reshape(-1, 3)
         self.positions, self.velocities, self.external_forces_n, self.masses_kg, self.fixed_nodes = state
         self.springs = springs = build_springs(mesh, self.params, capsule_triangles=self.capsule_triangles)
+        self.support = build_support(mesh, self.capsule_triangles, self.params)
         self._spring_arrays = kernels.SpringArrays(springs.node_i, springs.node_j, springs.rest_length_m,
                                                    springs.lambda1_n, springs.lambda2_n, springs.mu_ns_per_m)
         if self.parallel is None:  # chosen once, for the first mesh
@@ -109,7 +118,7 @@ class LiverModel:
                                         self.parallel)
         self._skin = np.ascontiguousarray(mesh.skin)
         self._centre = mesh.points.mean(axis=0)
-        self._solver = ImplicitEuler(springs, len(mesh.points))
+        self._solver = ImplicitEuler(springs, len(mesh.points), support=self.support)
         self.hold(self.held_nodes)
 
     @property
@@ -127,7 +136,8 @@ class LiverModel:
         self._set_mesh(mesh, change.capsule_triangles, state)
         params = self.params
         self.stable_dt_s = math.inf if self.implicit else estimate_stable_time_step(
-            self.springs, self.masses_kg, params.environment_damping_per_s, params.integrator, mesh.points)
+            self.springs, self.masses_kg, params.environment_damping_per_s, params.integrator, mesh.points,
+            support=self.support)
         if self.params.dt_s > STABILITY_MARGIN * self.stable_dt_s:  # new short springs or light nodes
             needed = math.ceil(self.frame_period_s / (STABILITY_MARGIN * self.stable_dt_s))
             self.params = self.params.with_changes(substeps=min(needed, 10_000))
@@ -248,7 +258,7 @@ class LiverModel:
                                         np.asarray(params.gravity_m_s2, dtype=np.float64),
                                         params.integrator == "symplectic_euler")
         liver_force = kernels.run_frame(self.positions, self.velocities, self.inv_mass, self.external_forces_n,
-                                        self._spring_arrays, settings, tool, self._work)
+                                        self._spring_arrays, self.support, settings, tool, self._work)
         return liver_force, tool
 
     def _tool_state(self, pose: ToolPose | None) -> kernels.ToolState:
@@ -286,12 +296,15 @@ class LiverModel:
         return liver_force
 
     def _spring_forces(self) -> None:
-        """work.force ← external forces + the springs' Eq. 1 forces at the current state."""
+        """work.force ← external forces + the springs' Eq. 1 forces + the support at the current state."""
         f = self._work.force
         f[:] = self.external_forces_n
         s = self._spring_arrays
         kernels.spring_forces_serial(self.positions, self.velocities, s.node_i, s.node_j, s.rest_m, s.lambda1_n,
                                      s.lambda2_n, s.mu_ns_per_m, f)
+        support = self.support
+        kernels.support_forces(self.positions, self.velocities, support.nodes, support.rest_m,
+                               support.stiffness_n_per_m, support.damping_ns_per_m, f)
 
     def _check_divergence(self) -> str | None:
         """None, or the cause when the state is non-finite or a node outruns max_node_speed_m_s."""

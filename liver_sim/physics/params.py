@@ -9,6 +9,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, fields, replace
 
+import numpy as np
+
 #: The integrators and their steps per 150 Hz frame when `substeps` is not given: linearised backward
 #: Euler is stable at one step per frame; the explicit ones need the parenchyma's viscous bound (~105 µs).
 INTEGRATOR_SUBSTEPS = {"implicit_euler": 1, "symplectic_euler": 72, "explicit_euler": 72}
@@ -16,6 +18,21 @@ INTEGRATORS = tuple(INTEGRATOR_SUBSTEPS)
 #: Where the springs' λ1, λ2, μ come from: the tissue's properties and the mesh (physics.materials), or the
 #: paper's per-spring constants (`capsule`, `parenchyma`; its figures and the traction test R1).
 SPRING_CONSTANTS = ("material", "paper")
+#: How the liver is held (physics.support): 'organ' (anchored where a liver is held) or 'paper' (§3.1's scene).
+SUPPORTS = ("organ", "paper")
+#: The default liver's supports (physics.support), spheres (x, y, z, radius; m) with a stiffness per unit
+#: skin area (N/m³), LPS axes (+x left, +y posterior, +z superior; liver_sim.mesh.liver_shape): the bare area
+#: (posterior-superior face of the right lobe, fused to the diaphragm by the coronary ligament) and the
+#: inferior vena cava's groove (posterior, between the lobes), stiff; the left triangular ligament
+#: (posterior-superior edge of the left lobe); and the viscera the visceral face rests on (liver_shape's
+#: sphere carving it, 5 mm wider), soft.
+DEFAULT_SUPPORT_REGIONS = (
+    (-0.06, 0.065, 0.025, 0.03, 1.0e6),
+    (-0.01, 0.05, 0.035, 0.025, 1.0e6),
+    (-0.01, 0.05, 0.0, 0.025, 1.0e6),
+    (0.09, 0.02, 0.02, 0.025, 2.0e5),
+    (-0.0001, 0.173, -0.2621, 0.305, 2.0e4),
+)
 
 
 @dataclass(frozen=True)
@@ -83,6 +100,11 @@ class ModelParams:
     `capsule` and `parenchyma` laws (forces, so a finer mesh is stiffer).
     `substeps` None: the integrator's own (INTEGRATOR_SUBSTEPS); `with_changes(integrator=…)` without
     `substeps` takes the new integrator's.
+    `support` 'organ' (default): the capsule nodes inside `support_regions` (spheres x, y, z, radius in m,
+    each with a stiffness per unit skin area in N/m³) are tied to their rest positions, with damping
+    `support_damping_s` × stiffness (physics.support); no node is fixed unless `fixed_nodes` says so;
+    'paper': §3.1's scene, `fixed_nodes` None fixes the central tet (as it does when the regions hold no
+    capsule node).
     With `tearing`, an interior face whose stretch across it exceeds `tear_strain_parenchyma`
     (`tear_strain_capsule` for a face with an edge on the capsule) opens (P13, §2.6).
     """
@@ -99,6 +121,9 @@ class ModelParams:
     frame_rate_hz: float = 150.0
     substeps: int | None = None
     fixed_nodes: tuple | None = None
+    support: str = "organ"
+    support_regions: tuple = DEFAULT_SUPPORT_REGIONS
+    support_damping_s: float = 0.01
     contact_stiffness_n_per_m: float = 300.0
     contact_damping_ns_per_m: float = 1.0
     max_node_speed_m_s: float = 20.0
@@ -143,6 +168,7 @@ class ModelParams:
             "environment_damping_per_s": self.environment_damping_per_s,
             "contact_stiffness_n_per_m": self.contact_stiffness_n_per_m,
             "contact_damping_ns_per_m": self.contact_damping_ns_per_m,
+            "support_damping_s": self.support_damping_s,
         }
         for name, value in non_negative.items():
             if not (math.isfinite(value) and value >= 0.0):
@@ -151,6 +177,13 @@ class ModelParams:
             raise ValueError(f"parameter spring_constants must be one of {SPRING_CONSTANTS}, "
                              f"got {self.spring_constants!r}")
         self.tissue.validate()
+        if self.support not in SUPPORTS:
+            raise ValueError(f"parameter support must be one of {SUPPORTS}, got {self.support!r}")
+        regions = np.asarray(self.support_regions, dtype=np.float64)
+        if (regions.ndim != 2 or regions.shape[1] != 5 or not np.isfinite(regions).all()
+                or (regions[:, 3:] < 0).any()):
+            raise ValueError("parameter support_regions must be rows (x, y, z, radius m, stiffness N/m³) of finite "
+                             f"numbers, radius and stiffness >= 0, got {self.support_regions!r}")
         if self.integrator not in INTEGRATORS:
             raise ValueError(f"parameter integrator must be one of {INTEGRATORS}, got {self.integrator!r}")
         if not (isinstance(self.substeps, int) and 1 <= self.substeps <= 10_000):

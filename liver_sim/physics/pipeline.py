@@ -23,8 +23,8 @@ from liver_sim.mesh.liver_shape import default_liver
 from liver_sim.parameters import Param, realtime_priority_parameter
 from liver_sim.physics.contact import ToolPose, ToolShape
 from liver_sim.physics.model import FrameResult, LiverModel
-from liver_sim.physics.params import INTEGRATOR_SUBSTEPS, INTEGRATORS, SPRING_CONSTANTS, ModelParams, SpringLaw, \
-    TissueProperties
+from liver_sim.physics.params import INTEGRATOR_SUBSTEPS, INTEGRATORS, SPRING_CONSTANTS, SUPPORTS, ModelParams, \
+    SpringLaw, TissueProperties
 from liver_sim.physics.tool_use import TOOL_MODES, ToolUse
 
 DEFAULTS = ModelParams()
@@ -69,7 +69,18 @@ PARAMETERS = {
     "environment_damping_per_s": Param(DEFAULTS.environment_damping_per_s,
                                        "environmental viscosity c: a −= c·v (1/s)", 0.0, 1e4),
     "gravity_m_s2": Param(list(DEFAULTS.gravity_m_s2), "gravity vector in the liver frame (m/s²)"),
-    "fixed_nodes": Param([-1], "indices of fixed nodes; [-1]: the four nodes of the tet nearest the centroid"),
+    "fixed_nodes": Param([-1], "indices of fixed nodes; [-1]: none with support organ (the central tet's four "
+                         "nodes if support_regions hold no skin node), the central tet's with support paper"),
+    "support": Param(DEFAULTS.support, "how the liver is held: organ (skin in support_regions tied to its rest "
+                     "position) or paper (the four nodes of the tet nearest the centroid fixed, paper §3.1)",
+                     choices=SUPPORTS),
+    "support_regions": Param([float(v) for region in DEFAULTS.support_regions for v in region],
+                             "support organ: spheres, five numbers each: centre x, y, z (m, liver frame), radius "
+                             "(m), stiffness per unit skin area (N/m³); each skin node inside is tied to its rest "
+                             "position with that stiffness times its share of skin area (m²). Default: the "
+                             "default liver's bare area, vena cava, left triangular ligament, visceral bed"),
+    "support_damping_s": Param(DEFAULTS.support_damping_s, "support organ: damping of each tie over its stiffness "
+                               "(s, Kelvin-Voigt time constant)", 0.0, 10.0),
     "contact_stiffness_n_per_m": Param(DEFAULTS.contact_stiffness_n_per_m, "penalty λ of Eq. 3 (N/m)", 0.0, 1e6),
     "contact_damping_ns_per_m": Param(DEFAULTS.contact_damping_ns_per_m, "penalty μ of Eq. 3 (N·s/m)", 0.0, 1e4),
     "tool_shape": Param("sphere", "rigid tool: sphere, capsule or box", choices=("sphere", "capsule", "box")),
@@ -111,6 +122,10 @@ PARAMETERS = {
 def model_params(values: dict) -> ModelParams:
     """The ModelParams named by the node's parameter values (validated)."""
     fixed = tuple(values["fixed_nodes"]) if list(values["fixed_nodes"]) != [-1] else None
+    regions = list(values["support_regions"])
+    if len(regions) % 5:
+        raise ValueError(f"parameter support_regions must hold five numbers per region (x, y, z, radius m, "
+                         f"stiffness N/m³), got {len(regions)} numbers")
     return ModelParams(
         spring_constants=values["spring_constants"],
         tissue=TissueProperties(values["parenchyma_young_modulus_kpa"], values["parenchyma_poisson_ratio"],
@@ -122,6 +137,8 @@ def model_params(values: dict) -> ModelParams:
         density_kg_m3=values["density_kg_m3"], environment_damping_per_s=values["environment_damping_per_s"],
         gravity_m_s2=tuple(values["gravity_m_s2"]), integrator=values["integrator"],
         frame_rate_hz=values["rate_hz"], substeps=values["substeps"] or None, fixed_nodes=fixed,
+        support=values["support"], support_regions=tuple(tuple(regions[i:i + 5]) for i in range(0, len(regions), 5)),
+        support_damping_s=values["support_damping_s"],
         contact_stiffness_n_per_m=values["contact_stiffness_n_per_m"],
         contact_damping_ns_per_m=values["contact_damping_ns_per_m"], tearing=values["tearing"],
         tear_strain_parenchyma=values["tear_strain_parenchyma"],

@@ -4,6 +4,7 @@ from __future__ import annotations
 import numpy as np
 
 from liver_sim.physics.springs import SpringNetwork
+from liver_sim.physics.support import SupportArrays
 
 
 def spring_forces(x: np.ndarray, v: np.ndarray, springs: SpringNetwork) -> np.ndarray:
@@ -22,12 +23,24 @@ def spring_forces(x: np.ndarray, v: np.ndarray, springs: SpringNetwork) -> np.nd
     return f
 
 
-def step(x, v, springs, inv_mass, dt, environment_damping, gravity, integrator):
-    """One step (Eq. 2 for 'explicit_euler', new velocity in the position update for 'symplectic_euler').
+def support_forces(x: np.ndarray, v: np.ndarray, support: SupportArrays) -> np.ndarray:
+    """The support's −k_n·(x_n − rest_n) − c_n·v_n on each supported node (physics.support)."""
+    f = np.zeros_like(x)
+    n = support.nodes
+    np.add.at(f, n, -support.stiffness_n_per_m[:, None] * (x[n] - support.rest_m)
+              - support.damping_ns_per_m[:, None] * v[n])
+    return f
+
+
+def step(x, v, springs, inv_mass, dt, environment_damping, gravity, integrator, support=None):
+    """One step (Eq. 2 for 'explicit_euler', new velocity in the position update for 'symplectic_euler'),
+    with the `support`'s ties if given.
 
     Returns new (x, v); nodes with inv_mass 0 are fixed.
     """
     f = spring_forces(x, v, springs)
+    if support is not None:
+        f += support_forces(x, v, support)
     free = (inv_mass > 0.0)[:, None]
     a = f * inv_mass[:, None] + np.asarray(gravity) - environment_damping * v
     v_new = np.where(free, v + dt * a, v)

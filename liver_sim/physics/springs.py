@@ -18,6 +18,7 @@ import scipy.sparse.linalg
 from liver_sim.mesh.tetmesh import TRIANGLE_EDGES, TetMesh, isin_keys, unique_edges
 from liver_sim.physics.materials import material_coefficients
 from liver_sim.physics.params import ModelParams
+from liver_sim.physics.support import SupportArrays
 
 
 @dataclass(frozen=True, eq=False)
@@ -82,7 +83,7 @@ def _rows_in(rows: np.ndarray, table: np.ndarray) -> np.ndarray:
 
 
 def stable_time_step(springs: SpringNetwork, masses_kg: np.ndarray, environment_damping_per_s: float,
-                     integrator: str, positions: np.ndarray) -> float:
+                     integrator: str, positions: np.ndarray, support: SupportArrays | None = None) -> float:
     """Largest stable time step (s) of the linearised model at `positions` (rest: the mesh nodes).
 
     With K = Σ (λ2/l0)·u·uᵀ and C = Σ μ·u·uᵀ the springs' axial stiffness and damping, a mode
@@ -90,18 +91,20 @@ def stable_time_step(springs: SpringNetwork, masses_kg: np.ndarray, environment_
     stable for h ≤ (√(c² + 4ω²) − c)/ω², taken at the largest ω and c together (conservative).
     Explicit Euler (Eq. 2) needs h < c/ω² on every mode, and c/ω² ≥ min over springs of
     μ·l0/λ2 (+ c_env/ω²max), with h·c ≤ 2: without damping it is unstable at any step.
+    The `support`'s ties (physics.support) add at most max k_n/m_n to ω² and c_n/m_n to c (Weyl), and
+    their c_n/k_n to the explicit bound's minimum.
     """
     axis = positions[springs.node_j] - positions[springs.node_i]
     unit = axis / np.linalg.norm(axis, axis=1)[:, None]
     scale = 1.0 / np.sqrt(np.repeat(masses_kg, 3))
     omega2 = _largest_eigenvalue(springs, unit, springs.lambda2_n / springs.rest_length_m, scale)
     c = _largest_eigenvalue(springs, unit, springs.mu_ns_per_m, scale) + environment_damping_per_s
-    return _time_step(springs, omega2, c, environment_damping_per_s, integrator)
+    return _time_step(springs, omega2, c, environment_damping_per_s, integrator, masses_kg, support)
 
 
 def estimate_stable_time_step(springs: SpringNetwork, masses_kg: np.ndarray, environment_damping_per_s: float,
                               integrator: str, positions: np.ndarray, max_iterations: int = 400,
-                              tolerance: float = 1e-2) -> float:
+                              tolerance: float = 1e-2, support: SupportArrays | None = None) -> float:
     """stable_time_step's bound (s) with λmax from a matrix-free power iteration (fast; for topology changes).
 
     λmax is the larger of ρ + ‖A·v − ρ·v‖ (Rayleigh quotient plus residual of the iterate, started from a
@@ -120,18 +123,27 @@ def estimate_stable_time_step(springs: SpringNetwork, masses_kg: np.ndarray, env
                                     tolerance)
         estimates.append(max(iterated, float((coefficient * pair).max()) if len(pair) else 0.0))
     omega2, c = estimates
-    return _time_step(springs, omega2, c + environment_damping_per_s, environment_damping_per_s, integrator)
+    return _time_step(springs, omega2, c + environment_damping_per_s, environment_damping_per_s, integrator,
+                      masses_kg, support)
 
 
 def _time_step(springs: SpringNetwork, omega2: float, c: float, environment_damping_per_s: float,
-               integrator: str) -> float:
-    """The integrator's stable step (s) for largest ω² and damping rate c (see stable_time_step)."""
+               integrator: str, masses_kg: np.ndarray, support: SupportArrays | None) -> float:
+    """The integrator's stable step (s) for largest ω² and damping rate c of the springs, with the support's
+    ties added (see stable_time_step)."""
+    ratios = [np.inf]
+    if support is not None and len(support.nodes):
+        mass = masses_kg[support.nodes]
+        omega2 += float((support.stiffness_n_per_m / mass).max())
+        c += float((support.damping_ns_per_m / mass).max())
+        ratios.append(float((support.damping_ns_per_m / np.maximum(support.stiffness_n_per_m, 1e-300)).min()))
     if omega2 <= 0.0:
         return math.inf
     if integrator == "explicit_euler":
         stiffness = springs.lambda2_n / springs.rest_length_m
         ratio = np.divide(springs.mu_ns_per_m, stiffness, out=np.full(len(stiffness), np.inf), where=stiffness > 0)
-        return min(float(ratio.min()) + environment_damping_per_s / omega2, 2.0 / c if c > 0.0 else math.inf)
+        return min(min(float(ratio.min()), *ratios) + environment_damping_per_s / omega2,
+                   2.0 / c if c > 0.0 else math.inf)
     return (math.sqrt(c * c + 4.0 * omega2) - c) / omega2
 
 
