@@ -19,12 +19,15 @@ def blend(start: LocalModel | None, target: LocalModel, fraction: float) -> Loca
     """The model `fraction` (clipped to 0..1) of the way from `start` to `target`.
 
     Plane: point and normal interpolated linearly (the normal renormalised); sphere: centre and
-    radius; the other fields are the target's. No `start`, an invalid model, models of different
+    radius; the stiffness K when both carry one; the other fields are the target's. No `start`, an invalid model, models of different
     kinds, or opposite normals give `target`.
     """
     f = min(max(float(fraction), 0.0), 1.0)
     if f >= 1.0 or start is None or start.kind != target.kind or not (start.valid and target.valid):
         return target
+    if start.stiffness_n_per_m is not None and target.stiffness_n_per_m is not None:
+        target = replace(target, stiffness_n_per_m=start.stiffness_n_per_m
+                         + f * (target.stiffness_n_per_m - start.stiffness_n_per_m))
     if target.kind == "plane":
         normal = (1.0 - f) * start.normal + f * target.normal
         if not np.linalg.norm(normal) > 1e-9:

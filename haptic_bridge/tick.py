@@ -79,6 +79,14 @@ def safe_output(p: dict) -> SafeForceOutput:
                          f"max_force_n={p['max_force_n']:g}, ramp_time_s={p['ramp_time_s']:g}: {exc}") from None
 
 
+def rendered_stiffness(model: LocalModel | None, cap_n_per_m: float) -> float:
+    """The K (N/m) a local model is rendered with: its own K capped at `cap_n_per_m` (the bridge's
+    stiffness_n_per_m, whose passivity is checked), the cap when it carries none."""
+    if model is None or model.stiffness_n_per_m is None:
+        return cap_n_per_m
+    return min(model.stiffness_n_per_m, cap_n_per_m)
+
+
 #: A penetration rate beyond this (m/s) is no motion of a hand-held stylus but a jump of the inputs.
 MAX_DEPTH_RATE_M_S = 10.0
 
@@ -153,13 +161,16 @@ class BridgeTick:
         self.depth_rate = DepthRate(self.depth_rate.period_s, self.p["depth_rate_cutoff_hz"])
 
     def render(self, model: LocalModel | None, tip: np.ndarray | None) -> np.ndarray:
-        """Local-model force on the tool (N, liver frame); zero without a model or a tip."""
+        """Local-model force on the tool (N, liver frame); zero without a model or a tip.  The stiffness is the
+        model's K (the tissue's under the tool) capped at `stiffness_n_per_m` (checked passive), or that
+        parameter when the model carries no K."""
         if model is None or tip is None:
             depth, direction = 0.0, np.zeros(3)
         else:
             depth, direction = penetration(model, tip, self.p["tool_radius_m"])
         rate = self.depth_rate.update(depth)
-        return contact_force(depth, rate, direction, self.p["stiffness_n_per_m"], self.p["damping_ns_per_m"])
+        return contact_force(depth, rate, direction, rendered_stiffness(model, self.p["stiffness_n_per_m"]),
+                             self.p["damping_ns_per_m"])
 
     def step(self, now_s: float, tip: np.ndarray | None, pose_age_s: float, source, source_age_s: float) -> np.ndarray:
         """The (3,) command (N, device frame) of the tick at `now_s` (s, any clock that ticks in seconds).

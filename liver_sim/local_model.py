@@ -28,11 +28,12 @@ class LocalModel:
     kind 'plane': the surface through `point` (m) with outward unit `normal`, the liver on the −normal
     side; kind 'sphere': a sphere of `radius_m` (m) about `centre` (m) holding the liver (`point` and
     `normal` then keep the plane the physics fitted beside it). `valid` is False when no surface is
-    within reach of the tool. `depth_m` is the tool's deepest penetration seen by the physics (m),
-    `in_contact` whether the tool touched the surface.
+    within reach of the tool. `depth_m` is the tool's penetration of the model at the physics' pose (m),
+    `in_contact` whether the physics had a contact force. `stiffness_n_per_m`: the K (N/m) to render it
+    with, the tissue's local stiffness under the tool (None: the renderer's own).
 
     Refuses (ValueError naming the field) an unknown kind, non-finite or misshapen vectors, a zero
-    normal, and a valid sphere without a finite radius > 0. The normal is normalised.
+    normal, a valid sphere without a finite radius > 0, and a K that is not a finite number > 0. The normal is normalised.
     """
 
     kind: str
@@ -43,6 +44,7 @@ class LocalModel:
     radius_m: float
     depth_m: float
     in_contact: bool
+    stiffness_n_per_m: float | None = None
 
     def __post_init__(self):
         if self.kind not in KINDS:
@@ -58,6 +60,9 @@ class LocalModel:
         object.__setattr__(self, "normal", normal)
         if self.valid and self.kind == "sphere":
             object.__setattr__(self, "radius_m", positive(self.radius_m, "LocalModel.radius_m"))
+        if self.stiffness_n_per_m is not None:
+            object.__setattr__(self, "stiffness_n_per_m", positive(self.stiffness_n_per_m,
+                                                                   "LocalModel.stiffness_n_per_m"))
 
     @classmethod
     def invalid(cls) -> LocalModel:
@@ -65,15 +70,15 @@ class LocalModel:
         return cls("plane", False, _ZERO, _UP, _ZERO, 0.0, 0.0, False)
 
     @classmethod
-    def plane(cls, point, normal) -> LocalModel:
+    def plane(cls, point, normal, stiffness_n_per_m: float | None = None) -> LocalModel:
         """A valid plane model of the surface alone (what a Marker carries): no depth seen, not in contact."""
-        return cls("plane", True, point, normal, point, 0.0, 0.0, False)
+        return cls("plane", True, point, normal, point, 0.0, 0.0, False, stiffness_n_per_m)
 
     @classmethod
-    def sphere(cls, centre, radius_m: float) -> LocalModel:
+    def sphere(cls, centre, radius_m: float, stiffness_n_per_m: float | None = None) -> LocalModel:
         """A valid sphere model of the surface alone (what a Marker carries): no plane beside it (point =
         centre, normal +z), no depth seen, not in contact."""
-        return cls("sphere", True, centre, _UP, centre, radius_m, 0.0, False)
+        return cls("sphere", True, centre, _UP, centre, radius_m, 0.0, False, stiffness_n_per_m)
 
 
 def penetration(model: LocalModel, tip: np.ndarray, tool_radius: float = 0.0) -> tuple[float, np.ndarray]:

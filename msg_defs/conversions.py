@@ -321,7 +321,8 @@ def local_model_marker(model: LocalModel, stamp, frame_id: str, lifetime_s: floa
     for `lifetime_s` seconds.
 
     plane: CUBE at `point`, orientation's z axis = outward `normal`, scale (patch, patch, 1 mm);
-    sphere: SPHERE at `centre`, scale = diameter (m) on all axes; not valid: action DELETE.
+    sphere: SPHERE at `centre`, scale = diameter (m) on all axes; not valid: action DELETE.  The model's
+    stiffness K, when it has one, rides in `text` as "stiffness_n_per_m=<K>" (STIFFNESS_KEY).
     """
     marker = Marker(header=_header(stamp, frame_id), ns="local_model", id=0,
                     lifetime=_duration(lifetime_s, "lifetime_s"))
@@ -340,7 +341,26 @@ def local_model_marker(model: LocalModel, stamp, frame_id: str, lifetime_s: floa
         marker.pose = _pose(model.centre, (0.0, 0.0, 0.0, 1.0), "LocalModel.centre")
         marker.scale = Vector3(x=diameter, y=diameter, z=diameter)
         marker.color = _colour(SPHERE_COLOUR)
+    if model.stiffness_n_per_m is not None:
+        marker.text = f"{STIFFNESS_KEY}={model.stiffness_n_per_m!r}"
     return marker
+
+
+#: The key of the local model's stiffness K (N/m) in the Marker's `text` ("key=value").
+STIFFNESS_KEY = "stiffness_n_per_m"
+
+
+def _marker_stiffness(text: str) -> float | None:
+    """K (N/m) from a local-model Marker's `text`: None when it carries no STIFFNESS_KEY entry; ValueError
+    naming the field for a value that is not a finite number > 0."""
+    for entry in text.split():
+        key, _, value = entry.partition("=")
+        if key == STIFFNESS_KEY:
+            try:
+                return positive(float(value), f"Marker.text {STIFFNESS_KEY}")
+            except ValueError:
+                raise ValueError(f"Marker.text {STIFFNESS_KEY} must be a finite number > 0, got {value!r}") from None
+    return None
 
 
 def marker_to_local_model(msg: Marker) -> tuple[LocalModel | None, float]:
@@ -348,8 +368,8 @@ def marker_to_local_model(msg: Marker) -> tuple[LocalModel | None, float]:
     DELETEALL (no surface near the tool).
 
     CUBE → LocalModel.plane(pose.position, normal = the orientation's z axis); SPHERE →
-    LocalModel.sphere(pose.position, radius = scale.x / 2). A lifetime of 0 means "forever" to RViz: the
-    caller decides what it trusts.
+    LocalModel.sphere(pose.position, radius = scale.x / 2); K from `text` (local_model_marker). A lifetime
+    of 0 means "forever" to RViz: the caller decides what it trusts.
     """
     lifetime_s = seconds_from_stamp(msg.lifetime)
     if msg.action in (Marker.DELETE, Marker.DELETEALL):
@@ -360,9 +380,10 @@ def marker_to_local_model(msg: Marker) -> tuple[LocalModel | None, float]:
     if msg.type not in (Marker.CUBE, Marker.SPHERE):
         raise ValueError(f"Marker.type is {msg.type}, expected CUBE ({Marker.CUBE}) or SPHERE ({Marker.SPHERE})")
     position, orientation = _pose_arrays(msg.pose, "Marker.pose")
+    stiffness = _marker_stiffness(msg.text)
     if msg.type == Marker.CUBE:
-        return LocalModel.plane(position, quaternion_to_matrix(orientation)[:, 2]), lifetime_s
-    return LocalModel.sphere(position, positive(msg.scale.x, "Marker.scale.x") / 2.0), lifetime_s
+        return LocalModel.plane(position, quaternion_to_matrix(orientation)[:, 2], stiffness), lifetime_s
+    return LocalModel.sphere(position, positive(msg.scale.x, "Marker.scale.x") / 2.0, stiffness), lifetime_s
 
 
 # ---------------------------------------------------------------- the device map

@@ -6,6 +6,7 @@ import pytest
 from meshes import box_mesh
 
 from liver_sim.physics.contact import ToolPose, ToolShape, candidate_nodes, candidate_triangles, fit_sphere
+from liver_sim.local_model import penetration
 from liver_sim.physics.model import LiverModel
 from liver_sim.physics.params import ModelParams
 
@@ -32,15 +33,17 @@ def one_step_model(mesh, tool):
 Y_TO_X = (0.0, math.sin(math.pi / 4), 0.0, math.cos(math.pi / 4))  # tool +z along liver +x
 
 
-@pytest.mark.parametrize("tool, tip", [
-    (ToolShape("sphere", radius_m=0.01), (0.04, 0.04, 0.04 + 0.01 - DEPTH)),
-    (ToolShape("capsule", radius_m=0.01, length_m=0.05), (0.04, 0.04, 0.04 + 0.01 - DEPTH)),
-    (ToolShape("box", half_extents_m=(0.005, 0.005, 0.01)), (0.04, 0.04, 0.04 + 0.01 - DEPTH)),
+@pytest.mark.parametrize("tool, tip, probes", [
+    (ToolShape("sphere", radius_m=0.01), (0.04, 0.04, 0.04 + 0.01 - DEPTH), 1),
+    (ToolShape("capsule", radius_m=0.01, length_m=0.05), (0.04, 0.04, 0.04 + 0.01 - DEPTH), 1),
+    (ToolShape("sphere", radius_m=0.01), (0.047, 0.043, 0.04 + 0.01 - DEPTH), 1),  # between nodes
+    # the box's bottom face: its 3 × 3 probes (corners, edge midpoints, centre) all touch
+    (ToolShape("box", half_extents_m=(0.005, 0.005, 0.01)), (0.04, 0.04, 0.04 + 0.01 - DEPTH), 9),
 ])
-def test_pressing_a_vertex_gives_the_penalty_force_along_the_normal(slab, tool, tip):
+def test_pressing_a_vertex_gives_the_penalty_force_along_the_normal(slab, tool, tip, probes):
     result = one_step_model(slab, tool).step_frame(ToolPose(np.array(tip)))
-    # Eq. 3 with μ = 0: |F| = λ·δ, pushing the tool out along the surface normal (+z)
-    np.testing.assert_allclose(result.tool_force_n, [0.0, 0.0, STIFFNESS * DEPTH], atol=1e-9)
+    # Eq. 3 with μ = 0: |F| = λ·δ per touching probe, pushing the tool out along the surface normal (+z)
+    np.testing.assert_allclose(result.tool_force_n, [0.0, 0.0, probes * STIFFNESS * DEPTH], atol=1e-9)
 
 
 def test_liver_nodes_feel_the_opposite_of_the_tool_force(slab):
@@ -65,7 +68,8 @@ def test_horizontal_capsule_touches_along_its_length(slab):
 
 def test_no_force_out_of_contact(slab):
     for tool in (ToolShape("sphere"), ToolShape("capsule"), ToolShape("box")):
-        result = one_step_model(slab, tool).step_frame(ToolPose(np.array([0.05, 0.05, 0.04 + 0.011])))
+        lowest = tool.half_extents_m[2] if tool.kind == "box" else tool.radius_m  # below the tip
+        result = one_step_model(slab, tool).step_frame(ToolPose(np.array([0.05, 0.05, 0.04 + lowest + 0.001])))
         np.testing.assert_array_equal(result.tool_force_n, 0.0)
 
 
@@ -94,12 +98,18 @@ def test_candidates_are_the_elements_near_the_tool(slab):
 
 
 def test_local_model_in_contact_is_the_touched_plane(slab):
+    """The touched plane, sunk so that its stiffness K times the tool's penetration is the contact force
+    (K: the penalty in series with the slab under the tool, so ≤ λ, and the plane at or below the skin)."""
     model = one_step_model(slab, ToolShape("sphere", radius_m=0.01))
-    local = model.step_frame(ToolPose(np.array([0.04, 0.04, 0.04 + 0.01 - DEPTH]))).local_model
+    tip = np.array([0.04, 0.04, 0.04 + 0.01 - DEPTH])
+    result = model.step_frame(ToolPose(tip))
+    local = result.local_model
     assert local.valid and local.in_contact and local.kind == "plane"
     np.testing.assert_allclose(local.normal, [0, 0, 1], atol=1e-9)
-    np.testing.assert_allclose(local.point, [0.04, 0.04, 0.04], atol=1e-6)
-    assert local.depth_m == pytest.approx(DEPTH, rel=1e-4)
+    assert 0.0 < local.stiffness_n_per_m < STIFFNESS
+    assert local.stiffness_n_per_m * local.depth_m == pytest.approx(np.linalg.norm(result.tool_force_n), rel=1e-9)
+    assert penetration(local, tip, 0.01)[0] == pytest.approx(local.depth_m, rel=1e-9) and local.depth_m >= DEPTH
+    np.testing.assert_allclose(local.point[:2], [0.04, 0.04], atol=1e-6)
 
 
 def test_local_model_near_but_not_touching_and_out_of_reach(slab):

@@ -6,8 +6,8 @@ from meshes import box_mesh
 
 from liver_sim.mesh.liver_shape import default_liver
 from liver_sim.physics import implicit, kernels, reference
-from liver_sim.physics.contact import ToolPose, ToolShape, candidate_nodes, tool_core, tool_state
-from liver_sim.physics.implicit import Contacts, ImplicitEuler, round_tool_node_contacts
+from liver_sim.physics.contact import ToolPose, ToolShape, surface_contacts, tool_state
+from liver_sim.physics.implicit import Contacts, ImplicitEuler
 from liver_sim.physics.model import LiverModel
 from liver_sim.physics.params import ModelParams
 from liver_sim.physics.springs import build_springs
@@ -136,7 +136,7 @@ def test_stable_at_one_step_per_frame_where_symplectic_euler_diverges(liver):
     xe, ve = perturbed(liver)
     springs = liver.springs
     settings = kernels.StepSettings(FRAME_S, 30, p.environment_damping_per_s, np.zeros(3), True)
-    no_tool = tool_state(liver.tool, None, None, p, 0.0, xe, liver.mesh.skin_nodes, np.zeros(3))
+    no_tool = tool_state(liver.tool, None, None, p, 0.0, xe, liver.mesh.skin)
     work = kernels.WorkArrays(np.zeros_like(xe), np.zeros((1, len(xe), 3)), False)
     with np.errstate(all="ignore"):
         kernels.run_frame(xe, ve, liver.inv_mass, np.zeros_like(xe), liver._spring_arrays, liver.support, settings,
@@ -224,18 +224,16 @@ def test_press_and_release_matches_symplectic_euler_at_72_substeps():
     script = make_script("press_release", settings)
     solver = ImplicitEuler(model.springs, len(mesh.points))
     x, v = model.positions, model.velocities
-    centre = mesh.points.mean(axis=0)
+    skin = np.asarray(mesh.skin, dtype=np.int64)
     previous = None
     worst_position = worst_force = peak = 0.0
     for frame in range(int(round(script.duration_s / FRAME_S))):
         pose = ToolPose(script.position_at((frame + 1) * FRAME_S))
         expected = -explicit.step_frame(pose).tool_force_n
-        core, _ = tool_core(tool, pose)  # the tool at the end of the frame, as the explicit kernel's last substep
-        velocity = np.zeros(3) if previous is None else (core - previous) / FRAME_S
-        previous = core
-        candidates = candidate_nodes(x, mesh.skin_nodes, tool, pose, 0.02 + np.linalg.norm(velocity) * FRAME_S)
-        contacts = round_tool_node_contacts(x, v, candidates, core, core, tool.radius_m, centre, velocity, FRAME_S,
-                                            p.contact_stiffness_n_per_m, p.contact_damping_ns_per_m)
+        state = tool_state(tool, pose, previous, p, 0.02, x, skin)
+        previous = pose
+        # the tool at the end of the frame, as the explicit kernel's last substep
+        contacts = surface_contacts(x, v, state, state.velocity_m_s * FRAME_S, FRAME_S)
         force = solver.step(x, v, model.inv_mass, model.external_forces_n, FRAME_S, p.environment_damping_per_s,
                             np.zeros(3), contacts)
         worst_position = max(worst_position, np.abs(x - explicit.positions).max())

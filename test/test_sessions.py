@@ -14,6 +14,7 @@ from rclpy.serialization import serialize_message
 
 from liver_sim.analysis import largest_force_jump_n
 from liver_sim.cli import main
+from liver_sim.local_model import LocalModel
 from liver_sim.processes import cli_command_line
 from liver_sim.sessions.bag import BagWriter, QosSpec, read_messages
 from liver_sim.sessions.parameters import node_parameters
@@ -213,8 +214,7 @@ def test_report_plots_the_session_and_the_fig8_comparison(tmp_path):
     t = np.arange(3000) * 1e-3
     smooth = np.clip(np.sin(np.pi * t / 3.0), 0, None)[:, None] * [0.0, 0.0, 1.0]     # rendered at 1 kHz
     held = smooth[(np.floor(t * 150) / 150 * 1000).astype(int)]                       # held between 150 Hz frames
-    plane = conversions.local_model_marker(type("M", (), {"valid": True, "kind": "plane", "point": np.zeros(3),
-                                                          "normal": np.array([0, 0, 1.0])})(), 0.0, "liver", 0.05)
+    plane = conversions.local_model_marker(LocalModel.plane(np.zeros(3), [0.0, 0.0, 1.0]), 0.0, "liver", 0.05)
     with BagWriter(bag) as writer:
         writer.write("/liver/contact_plane", "visualization_msgs/msg/Marker", 1, serialize_message(plane))
         for k, tk in enumerate(t):

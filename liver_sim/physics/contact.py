@@ -15,6 +15,7 @@ import numpy as np
 from liver_sim.geometry.rotations import quaternion_to_matrix
 from liver_sim.local_model import LocalModel
 from liver_sim.physics import kernels
+from liver_sim.physics.implicit import Contacts
 from liver_sim.physics.params import ModelParams
 
 TOOL_KINDS = {"sphere": kernels.TOOL_SPHERE, "capsule": kernels.TOOL_CAPSULE, "box": kernels.TOOL_BOX}
@@ -94,42 +95,6 @@ def candidate_triangles(points: np.ndarray, skin: np.ndarray, shape: ToolShape, 
     return np.flatnonzero(near)
 
 
-def fit_local_model(gap: np.ndarray, point: np.ndarray, direction: np.ndarray, reach_m: float,
-                    kind: str = "plane", skin_points: np.ndarray | None = None) -> LocalModel:
-    """Fit the local model from per-candidate contact geometry of the last physics step.
-
-    In contact (some gap < 0): the plane passes through the depth-weighted mean of the contact
-    points, its normal the opposite of the depth-weighted mean push direction.  Out of contact but
-    within `reach_m`: the plane touches the nearest surface point, facing the tool.  Beyond: invalid.
-    kind 'sphere' also fits a sphere (least squares) through `skin_points` near the contact and keeps
-    it when it is convex toward the tool (its centre lies behind the plane); otherwise the plane.
-    """
-    if gap.size == 0 or gap.min() > reach_m:
-        return LocalModel.invalid()
-    touching = gap < 0.0
-    if touching.any():
-        depth = -gap[touching]
-        plane_point = (depth[:, None] * point[touching]).sum(axis=0) / depth.sum()
-        push = (depth[:, None] * direction[touching]).sum(axis=0)
-        deepest = float(depth.max())
-    else:
-        nearest = int(np.argmin(gap))
-        plane_point = point[nearest]
-        push = direction[nearest]
-        deepest = 0.0
-    norm = np.linalg.norm(push)
-    if not norm > 0.0:
-        return LocalModel.invalid()
-    normal = -push / norm
-    plane = LocalModel("plane", True, plane_point, normal, plane_point, 0.0, deepest, bool(touching.any()))
-    if kind != "sphere" or skin_points is None or len(skin_points) < 4:
-        return plane
-    centre, radius = fit_sphere(skin_points)
-    if not (math.isfinite(radius) and (centre - plane_point) @ normal < 0.0 and radius < 1.0):
-        return plane
-    return LocalModel("sphere", True, plane_point, normal, centre, radius, deepest, plane.in_contact)
-
-
 def fit_sphere(points: np.ndarray) -> tuple[np.ndarray, float]:
     """Algebraic least-squares sphere |p − c|² = r² through the points: (centre, radius); radius inf if flat."""
     design = np.column_stack([2.0 * points, np.ones(len(points))])
@@ -143,52 +108,148 @@ def fit_sphere(points: np.ndarray) -> tuple[np.ndarray, float]:
 
 #: A tool that moves farther than this in one frame is taken as re-placed, not as moving (m).
 TOOL_JUMP_M = 0.05
+#: Largest spacing of a box's contact probes on its faces (m).
+BOX_PROBE_SPACING_M = 0.01
+
+
+def tool_probes(shape: ToolShape, pose: ToolPose) -> tuple[np.ndarray, float]:
+    """The tool's contact probes (P, 3) in the liver frame and their radius (m): the sphere's centre; points
+    along a capsule's shaft at most radius/2 apart (the union of their balls departs from the capsule by
+    < 4 % of its radius); for a box, radius 0 and the points of a grid on its faces at most
+    BOX_PROBE_SPACING_M apart, corners and edge midpoints included (a point shell)."""
+    tip = np.asarray(pose.position, dtype=np.float64)
+    if shape.kind == "sphere":
+        return tip[None, :].copy(), shape.radius_m
+    rotation = pose.rotation
+    if shape.kind == "capsule":
+        count = max(1, math.ceil(shape.length_m / (shape.radius_m / 2.0)) + 1)
+        along = np.linspace(0.0, shape.length_m, count)
+        return tip + along[:, None] * rotation[:, 2], shape.radius_m
+    half = np.asarray(shape.half_extents_m, dtype=np.float64)
+    axes = [np.linspace(-h, h, max(3, math.ceil(2.0 * h / BOX_PROBE_SPACING_M) + 1)) for h in half]
+    grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+    on_face = (np.abs(np.abs(grid) - half) <= 1e-12 * half).any(axis=1)
+    return tip + grid[on_face] @ rotation.T, 0.0
 
 
 def tool_state(shape: ToolShape, pose: ToolPose | None, previous: ToolPose | None, params: ModelParams,
-               reach_m: float, positions: np.ndarray, skin_nodes: np.ndarray,
-               inward_point: np.ndarray) -> kernels.ToolState:
+               reach_m: float, positions: np.ndarray, skin: np.ndarray) -> kernels.ToolState:
     """The tool over one frame for kernels.run_frame (pose None: no tool).
 
-    Its core moves at constant velocity (core − previous core)/frame period from where `previous` held
-    it to where `pose` holds it; a jump beyond TOOL_JUMP_M is a re-placed tool, at rest at `pose`.
-    Candidates: the skin nodes within its bounding radius + `reach_m` + the distance moved; contact
-    law: params.contact_stiffness_n_per_m, params.contact_damping_ns_per_m (Eq. 3).
+    Its probes (tool_probes) move at constant velocity (tip − previous tip)/frame period from where
+    `previous` held them to where `pose` holds them; a jump beyond TOOL_JUMP_M is a re-placed tool, at rest
+    at `pose`.  Candidates: the skin triangles within reach_m + the distance moved (candidate_triangles);
+    contact law: params.contact_stiffness_n_per_m, params.contact_damping_ns_per_m (Eq. 3).
     """
-    core_a = core_b = velocity = np.zeros(3)
-    axes = np.eye(3)
+    velocity = np.zeros(3)
     kind = kernels.TOOL_NONE
-    nodes = np.zeros(0, dtype=np.int64)
-    period = 1.0 / params.frame_rate_hz
+    probes, radius = np.zeros((0, 3)), 0.0
+    triangles = np.zeros(0, dtype=np.int64)
     if pose is not None:
         kind = TOOL_KINDS[shape.kind]
-        core_a, core_b = tool_core(shape, pose)
-        axes = np.ascontiguousarray(pose.rotation)
+        probes, radius = tool_probes(shape, pose)
         if previous is not None:
-            start_a, start_b = tool_core(shape, previous)
-            if np.linalg.norm(core_a - start_a) <= TOOL_JUMP_M:
-                velocity = (core_a - start_a) / period
-                core_a, core_b = start_a, start_b
-        nodes = candidate_nodes(positions, skin_nodes, shape, pose, reach_m + float(np.linalg.norm(velocity)) * period)
-    return kernels.ToolState(kind, core_a, core_b, shape.radius_m, axes,
-                             np.asarray(shape.half_extents_m, dtype=np.float64), velocity,
-                             params.contact_stiffness_n_per_m, params.contact_damping_ns_per_m, inward_point, nodes,
-                             np.full(len(nodes), np.inf), np.zeros((len(nodes), 3)), np.zeros((len(nodes), 3)))
+            moved = np.asarray(pose.position, dtype=np.float64) - np.asarray(previous.position, dtype=np.float64)
+            if np.linalg.norm(moved) <= TOOL_JUMP_M:
+                velocity = moved * params.frame_rate_hz
+                probes, radius = tool_probes(shape, previous)
+        triangles = candidate_triangles(positions, skin, shape, pose, reach_m + float(np.linalg.norm(velocity))
+                                        / params.frame_rate_hz)
+    rows = len(probes) * len(triangles)
+    return kernels.ToolState(kind, np.ascontiguousarray(probes), radius, velocity, params.contact_stiffness_n_per_m,
+                             params.contact_damping_ns_per_m, np.ascontiguousarray(skin, dtype=np.int64), triangles,
+                             np.zeros((rows, 3), dtype=np.int64), np.zeros((rows, 3)), np.zeros((rows, 3)),
+                             np.full(rows, -np.inf), np.zeros(rows), np.zeros((rows, 3)))
 
 
-def surface_local_model(shape: ToolShape, pose: ToolPose, state: kernels.ToolState, positions: np.ndarray,
-                        skin: np.ndarray, reach_m: float, kind: str) -> LocalModel:
-    """The local model at the end of a frame (fit_local_model): from the skin triangles near a round
-    tool, from the box's candidate nodes (`state`, as kernels.run_frame left them) for a box."""
-    if shape.kind == "box":
-        return fit_local_model(state.gap, state.point, state.direction, reach_m, kind, positions[state.candidates])
-    core_a, core_b = tool_core(shape, pose)
-    triangles = candidate_triangles(positions, skin, shape, pose, reach_m)
-    gap = np.full(len(triangles), np.inf)
-    point = np.zeros((len(triangles), 3))
-    direction = np.zeros((len(triangles), 3))
-    kernels.surface_gaps(positions, skin, triangles, core_a, core_b, shape.radius_m, gap, point, direction)
-    return fit_local_model(gap, point, direction, reach_m, kind, positions[np.unique(skin[triangles])])
+def probe_contacts(x: np.ndarray, v: np.ndarray, tool: kernels.ToolState, shift: np.ndarray, dt: float) -> None:
+    """The tool's contact rows (kernels.probe_geometry) with its probes moved by `shift`, in its arrays."""
+    kernels.probe_geometry(x, v, tool.skin, tool.triangles, tool.probes, shift, tool.radius_m, tool.velocity_m_s, dt,
+                           tool.nodes, tool.weights, tool.normal, tool.depth, tool.share, tool.point)
+
+
+def surface_contacts(x: np.ndarray, v: np.ndarray, tool: kernels.ToolState, shift: np.ndarray, dt: float) -> Contacts:
+    """The tool's contacts with the skin triangles for implicit.ImplicitEuler, its probes moved by `shift`
+    (where they are at the end of the step): the rows of kernels.probe_geometry with a share, λ and μ scaled
+    by it, linearised about the skin where its velocity takes it in `dt` (x̂ = x + dt·v, so the contacts that
+    touch at the end of the step are those that act): o = δ(x̂) + n·Σ w_a·x̂_a so that δ = o − n·Σ w_a·x_a,
+    s = n·v_tool (Eq. 3)."""
+    ahead = x + dt * v
+    probe_contacts(ahead, v, tool, shift, 0.0)
+    keep = tool.share > 0.0
+    normal, weights, nodes = tool.normal[keep], tool.weights[keep], tool.nodes[keep]
+    surface_x = np.einsum("ij,ijk->ik", weights, ahead[nodes])
+    share = tool.share[keep]
+    return Contacts(nodes, weights, np.ascontiguousarray(normal),
+                    tool.depth[keep] + np.einsum("ij,ij->i", normal, surface_x), normal @ tool.velocity_m_s,
+                    share * tool.stiffness_n_per_m, share * tool.damping_ns_per_m)
+
+
+def contact_load(tool: kernels.ToolState, n_nodes: int) -> tuple[np.ndarray, float]:
+    """The pattern of the tool's push on the liver, scaled to a unit total, (N, 3), and how many probes'
+    worth of penalty carry it (the sum of the touching rows' shares): the rows' elastic pushes
+    share·λ·δ·n spread by barycentric weights (as the last step left them); out of contact, a unit push
+    at the nearest row's surface point (none within the candidates: zeros, 0)."""
+    load = np.zeros((n_nodes, 3))
+    finite = np.isfinite(tool.depth)
+    if not finite.any():
+        return load, 0.0
+    touching = finite & (tool.depth > 0.0) & (tool.share > 0.0)
+    if touching.any():
+        amount = np.where(touching, tool.share * tool.depth, 0.0)
+        probes = float(tool.share[touching].sum())
+    else:
+        amount = (np.arange(len(tool.depth)) == np.argmax(np.where(finite, tool.depth, -np.inf))).astype(float)
+        probes = 1.0
+    pushes = amount[:, None] * tool.normal
+    total = float(np.linalg.norm(pushes.sum(axis=0)))
+    if not total > 0.0:
+        return load, 0.0
+    np.add.at(load, tool.nodes.ravel(), (tool.weights[:, :, None] * pushes[:, None, :] / total).reshape(-1, 3))
+    return load, probes
+
+
+def local_stiffness(penalty_n_per_m: float, probes: float, tissue_compliance_m_per_n: float) -> float:
+    """K of the local model (N/m): the touching probes' penalties (in parallel, `probes` × λ) in series with
+    the tissue under them (1/compliance): 1/K = 1/(probes·λ) + compliance."""
+    return 1.0 / (1.0 / (probes * penalty_n_per_m) + max(tissue_compliance_m_per_n, 0.0))
+
+
+def force_local_model(shape: ToolShape, pose: ToolPose, tool: kernels.ToolState, force_on_tool_n: np.ndarray,
+                      stiffness_n_per_m: float, reach_m: float, kind: str, positions: np.ndarray) -> LocalModel:
+    """The local model of the end of a frame, consistent with its contact force F (paper §2.5, P11): in
+    contact, the plane with normal F/|F| that the tool sphere (radius r) penetrates by |F|/K, so that the
+    haptic loop rendering K·depth feels F at the pose of the frame and a spring of stiffness K as the
+    tool moves before the next one (kind 'sphere': a sphere fitted through the candidate triangles'
+    nodes, kept when convex toward the tool, with the same normal and depth at the tip).  Without contact
+    force, the plane through the nearest probe's surface point facing the tool, moved back until the tool
+    does not touch it (depth 0); none within `reach_m`: invalid.  `in_contact`: a force, or a probe
+    touching the surface (its push clipped to 0 by the damping of a fast withdrawal)."""
+    magnitude = float(np.linalg.norm(force_on_tool_n))
+    tip = np.asarray(pose.position, dtype=np.float64)
+    radius = shape.radius_m
+    if magnitude > 0.0:
+        normal = force_on_tool_n / magnitude
+        depth = magnitude / stiffness_n_per_m
+        point = tip - (radius - depth) * normal
+    else:
+        finite = np.isfinite(tool.depth)  # the rows: each probe against each candidate triangle
+        nearest = int(np.argmax(np.where(finite, tool.depth, -np.inf))) if finite.any() else -1
+        if nearest < 0 or -tool.depth[nearest] > reach_m:
+            return LocalModel.invalid()
+        normal, point, depth = -tool.normal[nearest], tool.point[nearest], 0.0
+        point = point - max(radius - float((tip - point) @ normal), 0.0) * normal
+    touching = magnitude > 0.0 or bool(((tool.depth > 0.0) & (tool.share > 0.0)).any())
+    plane = LocalModel("plane", True, point, normal, point, 0.0, depth, touching, stiffness_n_per_m)
+    nodes = np.unique(tool.skin[tool.triangles])
+    if kind != "sphere" or len(nodes) < 4:
+        return plane
+    centre, sphere_radius = fit_sphere(positions[nodes])
+    if not (math.isfinite(sphere_radius) and (centre - point) @ normal < 0.0 and sphere_radius < 1.0):
+        return plane
+    centre = point - sphere_radius * normal
+    return LocalModel("sphere", True, point, normal, centre, sphere_radius, depth, plane.in_contact,
+                      stiffness_n_per_m)
 
 
 def pull_local_model(pose: ToolPose, pull_n: np.ndarray, stiffness_n_per_m: float, radius_m: float) -> LocalModel:
@@ -202,4 +263,4 @@ def pull_local_model(pose: ToolPose, pull_n: np.ndarray, stiffness_n_per_m: floa
     normal = pull_n / magnitude
     depth = magnitude / stiffness_n_per_m
     point = np.asarray(pose.position) - (radius_m - depth) * normal
-    return LocalModel("plane", True, point, normal, point, 0.0, depth, True)
+    return LocalModel("plane", True, point, normal, point, 0.0, depth, True, stiffness_n_per_m)

@@ -36,8 +36,8 @@ adds h·c_n + h²·k_n to the node's shift (`_support_terms`).
 Contacts (`Contacts`): element e with nodes a (up to 3, padding −1), weights w_a, unit normal n
 (pushing the liver), stiffness k and damping c has depth δ = o − n·Σ w_a·x_a and depth rate
 δ̇ = s − n·Σ w_a·v_a, force F = max(0, k·δ + c·δ̇) and f_a = w_a·F·n; active, its Jacobian blocks
-are ∂f_a/∂x_b = −w_a·w_b·k·nnᵀ and ∂f_a/∂v_b = −w_a·w_b·c·nnᵀ.  Node contacts (Eq. 3) are the
-1-node case (`round_tool_node_contacts`), surface-triangle contacts the 3-node case.  Contacts
+are ∂f_a/∂x_b = −w_a·w_b·k·nnᵀ and ∂f_a/∂v_b = −w_a·w_b·c·nnᵀ.  Node contacts are the
+1-node case, the tool's contacts with the skin triangles (contact.surface_contacts) the 3-node case.  Contacts
 enter the solver matrix-free, so they need no slot in the sparse pattern.
 
 Solver, chosen by measurement: preconditioned conjugate gradients, block-Jacobi (the 3×3 diagonal
@@ -109,54 +109,6 @@ def node_contacts(nodes, normal, offset_m, normal_speed_m_s, stiffness_n_per_m, 
                     np.asarray(offset_m, dtype=np.float64), np.asarray(normal_speed_m_s, dtype=np.float64),
                     np.broadcast_to(np.asarray(stiffness_n_per_m, dtype=np.float64), (count,)).copy(),
                     np.broadcast_to(np.asarray(damping_ns_per_m, dtype=np.float64), (count,)).copy())
-
-
-def round_tool_node_contacts(x, v, candidates, core_a, core_b, radius_m, inward_point, tool_velocity,
-                             dt, stiffness_n_per_m, damping_ns_per_m) -> Contacts:
-    """Node contacts of a sphere (core_a == core_b) or capsule whose core is at core_a/core_b at the end
-    of the step, for the candidate skin nodes that touch it now or would after a step at their
-    velocity: n from the core to the node (toward `inward_point` on the core), o = radius + n·(core
-    point), s = n·tool_velocity; so δ = radius − distance to the core, linearised along n (Eq. 3).
-    """
-    x_c = x[candidates]
-    axis = core_b - core_a
-    length2 = float(axis @ axis)
-    t = np.zeros(len(candidates))
-    if length2 > 0.0:
-        t = np.clip((x_c - core_a) @ axis / length2, 0.0, 1.0)
-    core = core_a + t[:, None] * axis
-    delta = x_c - core
-    dist = np.linalg.norm(delta, axis=1)
-    inward = inward_point - x_c
-    normal = np.where((dist > 1e-12)[:, None], delta / np.maximum(dist, 1e-300)[:, None],
-                      inward / np.linalg.norm(inward, axis=1)[:, None])
-    offset = radius_m + np.einsum("ij,ij->i", normal, core)
-    speed = normal @ tool_velocity
-    predicted = offset - np.einsum("ij,ij->i", normal, x_c + dt * v[candidates])
-    touching = (dist < radius_m) | (predicted > 0.0)
-    return node_contacts(candidates[touching], normal[touching], offset[touching], speed[touching],
-                         stiffness_n_per_m, damping_ns_per_m)
-
-
-def box_node_contacts(x, v, candidates, centre, axes, half_extents_m, tool_velocity, dt, stiffness_n_per_m,
-                      damping_ns_per_m) -> Contacts:
-    """Node contacts of a box (centre at the end of the step, axes = columns of a rotation, half extents,
-    m) for the candidate skin nodes inside it now or after a step at their velocity: pushed out through the
-    face of least depth (as kernels.box_tool_contacts), n = ±that axis, o = n·centre + its half extent,
-    s = n·tool_velocity; so δ = o − n·x is the depth below that face (Eq. 3)."""
-    now = x[candidates]
-    ahead = now + dt * v[candidates]
-    half = np.asarray(half_extents_m, dtype=np.float64)
-    inside_now = (np.abs((now - centre) @ axes) < half).all(axis=1)
-    probe = np.where(inside_now[:, None], now, ahead)
-    local = (probe - centre) @ axes
-    touching = (np.abs(local) < half).all(axis=1)
-    axis = np.argmin(half - np.abs(local), axis=1)
-    sign = np.where(np.take_along_axis(local, axis[:, None], axis=1)[:, 0] >= 0.0, 1.0, -1.0)
-    normal = sign[:, None] * axes.T[axis]
-    offset = normal @ centre + half[axis]
-    return node_contacts(candidates[touching], normal[touching], offset[touching], (normal @ tool_velocity)[touching],
-                         stiffness_n_per_m, damping_ns_per_m)
 
 
 @numba.njit(cache=True)
@@ -546,6 +498,11 @@ def implicit_step(x, v, inv_mass, external, gravity, c_env, h, node_i, node_j, r
     return contact, total_iterations, newton, residual
 
 
+#: The step length (s) of the quasi-static solve in ImplicitEuler.compliance, and its CG tolerance.
+COMPLIANCE_HORIZON_S = 30.0
+COMPLIANCE_TOLERANCE = 1e-3
+
+
 class ImplicitEuler:
     """Linearised backward Euler on one spring network and its support (none by default): its per-spring
     matrix blocks and work arrays; with `second_order`, BDF2 from the second step on (see the module
@@ -636,6 +593,33 @@ class ImplicitEuler:
         return scipy.sparse.coo_matrix((values.ravel(), (np.broadcast_to(r, values.shape).ravel(),
                                                           np.broadcast_to(c, values.shape).ravel())),
                                        shape=(size, size)).tocsr()
+
+    def compliance(self, x: np.ndarray, inv_mass: np.ndarray, load: np.ndarray, environment_damping: float,
+                   guess: np.ndarray) -> float:
+        """Static compliance bᵀ·K⁻¹·b (m/N) of the network at x under the load pattern b = `load` (N, 3) N,
+        held nodes (inv_mass 0) fixed: the tangent stiffness K of the springs (module docstring) and of the
+        organ's supports at x, solved
+        by the step's PCG as (M·(1 + H·c_env) + H·C + H²·K)·z = b with H = COMPLIANCE_HORIZON_S, so the mass
+        and damping terms weigh ≲ 1 % against K; `guess` (N, 3), the previous solution ·H², starts the
+        solve and is overwritten by this one."""
+        h = COMPLIANCE_HORIZON_S
+        zero = np.zeros_like(x)
+        f, ky, r, z, p, q = (np.zeros_like(x) for _ in range(6))
+        s = self.springs
+        no = Contacts.none()
+        _assemble(x, zero, zero, inv_mass, zero, np.zeros(3), float(environment_damping), h, self._node_i,
+                  self._node_j, s.rest_length_m, s.lambda1_n, s.lambda2_n, s.mu_ns_per_m, self._unit, self._iso,
+                  self._axial, self._shift, self._diagonal, f, ky, True)
+        _support_terms(x, zero, zero, inv_mass, h, *self.support, f, ky, self._shift, self._diagonal, True)
+        coefficient = np.zeros(0)
+        _block_jacobi(self._diagonal, inv_mass, no.nodes, no.weights, no.normal, coefficient, self._preconditioner)
+        b = np.where((inv_mass > 0.0)[:, None], load, 0.0)
+        solution = np.where((inv_mass > 0.0)[:, None], guess / (h * h), 0.0)
+        _pcg(self._node_i, self._node_j, self._unit, self._iso, self._axial, self._shift, inv_mass, no.nodes,
+             no.weights, no.normal, coefficient, self._preconditioner, b, solution, COMPLIANCE_TOLERANCE,
+             self.max_cg_iterations, r, z, p, q)
+        guess[:] = solution * (h * h)
+        return float(np.einsum("ij,ij->", b, guess))
 
     def warm_up(self) -> None:
         """Compile the kernels (numba, cached on disk) before a timed loop starts."""

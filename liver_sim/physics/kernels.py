@@ -50,30 +50,30 @@ class StepSettings(NamedTuple):
 
 
 class ToolState(NamedTuple):
-    """The tool over one frame and its contact candidates (Eq. 3).
+    """The tool over one frame and its contact geometry (Eq. 3 on the skin triangles).
 
-    kind: TOOL_NONE, TOOL_SPHERE, TOOL_CAPSULE or TOOL_BOX; the core (a point, or the capsule's segment
-    core_a–core_b, m) starts where given and moves at `velocity_m_s`; radius (m) of sphere and capsule;
-    box axes (columns of a rotation) and half extents (m); penalty λ (N/m) and μ (N·s/m); `inward_point`:
-    a point inside the liver (push direction of a node on the core); `candidates`: skin nodes near the
-    tool; per candidate, `gap` (m), `point` and `direction` (the box's contact geometry, see
-    box_tool_contacts).
+    kind: TOOL_NONE, TOOL_SPHERE, TOOL_CAPSULE or TOOL_BOX; `probes` (P, 3) m: the tool's contact probes
+    (contact.tool_probes: a sphere's centre, points along a capsule's shaft, a grid on a box's faces)
+    where the frame starts, each a ball of `radius_m` (0 for a box), moving at `velocity_m_s`; penalty λ
+    (N/m) and μ (N·s/m); `skin` (T, 3) the skin triangles and `triangles` the candidates near the tool;
+    per probe and candidate (probe_geometry's rows), the contact geometry the last step left: `nodes`,
+    `weights`, `normal`, `depth` (m), `share`, `point`.
     """
 
     kind: int
-    core_a: np.ndarray
-    core_b: np.ndarray
+    probes: np.ndarray
     radius_m: float
-    axes: np.ndarray
-    half_extents_m: np.ndarray
     velocity_m_s: np.ndarray
     stiffness_n_per_m: float
     damping_ns_per_m: float
-    inward_point: np.ndarray
-    candidates: np.ndarray
-    gap: np.ndarray
+    skin: np.ndarray
+    triangles: np.ndarray
+    nodes: np.ndarray
+    weights: np.ndarray
+    normal: np.ndarray
+    depth: np.ndarray
+    share: np.ndarray
     point: np.ndarray
-    direction: np.ndarray
 
 
 class WorkArrays(NamedTuple):
@@ -171,119 +171,177 @@ def integrate(x, v, f, inv_mass, dt, environment_damping, gravity, symplectic):
                 v[n, k] += dt * a
 
 
-@numba.njit(cache=True)
-def closest_point_on_segment(p, a, b):
-    """Closest point to p on segment ab."""
-    ab = b - a
-    denom = ab @ ab
+@numba.njit(cache=True, inline="always")
+def _barycentric(q, corners):
+    """Barycentric weights (3-tuple, ≥ 0, sum 1) of a point q of the triangle `corners` (3, 3)."""
+    ax, ay, az = corners[0, 0], corners[0, 1], corners[0, 2]
+    v0 = (corners[1, 0] - ax, corners[1, 1] - ay, corners[1, 2] - az)
+    v1 = (corners[2, 0] - ax, corners[2, 1] - ay, corners[2, 2] - az)
+    v2 = (q[0] - ax, q[1] - ay, q[2] - az)
+    d00 = v0[0] * v0[0] + v0[1] * v0[1] + v0[2] * v0[2]
+    d01 = v0[0] * v1[0] + v0[1] * v1[1] + v0[2] * v1[2]
+    d11 = v1[0] * v1[0] + v1[1] * v1[1] + v1[2] * v1[2]
+    d20 = v2[0] * v0[0] + v2[1] * v0[1] + v2[2] * v0[2]
+    d21 = v2[0] * v1[0] + v2[1] * v1[1] + v2[2] * v1[2]
+    denom = d00 * d11 - d01 * d01
     if denom <= 0.0:
-        return a.copy()
-    t = min(1.0, max(0.0, ((p - a) @ ab) / denom))
-    return a + t * ab
+        return 1.0 / 3.0, 1.0 / 3.0, 1.0 / 3.0
+    b = max((d11 * d20 - d01 * d21) / denom, 0.0)
+    c = max((d00 * d21 - d01 * d20) / denom, 0.0)
+    a = max(1.0 - b - c, 0.0)
+    total = a + b + c
+    return a / total, b / total, c / total
 
 
-@numba.njit(cache=True)
-def round_tool_contacts(x, v, candidates, core_a, core_b, shift, radius, inward_point, tool_velocity,
-                        stiffness, damping, f):
-    """Eq. 3 between a sphere (core_a == core_b) or capsule (segment core_a–core_b) moved by `shift`, and
-    skin nodes.
-
-    A candidate node closer than `radius` to the core has penetration δ = radius − distance and
-    gets F = max(0, λ·δ + μ·δ̇)·k, k the unit vector from the core to the node (into the liver;
-    toward `inward_point` if the node sits on the core).  Returns the total force on the liver
-    (the tool feels its opposite).  Scalar arithmetic: no array is allocated per node or step.
-    """
-    ax, ay, az = core_a[0] + shift[0], core_a[1] + shift[1], core_a[2] + shift[2]
-    ex, ey, ez = core_b[0] - core_a[0], core_b[1] - core_a[1], core_b[2] - core_a[2]
-    length2 = ex * ex + ey * ey + ez * ez
-    tx, ty, tz = 0.0, 0.0, 0.0
-    for c in range(candidates.shape[0]):
-        n = candidates[c]
-        px, py, pz = x[n, 0] - ax, x[n, 1] - ay, x[n, 2] - az
-        t = 0.0
-        if length2 > 0.0:
-            t = min(1.0, max(0.0, (px * ex + py * ey + pz * ez) / length2))
-        dx, dy, dz = px - t * ex, py - t * ey, pz - t * ez
-        dist = math.sqrt(dx * dx + dy * dy + dz * dz)
-        depth = radius - dist
-        if depth <= 0.0:
-            continue
-        if dist > 1e-12:
-            kx, ky, kz = dx / dist, dy / dist, dz / dist
-        else:
-            kx, ky, kz = inward_point[0] - x[n, 0], inward_point[1] - x[n, 1], inward_point[2] - x[n, 2]
-            norm = math.sqrt(kx * kx + ky * ky + kz * kz)
-            kx, ky, kz = kx / norm, ky / norm, kz / norm
-        depth_rate = -(kx * (v[n, 0] - tool_velocity[0]) + ky * (v[n, 1] - tool_velocity[1])
-                       + kz * (v[n, 2] - tool_velocity[2]))
-        magnitude = max(0.0, stiffness * depth + damping * depth_rate)
-        f[n, 0] += magnitude * kx
-        f[n, 1] += magnitude * ky
-        f[n, 2] += magnitude * kz
-        tx += magnitude * kx
-        ty += magnitude * ky
-        tz += magnitude * kz
-    return np.array([tx, ty, tz])
-
-
-@numba.njit(cache=True)
-def surface_gaps(x, skin, candidates, core_a, core_b, radius, gap, point, direction):
-    """Per candidate skin triangle: closest points of the tool core and the triangle (alternating
-    projection), gap = distance − radius (m, negative inside), the triangle point and the unit
-    direction from the core to it (the triangle's inward normal if the core lies on it).
-    """
-    for c in range(candidates.shape[0]):
-        corners = x[skin[candidates[c]]]
-        s = closest_point_on_segment((corners[0] + corners[1] + corners[2]) / 3.0, core_a, core_b)
-        q = np.array(closest_point_on_triangle((s[0], s[1], s[2]), corners)[0])
-        for _ in range(4):
-            s = closest_point_on_segment(q, core_a, core_b)
-            q = np.array(closest_point_on_triangle((s[0], s[1], s[2]), corners)[0])
-        delta = q - s
-        dist = math.sqrt(delta @ delta)
-        if dist > 1e-12:
-            direction[c] = delta / dist
-        else:
-            normal = np.cross(corners[1] - corners[0], corners[2] - corners[0])
-            direction[c] = -normal / math.sqrt(normal @ normal)
-        gap[c] = dist - radius
-        point[c] = q
-
-
-@numba.njit(cache=True)
-def box_tool_contacts(x, v, candidates, centre, axes, half_extents, tool_velocity,
-                      stiffness, damping, f, gap, point, direction):
-    """Eq. 3 between a box (centre, axes = columns of a rotation matrix, half extents) and skin nodes.
-
-    A node inside the box is pushed out through the nearest face: δ = h_a − |q_a| on the axis a of
-    least depth, k = ±axis a.  Writes each candidate node's gap (m; distance to the box outside,
-    −δ inside), position and k; returns the total force on the liver.
-    """
-    total = np.zeros(3)
-    for c in range(candidates.shape[0]):
-        n = candidates[c]
-        local = axes.T @ (x[n] - centre)
-        outside = np.maximum(np.abs(local) - half_extents, 0.0)
-        point[c] = x[n]
-        if outside.max() > 0.0:
-            gap[c] = math.sqrt(outside @ outside)
-            direction[c] = axes @ (np.sign(local) * outside) / gap[c]
-            continue
-        depths = half_extents - np.abs(local)
-        axis = np.argmin(depths)
-        k = axes[:, axis] * (1.0 if local[axis] >= 0.0 else -1.0)
-        gap[c] = -depths[axis]
-        direction[c] = k
-        depth_rate = -(k @ (v[n] - tool_velocity))
-        force = max(0.0, stiffness * depths[axis] + damping * depth_rate) * k
-        f[n] += force
-        total += force
-    return total
+#: Distance (m) over which a closest point on an edge or corner fades out as a triangle sharing that
+#: feature comes nearer (probe_geometry).
+FEATURE_FADE_M = 3e-4
 
 
 @numba.njit(cache=True, inline="always")
-def add_forces(x, v, external_force, springs, support, tool, work, shift, contact):
-    """work.force ← external force + Eq. 1 spring forces + the support + Eq. 3 contact of the tool core moved
+def _local_minimum(skin, triangles, feature, distance, t):
+    """1 for a row whose closest point is a triangle's interior; for one on an edge or corner, 1 − (its
+    distance − the least distance of the candidates holding that feature)/FEATURE_FADE_M, clipped to 0..1:
+    the point is then no local minimum of the distance to the skin (a neighbour is nearer), and fades out
+    continuously as the neighbour pulls ahead.  `feature` and `distance`: the candidates' closest features
+    (Ericson's numbering) and distances."""
+    f = feature[t]
+    if f == 6:
+        return 1.0
+    tri = skin[triangles[t]]
+    a = tri[f] if f < 3 else tri[f - 3]
+    b = a if f < 3 else tri[(f - 2) % 3]
+    dist = distance[t]
+    least = dist
+    for s in range(triangles.shape[0]):
+        other = skin[triangles[s]]
+        has_a = other[0] == a or other[1] == a or other[2] == a
+        has_b = other[0] == b or other[1] == b or other[2] == b
+        if s != t and has_a and has_b:
+            least = min(least, distance[s])
+    return min(max(1.0 - (dist - least) / FEATURE_FADE_M, 0.0), 1.0)
+
+
+@numba.njit(cache=True)
+def probe_geometry(x, v, skin, triangles, probes, shift, radius, tool_velocity, dt, nodes, weights, normal, depth,
+                   share, point):
+    """The contacts of the probes p (+ `shift`, balls of `radius` moving at `tool_velocity`) with the
+    candidate skin `triangles`: row c·T + t for probe c and candidate t (T candidates).  Each row is the
+    triangle's `nodes`, the barycentric `weights` of its closest point q to p (Ericson), the unit `normal`
+    pushing the liver (from p to q; from q to p when p lies behind the triangle's outward face; the inward
+    face normal when p is on it), the `depth` δ = radius ∓ |p − q| (m, negative apart), q (`point`), and
+    the row's `share` of its probe's contact: s_t/Σ s, s_t = γ_t·max(δ_t, 0)² (when no row of the probe
+    touches, max(δ_t + dt·δ̇_t, 0)²: touching after `dt` at the nodes' and the tool's velocity), γ_t: 1 where q is a local
+    minimum of the distance to the skin, fading to 0 where a triangle sharing q's edge or corner is nearer
+    (_local_minimum).  A probe inside the liver
+    (behind the outward face of its nearest triangle, at d_min) leaves through q: normals from q to p and
+    δ = radius + 2·d_min − |p − q|, radius + d_min on the nearest row, continuous with the outside form at
+    d_min = 0 and negative on far triangles.
+
+    The shares of a probe sum to 1 (or all vanish), so a probe is never counted twice where triangles share
+    the closest edge or corner; on a flat or convex skin only the nearest point acts (exactly Eq. 3 there);
+    every δ_t, γ_t and share is a continuous function of the tool and the mesh (a triangle enters with share
+    0): the force is continuous as the tool slides over edges and corners, and the contact direction blends
+    between the local minima where the skin wraps around the tool (a dent) instead of jumping.
+    """
+    count = triangles.shape[0]
+    feature = np.empty(count, dtype=np.int64)
+    distance = np.empty(count)
+    ahead = np.empty(count)
+    fade = np.empty(count)
+    for c in range(probes.shape[0]):
+        p = (probes[c, 0] + shift[0], probes[c, 1] + shift[1], probes[c, 2] + shift[2])
+        nearest, nearest_d = -1, np.inf
+        inside = False
+        for t in range(count):  # closest points; the nearest triangle's outward face says whether p is inside
+            row = c * count + t
+            tri = skin[triangles[t]]
+            corners = x[tri]
+            q, feature[t] = closest_point_on_triangle(p, corners)
+            ox, oy, oz = q[0] - p[0], q[1] - p[1], q[2] - p[2]
+            dist = math.sqrt(ox * ox + oy * oy + oz * oz)
+            e1 = corners[1] - corners[0]
+            e2 = corners[2] - corners[0]
+            fx = e1[1] * e2[2] - e1[2] * e2[1]
+            fy = e1[2] * e2[0] - e1[0] * e2[2]
+            fz = e1[0] * e2[1] - e1[1] * e2[0]
+            fn = math.sqrt(fx * fx + fy * fy + fz * fz)
+            if dist > 1e-12:
+                normal[row, 0], normal[row, 1], normal[row, 2] = ox / dist, oy / dist, oz / dist
+            else:  # p on the triangle: the inward face normal
+                normal[row, 0], normal[row, 1], normal[row, 2] = -fx / fn, -fy / fn, -fz / fn
+            distance[t] = dist
+            point[row, 0], point[row, 1], point[row, 2] = q[0], q[1], q[2]
+            a, b, w = _barycentric(q, corners)
+            weights[row, 0], weights[row, 1], weights[row, 2] = a, b, w
+            for k in range(3):
+                nodes[row, k] = tri[k]
+            if dist < nearest_d:
+                nearest, nearest_d = t, dist
+                inside = dist > 1e-12 and ox * fx + oy * fy + oz * fz > 0.0  # q − p along the outward face
+        touching = False
+        for t in range(count):
+            row = c * count + t
+            dist = distance[t]
+            if inside:  # p exits through q: the nearest row is δ = radius + its distance, farther ones less
+                for k in range(3):
+                    normal[row, k] = -normal[row, k]
+                depth[row] = radius + 2.0 * nearest_d - dist
+            else:
+                depth[row] = radius - dist
+            nx, ny, nz = normal[row, 0], normal[row, 1], normal[row, 2]
+            rate = nx * tool_velocity[0] + ny * tool_velocity[1] + nz * tool_velocity[2]
+            for k in range(3):
+                n = nodes[row, k]
+                rate -= weights[row, k] * (nx * v[n, 0] + ny * v[n, 1] + nz * v[n, 2])
+            ahead[t] = max(depth[row] + dt * rate, 0.0)
+            fade[t] = _local_minimum(skin, triangles, feature, distance, t)
+            touching = touching or depth[row] > 0.0
+        total = 0.0
+        for t in range(count):  # shared by the rows touching now; by those touching after dt when none does
+            row = c * count + t
+            reach = max(depth[row], 0.0) if touching else ahead[t]
+            share[row] = fade[t] * reach * reach
+            total += share[row]
+        for t in range(count):
+            row = c * count + t
+            share[row] = share[row] / total if total > 0.0 else 0.0
+
+
+@numba.njit(cache=True)
+def surface_contacts(x, v, tool, shift, dt, f):
+    """Eq. 3 between the tool's probes (moved by `shift`) and the skin triangles (probe_geometry, shares
+    from a step of `dt`): each row pushes its closest point q with share·max(0, λ·δ + μ·δ̇)·n, δ̇ = n·(v_tool
+    − Σ w_a·v_a), spread over the triangle's nodes as w_a times that.  Returns the total force on the liver
+    (the tool feels its opposite); the rows' geometry is left in the tool's arrays."""
+    t = tool
+    probe_geometry(x, v, t.skin, t.triangles, t.probes, shift, t.radius_m, t.velocity_m_s, dt, t.nodes, t.weights,
+                   t.normal, t.depth, t.share, t.point)
+    tx, ty, tz = 0.0, 0.0, 0.0
+    for c in range(t.depth.shape[0]):
+        if not (t.share[c] > 0.0 and t.depth[c] > 0.0):
+            continue
+        nx, ny, nz = t.normal[c, 0], t.normal[c, 1], t.normal[c, 2]
+        rate = nx * t.velocity_m_s[0] + ny * t.velocity_m_s[1] + nz * t.velocity_m_s[2]
+        for k in range(3):
+            n = t.nodes[c, k]
+            rate -= t.weights[c, k] * (nx * v[n, 0] + ny * v[n, 1] + nz * v[n, 2])
+        magnitude = t.share[c] * max(0.0, t.stiffness_n_per_m * t.depth[c] + t.damping_ns_per_m * rate)
+        for k in range(3):
+            n = t.nodes[c, k]
+            g = t.weights[c, k] * magnitude
+            f[n, 0] += g * nx
+            f[n, 1] += g * ny
+            f[n, 2] += g * nz
+        tx += magnitude * nx
+        ty += magnitude * ny
+        tz += magnitude * nz
+    return np.array([tx, ty, tz])
+
+
+@numba.njit(cache=True, inline="always")
+def add_forces(x, v, external_force, springs, support, tool, work, shift, dt, contact):
+    """work.force ← external force + Eq. 1 spring forces + the support + Eq. 3 contact of the tool's probes moved
     by `shift`; the contact force on the liver (N) goes to `contact` (left alone without a tool)."""
     f = work.force
     f[:] = external_force
@@ -294,14 +352,8 @@ def add_forces(x, v, external_force, springs, support, tool, work, shift, contac
     else:
         spring_forces_serial(x, v, s.node_i, s.node_j, s.rest_m, s.lambda1_n, s.lambda2_n, s.mu_ns_per_m, f)
     support_forces(x, v, support.nodes, support.rest_m, support.stiffness_n_per_m, support.damping_ns_per_m, f)
-    t = tool
-    if t.kind == TOOL_BOX:
-        contact[:] = box_tool_contacts(x, v, t.candidates, t.core_a + shift, t.axes, t.half_extents_m,
-                                       t.velocity_m_s, t.stiffness_n_per_m, t.damping_ns_per_m, f, t.gap, t.point,
-                                       t.direction)
-    elif t.kind != TOOL_NONE:
-        contact[:] = round_tool_contacts(x, v, t.candidates, t.core_a, t.core_b, shift, t.radius_m, t.inward_point,
-                                         t.velocity_m_s, t.stiffness_n_per_m, t.damping_ns_per_m, f)
+    if tool.kind != TOOL_NONE:
+        contact[:] = surface_contacts(x, v, tool, shift, dt, f)
 
 
 @numba.njit(cache=True, nogil=True)
@@ -310,8 +362,8 @@ def run_frame(x, v, inv_mass, external_force, springs, support, settings, tool, 
 
     Runs without the GIL, so a node's executor thread keeps delivering messages meanwhile.
     `external_force` (N, 3) is added to every node each step.  Returns the contact force on the liver
-    at the last substep (N); the tool's reaction is its opposite.  For a box, the candidates' contact
-    geometry of the last substep is left in tool.gap/point/direction.
+    at the last substep (N); the tool's reaction is its opposite.  The probes' contact geometry of the
+    last substep is left in the tool's arrays.
     """
     contact = np.zeros(3)
     shift = np.zeros(3)
@@ -319,7 +371,7 @@ def run_frame(x, v, inv_mass, external_force, springs, support, settings, tool, 
     for step in range(settings.substeps):
         for k in range(3):
             shift[k] = tool.velocity_m_s[k] * ((step + 1) * dt)
-        add_forces(x, v, external_force, springs, support, tool, work, shift, contact)
+        add_forces(x, v, external_force, springs, support, tool, work, shift, dt, contact)
         integrate(x, v, work.force, inv_mass, dt, settings.environment_damping_per_s, settings.gravity_m_s2,
                   settings.symplectic)
     return contact

@@ -16,8 +16,9 @@ import numpy as np
 from liver_sim.local_model import LocalModel
 from liver_sim.mesh.tetmesh import TetMesh
 from liver_sim.physics import kernels
-from liver_sim.physics.contact import ToolPose, ToolShape, pull_local_model, surface_local_model, tool_state
-from liver_sim.physics.implicit import ImplicitEuler, box_node_contacts, round_tool_node_contacts
+from liver_sim.physics.contact import (ToolPose, ToolShape, contact_load, force_local_model, local_stiffness,
+                                      probe_contacts, pull_local_model, surface_contacts, tool_state)
+from liver_sim.physics.implicit import ImplicitEuler
 from liver_sim.physics.params import ModelParams
 from liver_sim.physics.springs import build_springs, estimate_stable_time_step, stable_time_step
 from liver_sim.physics.support import build_support
@@ -116,9 +117,9 @@ class LiverModel:
         threads = numba.get_num_threads() if self.parallel else 1
         self._work = kernels.WorkArrays(np.zeros_like(mesh.points), np.zeros((threads, len(mesh.points), 3)),
                                         self.parallel)
-        self._skin = np.ascontiguousarray(mesh.skin)
-        self._centre = mesh.points.mean(axis=0)
+        self._skin = np.ascontiguousarray(mesh.skin, dtype=np.int64)
         self._solver = ImplicitEuler(springs, len(mesh.points), support=self.support)
+        self._compliance_guess = np.zeros_like(mesh.points)
         self.hold(self.held_nodes)
 
     @property
@@ -221,9 +222,23 @@ class LiverModel:
             local_model = pull_local_model(pose, -liver_force, self.params.contact_stiffness_n_per_m,
                                            self.tool.radius_m)
         else:
-            local_model = surface_local_model(self.tool, pose, tool, self.positions, self._skin,
-                                              self.local_model_reach_m, self.local_model_kind)
+            local_model = force_local_model(self.tool, pose, tool, -liver_force, self.local_stiffness_n_per_m(tool),
+                                            self.local_model_reach_m, self.local_model_kind, self.positions)
         return FrameResult(self.time_s, -liver_force, local_model, None, torn, failure)
+
+    def local_stiffness_n_per_m(self, tool: kernels.ToolState) -> float:
+        """K of the local model under the tool (contact.local_stiffness): the penalty of the touching
+        probes in series with the tissue's static compliance under their push (contact.contact_load), from
+        the tangent stiffness of the springs at the current state with the fixed and held nodes held
+        (ImplicitEuler.compliance, warm-started from the last frame's solution); the penalty alone when
+        no probe is within reach."""
+        load, probes = contact_load(tool, len(self.positions))
+        penalty = self.params.contact_stiffness_n_per_m
+        if probes == 0.0:
+            return penalty
+        compliance = self._solver.compliance(self.positions, self.inv_mass, load, self.params.environment_damping_per_s,
+                                             self._compliance_guess)
+        return local_stiffness(penalty, probes, compliance)
 
     def _detector(self) -> TearDetector:
         """The TearDetector of the current mesh and thresholds (rebuilt when either changes)."""
@@ -263,36 +278,24 @@ class LiverModel:
 
     def _tool_state(self, pose: ToolPose | None) -> kernels.ToolState:
         return tool_state(self.tool, pose, self._previous_pose, self.params, self.local_model_reach_m,
-                          self.positions, self.mesh.skin_nodes, self._centre)
+                          self.positions, self._skin)
 
     def _implicit_frame(self, tool: kernels.ToolState, substeps: int) -> np.ndarray:
-        """`substeps` backward-Euler steps with the tool's contacts taken where its core is at the end of
-        each step (implicit.round_tool_node_contacts, implicit.box_node_contacts); for a box, the
-        candidates' contact geometry at the end is left in tool.gap/point/direction (as run_frame does).
-        Returns the contact force on the liver at the end (N)."""
+        """`substeps` backward-Euler steps with the tool's contacts with the skin triangles taken where its
+        probes are at the end of each step (contact.surface_contacts); the probes' geometry at the end is
+        left in the tool's arrays (as run_frame does).  Returns the contact force on the liver at the end (N)."""
         params = self.params
         dt = params.dt_s
         gravity = np.asarray(params.gravity_m_s2, dtype=np.float64)
         x, v = self.positions, self.velocities
         liver_force = np.zeros(3)
         for step in range(substeps):
-            shift = tool.velocity_m_s * ((step + 1) * dt)
-            if tool.kind == kernels.TOOL_NONE:
-                contacts = None
-            elif tool.kind == kernels.TOOL_BOX:
-                contacts = box_node_contacts(x, v, tool.candidates, tool.core_a + shift, tool.axes,
-                                             tool.half_extents_m, tool.velocity_m_s, dt, tool.stiffness_n_per_m,
-                                             tool.damping_ns_per_m)
-            else:
-                contacts = round_tool_node_contacts(x, v, tool.candidates, tool.core_a + shift, tool.core_b + shift,
-                                                    tool.radius_m, tool.inward_point, tool.velocity_m_s, dt,
-                                                    tool.stiffness_n_per_m, tool.damping_ns_per_m)
+            contacts = None if tool.kind == kernels.TOOL_NONE else surface_contacts(
+                x, v, tool, tool.velocity_m_s * ((step + 1) * dt), dt)
             liver_force = self._solver.step(x, v, self.inv_mass, self.external_forces_n, dt,
                                             params.environment_damping_per_s, gravity, contacts)
-        if tool.kind == kernels.TOOL_BOX:  # the contact geometry the box's local model is fitted to
-            kernels.box_tool_contacts(x, v, tool.candidates, tool.core_a + tool.velocity_m_s * (substeps * dt),
-                                      tool.axes, tool.half_extents_m, tool.velocity_m_s, tool.stiffness_n_per_m,
-                                      tool.damping_ns_per_m, np.zeros_like(x), tool.gap, tool.point, tool.direction)
+        if tool.kind != kernels.TOOL_NONE:  # the contact geometry the local model is fitted to
+            probe_contacts(x, v, tool, tool.velocity_m_s * (substeps * dt), dt)
         return liver_force
 
     def _spring_forces(self) -> None:
