@@ -129,18 +129,31 @@ def _save(fig, path: Path, plt) -> None:
     plt.close(fig)
 
 
-def _plot_force(data: dict, path: Path) -> None:
+def plot_force(data: dict, path: Path, title: str = "Force over time") -> None:
+    """|force| over time: the 1 kHz commands and the 150 Hz physics contact force (markers); a second panel
+    zooms on 0.1 s of contact, where the command meets the physics force at every update."""
+    from liver_sim.analysis import CONTACT_FORCE_N
+
     plt = _plots()
-    fig, ax = plt.subplots(figsize=(8, 4.2), dpi=110)
+    fig, axes = plt.subplots(2, 1, figsize=(8, 7), dpi=110)
     colours = {"local_model": "tab:red", "without_local_model": "tab:orange"}
-    for label, (t, f) in data["forces"].items():
-        ax.plot(t, np.linalg.norm(f, axis=1), color=colours[label], linewidth=0.8,
-                label=f"force command, {label.replace('_', ' ')}")
     wt, w = data["wrench"]
-    if len(wt):
-        ax.plot(wt, np.linalg.norm(w, axis=1), ".", color="tab:blue", markersize=2, label="physics contact force")
-    ax.set(xlabel="time (s)", ylabel="|force| (N)", title="Force over time")
-    ax.legend(loc="upper right", fontsize=8)
+    for ax in axes:
+        for label, (t, f) in data["forces"].items():
+            ax.plot(t, np.linalg.norm(f, axis=1), color=colours[label], linewidth=0.8,
+                    label=f"force command, {label.replace('_', ' ')}")
+        if len(wt):
+            ax.plot(wt, np.linalg.norm(w, axis=1), "o", color="tab:blue", markersize=2.5,
+                    label="physics contact force (150 Hz)")
+        ax.set(xlabel="time (s)", ylabel="|force| (N)")
+    axes[0].set_title(title)
+    axes[0].legend(loc="upper right", fontsize=8)
+    contact = wt[np.linalg.norm(w, axis=1) > CONTACT_FORCE_N] if len(wt) else wt
+    if len(contact):
+        middle = contact[len(contact) // 2]
+        axes[1].set_xlim(middle - 0.05, middle + 0.05)
+        axes[1].relim()
+        axes[1].set_title("0.1 s in contact: the command meets the physics force at each update")
     _save(fig, path, plt)
 
 
@@ -186,7 +199,7 @@ def _plot_rates(data: dict, topics: list[str], path: Path) -> None:
     _save(fig, path, plt)
 
 
-def _plot_fig8(data: dict, path: Path) -> None:
+def plot_fig8(data: dict, path: Path) -> None:
     from liver_sim.analysis import CONTACT_FORCE_N
 
     plt = _plots()
@@ -210,7 +223,7 @@ def _plot_fig8(data: dict, path: Path) -> None:
 
 def write_report(bag: Path, out: Path, progress=print) -> dict:
     """Read the bag, write the PNGs and summary.json/.md into `out`; return the summary."""
-    from liver_sim.analysis import contact_fraction, largest_force_jump_n, rate_figures
+    from liver_sim.analysis import contact_fraction, fig8_figures, largest_force_jump_n, rate_figures
     from liver_sim.sessions.parameters import node_parameters
     from msg_defs.topics import TOPICS
 
@@ -234,7 +247,7 @@ def write_report(bag: Path, out: Path, progress=print) -> dict:
         latest[name] = kv
     summary["diagnostics_last"] = latest
     if data["forces"] or len(data["wrench"][0]):
-        _plot_force(data, out / "force.png")
+        plot_force(data, out / "force.png")
         figures.append("force.png")
     summary["forces"] = {label: {"commands": len(f), "peak_n": float(np.linalg.norm(f, axis=1).max()),
                                  "contact_fraction": contact_fraction(f),
@@ -259,11 +272,8 @@ def write_report(bag: Path, out: Path, progress=print) -> dict:
         _plot_rates(data, rate_topics, out / "loop_rates.png")
         figures.append("loop_rates.png")
     if {"local_model", "without_local_model"} <= set(data["forces"]):
-        with_lm = summary["forces"]["local_model"]["largest_jump_in_contact_n"]
-        without = summary["forces"]["without_local_model"]["largest_jump_in_contact_n"]
-        summary["fig8"] = {"largest_jump_with_local_model_n": with_lm, "largest_jump_without_local_model_n": without,
-                           "smoothness_ratio": without / with_lm if with_lm > 0 else None}
-        _plot_fig8(data, out / "fig8.png")
+        summary["fig8"] = fig8_figures(data["forces"]["local_model"][1], data["forces"]["without_local_model"][1])
+        plot_fig8(data, out / "fig8.png")
         figures.append("fig8.png")
     else:
         summary["fig8"] = None
