@@ -380,7 +380,7 @@ def test_ros_commands_keep_dds_on_this_machine_unless_told():
 def test_fig8_offline_on_the_exploration_shows_the_held_force_stepping_at_physics_updates(tmp_path):
     from liver_sim.sessions.fig8 import exploration_fig8
 
-    figures = exploration_fig8(tmp_path, duration_s=1.8)  # the first taps
+    figures = exploration_fig8(tmp_path, duration_s=2.2)  # the first taps
     assert figures["largest_jump_without_local_model_n"] > 0.0 and figures["largest_jump_with_local_model_n"] > 0.0
     assert 0.0 < figures["smoothness_ratio"] < float("inf")
     steps = figures["baseline_steps"]

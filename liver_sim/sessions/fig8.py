@@ -9,6 +9,10 @@ from pathlib import Path
 import numpy as np
 
 
+#: Wait (s) before the exploration offline: both bridges' soft start (soft_start_s, 0.2 s) is over at the first tap.
+EXPLORE_DELAY_S = 0.5
+
+
 def baseline_step_ticks(command_s: np.ndarray, baseline_n: np.ndarray, wrench_s: np.ndarray, count: int = 5) -> dict:
     """Where the held physics force's `count` largest changes between consecutive commands occur: their tick
     times (s) and whether each is the first tick at or after a physics update (`wrench_s`, s)."""
@@ -22,14 +26,14 @@ def baseline_step_ticks(command_s: np.ndarray, baseline_n: np.ndarray, wrench_s:
 def exploration_fig8(out: Path | None = None, overrides=(), duration_s: float | None = None,
                      progress=lambda line: None) -> dict:
     """Fig. 8's figures (analysis.fig8_figures) of the explore script, played for `duration_s` (default: once)
-    with parameter `overrides`, and where the baseline steps (:func:`baseline_step_ticks`); with `out`, writes
+    after EXPLORE_DELAY_S, with parameter `overrides`, and where the baseline steps (:func:`baseline_step_ticks`); with `out`, writes
     fig8.png, force.png and fig8.json there."""
     from liver_sim.analysis import fig8_figures
     from liver_sim.sessions.report import plot_fig8, plot_force
     from liver_sim.sessions.resimulate import play_script
-    from liver_sim.tool_scripts import make_script
+    from liver_sim.tool_scripts import ScriptSettings, make_script
 
-    script = make_script("explore")
+    script = make_script("explore", ScriptSettings(start_delay_s=EXPLORE_DELAY_S))
     duration_s = script.duration_s if duration_s is None else duration_s
     progress(f"playing the explore script for {duration_s:.2f} s offline, with and without the local model")
     run = play_script(script, duration_s, overrides, progress)

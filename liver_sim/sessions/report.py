@@ -129,6 +129,16 @@ def _save(fig, path: Path, plt) -> None:
     plt.close(fig)
 
 
+def _zoom(ax, centre_s: float, half_width_s: float, series) -> None:
+    """Limit `ax` to centre_s ± half_width_s (s) and to the range of the (t, y) `series` inside it."""
+    inside = [y[(t >= centre_s - half_width_s) & (t <= centre_s + half_width_s)] for t, y in series]
+    values = np.concatenate(inside) if inside else np.zeros(0)
+    ax.set_xlim(centre_s - half_width_s, centre_s + half_width_s)
+    if values.size:
+        margin = 0.1 * max(float(np.ptp(values)), 0.01)
+        ax.set_ylim(float(values.min()) - margin, float(values.max()) + margin)
+
+
 def plot_force(data: dict, path: Path, title: str = "Force over time") -> None:
     """|force| over time: the 1 kHz commands and the 150 Hz physics contact force (markers); a second panel
     zooms on 0.1 s of contact, where the command meets the physics force at every update."""
@@ -138,22 +148,18 @@ def plot_force(data: dict, path: Path, title: str = "Force over time") -> None:
     fig, axes = plt.subplots(2, 1, figsize=(8, 7), dpi=110)
     colours = {"local_model": "tab:red", "without_local_model": "tab:orange"}
     wt, w = data["wrench"]
+    series = [(t, np.linalg.norm(f, axis=1)) for t, f in data["forces"].values()] + [(wt, np.linalg.norm(w, axis=1))]
     for ax in axes:
-        for label, (t, f) in data["forces"].items():
-            ax.plot(t, np.linalg.norm(f, axis=1), color=colours[label], linewidth=0.8,
-                    label=f"force command, {label.replace('_', ' ')}")
+        for label, (t, norm) in zip(data["forces"], series):
+            ax.plot(t, norm, color=colours[label], linewidth=0.8, label=f"force command, {label.replace('_', ' ')}")
         if len(wt):
-            ax.plot(wt, np.linalg.norm(w, axis=1), "o", color="tab:blue", markersize=2.5,
-                    label="physics contact force (150 Hz)")
+            ax.plot(wt, series[-1][1], "o", color="tab:blue", markersize=2.5, label="physics contact force (150 Hz)")
         ax.set(xlabel="time (s)", ylabel="|force| (N)")
     axes[0].set_title(title)
     axes[0].legend(loc="upper right", fontsize=8)
-    contact = wt[np.linalg.norm(w, axis=1) > CONTACT_FORCE_N] if len(wt) else wt
-    if len(contact):
-        middle = contact[len(contact) // 2]
-        axes[1].set_xlim(middle - 0.05, middle + 0.05)
-        axes[1].relim()
-        axes[1].set_title("0.1 s in contact: the command meets the physics force at each update")
+    if len(wt) and series[-1][1].max() > CONTACT_FORCE_N:
+        _zoom(axes[1], float(wt[np.argmax(series[-1][1])]), 0.05, series)  # around the peak physics force
+        axes[1].set_title("0.1 s in contact: the 1 kHz command and the physics force at each update")
     _save(fig, path, plt)
 
 
@@ -200,23 +206,23 @@ def _plot_rates(data: dict, topics: list[str], path: Path) -> None:
 
 
 def plot_fig8(data: dict, path: Path) -> None:
+    """Fig. 8: |command| with and without the local model; a second panel zooms on 0.1 s around the baseline's
+    largest step in contact."""
     from liver_sim.analysis import CONTACT_FORCE_N
 
     plt = _plots()
     (t1, f1), (t0, f0) = data["forces"]["local_model"], data["forces"]["without_local_model"]
     n1, n0 = np.linalg.norm(f1, axis=1), np.linalg.norm(f0, axis=1)
-    newest = np.clip(np.searchsorted(t0, t1, side="right") - 1, 0, None)
-    contact = t1[(n1 > CONTACT_FORCE_N) & (n0[newest] > CONTACT_FORCE_N)] if len(t0) else t1[:0]
+    steps = np.abs(np.diff(n0)) * ((n0[1:] > CONTACT_FORCE_N) & (n0[:-1] > CONTACT_FORCE_N))
     fig, axes = plt.subplots(2, 1, figsize=(8, 6), dpi=110)
     for ax in axes:
         ax.plot(t0, n0, color="tab:orange", linewidth=0.8, label="without local model (physics force held)")
         ax.plot(t1, n1, color="tab:red", linewidth=0.8, label="with local model")
         ax.set(xlabel="time (s)", ylabel="|force| (N)")
     axes[0].set_title("Fig. 8: force sent to the device with and without the local model")
-    if contact.size:
-        middle = contact[len(contact) // 2]
-        axes[1].set_xlim(middle - 0.1, middle + 0.1)
-        axes[1].set_title("0.2 s where both are in contact")
+    if steps.size and steps.max() > 0.0:
+        _zoom(axes[1], float(t0[np.argmax(steps) + 1]), 0.05, [(t0, n0), (t1, n1)])
+        axes[1].set_title("0.1 s around the largest step of the held physics force in contact")
     axes[0].legend(loc="upper right", fontsize=8)
     _save(fig, path, plt)
 
