@@ -148,17 +148,18 @@ def plot_force(data: dict, path: Path, title: str = "Force over time") -> None:
     fig, axes = plt.subplots(2, 1, figsize=(8, 7), dpi=110)
     colours = {"local_model": "tab:red", "without_local_model": "tab:orange"}
     wt, w = data["wrench"]
-    series = [(t, np.linalg.norm(f, axis=1)) for t, f in data["forces"].values()] + [(wt, np.linalg.norm(w, axis=1))]
+    physics = np.linalg.norm(np.reshape(w, (-1, 3)), axis=1)
+    series = [(t, np.linalg.norm(f, axis=1)) for t, f in data["forces"].values()] + [(wt, physics)]
     for ax in axes:
         for label, (t, norm) in zip(data["forces"], series):
             ax.plot(t, norm, color=colours[label], linewidth=0.8, label=f"force command, {label.replace('_', ' ')}")
         if len(wt):
-            ax.plot(wt, series[-1][1], "o", color="tab:blue", markersize=2.5, label="physics contact force (150 Hz)")
+            ax.plot(wt, physics, "o", color="tab:blue", markersize=2.5, label="physics contact force (150 Hz)")
         ax.set(xlabel="time (s)", ylabel="|force| (N)")
     axes[0].set_title(title)
     axes[0].legend(loc="upper right", fontsize=8)
-    if len(wt) and series[-1][1].max() > CONTACT_FORCE_N:
-        _zoom(axes[1], float(wt[np.argmax(series[-1][1])]), 0.05, series)  # around the peak physics force
+    if len(wt) and physics.max() > CONTACT_FORCE_N:
+        _zoom(axes[1], float(wt[np.argmax(physics)]), 0.05, series)  # around the peak physics force
         axes[1].set_title("0.1 s in contact: the 1 kHz command and the physics force at each update")
     _save(fig, path, plt)
 
