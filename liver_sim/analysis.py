@@ -61,3 +61,14 @@ def held_wrench_baseline(tick_s: np.ndarray, wrench_arrival_s: np.ndarray, wrenc
         source, source_age = (wrench_n[w], t - wrench_arrival_s[w]) if w >= 0 else (None, np.inf)
         commands[k] = tick.step(t, None, t - pose_arrival_s[p] if p >= 0 else np.inf, source, source_age)
     return commands
+
+
+def fig8_figures(with_local_model_n: np.ndarray, without_local_model_n: np.ndarray, times_s: np.ndarray | None = None,
+                 max_period_s: float | None = None) -> dict:
+    """Fig. 8 as numbers: the largest change (N) between consecutive commands in contact with and without the
+    local model (:func:`largest_force_jump_n`, `times_s`/`max_period_s` as there) and their ratio, the
+    smoothness ratio (without / with; None when nothing changed with the local model)."""
+    with_lm = largest_force_jump_n(with_local_model_n, times_s=times_s, max_period_s=max_period_s)
+    without = largest_force_jump_n(without_local_model_n, times_s=times_s, max_period_s=max_period_s)
+    return {"largest_jump_with_local_model_n": with_lm, "largest_jump_without_local_model_n": without,
+            "smoothness_ratio": without / with_lm if with_lm > 0 else None}

@@ -286,11 +286,11 @@ def loop_run(duration_s: float, log_dir, progress=None, observers: dict | None =
     network (NetworkPlan.observers), e.g. a recorder; `extra_load` core-bound processes at normal priority
     beside it (network.run_network).
     """
-    from liver_sim.analysis import contact_fraction, held_wrench_baseline, largest_force_jump_n, rate_figures
+    from liver_sim.analysis import contact_fraction, fig8_figures, held_wrench_baseline, rate_figures
     from liver_sim.network import closed_loop_plan, run_network
     from liver_sim.sessions.parameters import node_parameters
 
-    plan = closed_loop_plan(extra={"phantom_sim": {"loop_script": True}})
+    plan = closed_loop_plan(extra={"phantom_sim": {"loop_script": True, "script": "explore"}})
     plan.observers.update(observers or {})
     load_before = os.getloadavg()
     snapshot = run_network(plan, duration_s, log_dir, progress or (lambda line: None), extra_load=extra_load)
@@ -305,8 +305,7 @@ def loop_run(duration_s: float, log_dir, progress=None, observers: dict | None =
     baseline = held_wrench_baseline(sent_local, snapshot["wrench_arrival_s"], snapshot["wrench_n"],
                                     snapshot["tool_arrival_s"], node_parameters(())["haptic_bridge"])
     nodes_sent = snapshot["nodes_published_s"]
-    jump_local = largest_force_jump_n(force, times_s=sent_local, max_period_s=FIG8_MAX_PERIOD_S)
-    jump_none = largest_force_jump_n(baseline, times_s=sent_local, max_period_s=FIG8_MAX_PERIOD_S)
+    fig8 = fig8_figures(force, baseline, sent_local, FIG8_MAX_PERIOD_S)
     figures = {
         "physics_on_wire": rate_figures(nodes_sent[(nodes_sent >= start) & (nodes_sent <= end)], 150.0),
         "haptic_on_wire": rate_figures(sent_local, 1000.0),
@@ -314,10 +313,11 @@ def loop_run(duration_s: float, log_dir, progress=None, observers: dict | None =
         "pose_to_force_p50_s": float(np.percentile(latency, 50)) if latency.size else None,
         "pose_to_force_p99_s": float(np.percentile(latency, 99)) if latency.size else None,
         "contact_fraction": contact_fraction(force),
-        "largest_jump_with_local_model_n": jump_local,
-        "largest_jump_without_local_model_n": jump_none,
+        "largest_jump_with_local_model_n": fig8["largest_jump_with_local_model_n"],
+        "largest_jump_without_local_model_n": fig8["largest_jump_without_local_model_n"],
+        "fig8_script": "explore",
         "fig8_baseline": "offline: BridgeTick(local_model none) at the live bridge's tick times",
-        "fig8_smoothness_ratio": jump_none / jump_local if jump_local > 0 else None,
+        "fig8_smoothness_ratio": fig8["smoothness_ratio"],
     }
     physics, haptic = figures["physics_on_wire"], figures["haptic_on_wire"]
     t = LOOP_TARGETS

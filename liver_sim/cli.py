@@ -22,8 +22,8 @@ from liver_sim.mesh.liver_shape import build_liver, default_liver
 from liver_sim.mesh.tetmesh import TetMesh
 from liver_sim.processes import DISCOVERY_RANGES, NodeFailure, keep_dds_local
 from liver_sim.sessions.bag import STORAGES
-from liver_sim.sessions.cli import (add_bag_command, add_bench_record_parser, add_record_command, add_replay_command,
-                                   add_report_command, add_resimulate_command)
+from liver_sim.sessions.cli import (add_bag_command, add_bench_record_parser, add_fig8_command, add_record_command,
+                                   add_replay_command, add_report_command, add_resimulate_command)
 
 PROG = "liver-sim"
 #: Exit status of a command that refused its input.
@@ -312,7 +312,8 @@ def demo(args) -> int:
 
 #: The subcommands, in the order `liver-sim --help` lists them.
 COMMANDS = (add_mesh_command, add_traction_command, add_validate_command, add_bench_command, add_demo_command,
-            add_record_command, add_replay_command, add_resimulate_command, add_report_command, add_bag_command)
+            add_record_command, add_replay_command, add_resimulate_command, add_fig8_command, add_report_command,
+            add_bag_command)
 
 
 def build_parser() -> argparse.ArgumentParser:

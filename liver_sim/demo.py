@@ -349,22 +349,11 @@ def _network_markdown(summary: dict, title: str) -> str:
 
 
 def _plot_network_forces(snapshot: dict, title: str, path: Path) -> None:
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    """The report's force plot (sessions.report.plot_force: 1 kHz commands, 150 Hz physics force as markers,
+    a zoom on contact where they meet at each update) of what the listener received, titled `title`."""
+    from liver_sim.sessions.report import plot_force
 
     arrival, force = snapshot["forces"]["local_model"]
     origin = min([a[0] for a in (arrival, snapshot["wrench_arrival_s"]) if len(a)], default=0.0)
-    fig, ax = plt.subplots(figsize=(8, 4.2), dpi=110)
-    ax.plot(arrival - origin, np.linalg.norm(force, axis=1), color="tab:red", linewidth=0.8,
-            label="force command to the device, 1 kHz (local model)")
-    if len(snapshot["wrench_n"]):
-        ax.plot(snapshot["wrench_arrival_s"] - origin, np.linalg.norm(snapshot["wrench_n"], axis=1), ".",
-                color="tab:blue", markersize=2, label="physics contact force, 150 Hz")
-    ax.set_xlabel("time (s)")
-    ax.set_ylabel("force (N)")
-    ax.set_title(title)
-    ax.legend(loc="upper right", fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path)
-    plt.close(fig)
+    plot_force({"forces": {"local_model": (arrival - origin, force)},
+                "wrench": (snapshot["wrench_arrival_s"] - origin, snapshot["wrench_n"])}, path, title)

@@ -19,7 +19,7 @@ import numpy as np
 from liver_sim.parameters import Param, vector_parameter
 
 #: Every script name, for parameter choices.
-SCRIPT_NAMES = ("press", "press_release", "slide", "withdraw", "press_slide_release", "hold", "pull")
+SCRIPT_NAMES = ("press", "press_release", "slide", "withdraw", "press_slide_release", "hold", "pull", "explore")
 #: Orientation of a scripted tool: the liver frame's.
 IDENTITY_XYZW = (0.0, 0.0, 0.0, 1.0)
 
@@ -41,6 +41,7 @@ class ScriptSettings:
     withdraw_s: float = 0.3
     rest_s: float = 1.0
     start_delay_s: float = 0.0
+    hand_speed_m_s: float = 0.15
     loop: bool = False
 
 
@@ -87,11 +88,48 @@ def _checked(settings: ScriptSettings) -> np.ndarray:
     if anchor.shape != (3,) or not np.isfinite(anchor).all():
         raise ValueError(f"parameter anchor_m must be a finite [x, y, z] (m), got {settings.anchor_m!r}")
     for name in ("tool_radius_m", "depth_m", "clearance_m", "slide_m", "pull_m", "approach_s", "press_s", "hold_s",
-                 "slide_s", "withdraw_s", "rest_s", "start_delay_s"):
+                 "slide_s", "withdraw_s", "rest_s", "start_delay_s", "hand_speed_m_s"):
         value = getattr(settings, name)
         if not (math.isfinite(value) and value >= 0.0):
             raise ValueError(f"parameter {name} must be finite and >= 0, got {value!r}")
+    if not settings.hand_speed_m_s > 0.0:
+        raise ValueError(f"parameter hand_speed_m_s must be > 0, got {settings.hand_speed_m_s!r}")
     return anchor
+
+
+#: The exploration's taps, (x, y) offsets (m) from the anchor, and its pause (s) at the bottom of a tap.
+EXPLORE_TAPS_M = ((0.0, 0.0), (0.015, 0.0), (-0.012, 0.01), (0.0, -0.015), (0.01, 0.012))
+EXPLORE_PAUSE_S = 0.1
+#: Strokes move at this share of the hand speed (slower than the taps, as a hand feels along a surface).
+EXPLORE_STROKE_SPEED = 0.6
+
+
+def _explore_moves(anchor: np.ndarray, s: ScriptSettings) -> list:
+    """The `explore` script's moves [(duration s, point)], each eased segment timed so that its peak speed,
+    π·|Δ|/(2·T) for a cosine-eased move of length |Δ| over T, is `hand_speed_m_s` (taps) or
+    EXPLORE_STROKE_SPEED times it (strokes in contact)."""
+    up_z, deep_z = s.tool_radius_m + s.clearance_m, s.tool_radius_m - s.depth_m
+    moves, here = [], anchor + [0.0, 0.0, up_z]
+
+    def go(offset_xy, dz, speed):
+        nonlocal here
+        point = anchor + [offset_xy[0], offset_xy[1], dz]
+        moves.append((math.pi * float(np.linalg.norm(point - here)) / (2.0 * speed), point))
+        here = point
+
+    for offset in EXPLORE_TAPS_M:  # move over the spot, tap it, lift
+        go(offset, up_z, s.hand_speed_m_s)
+        go(offset, deep_z, s.hand_speed_m_s)
+        moves.append((EXPLORE_PAUSE_S, here))
+        go(offset, up_z, s.hand_speed_m_s)
+    half, stroke = s.slide_m / 2.0, EXPLORE_STROKE_SPEED * s.hand_speed_m_s
+    go((-half, 0.0), up_z, s.hand_speed_m_s)  # strokes: along −x → +x, across to −y, back to the start, lift
+    go((-half, 0.0), deep_z, s.hand_speed_m_s)
+    for offset in ((half, 0.0), (0.0, -half), (-half, 0.0)):
+        go(offset, deep_z, stroke)
+    go((-half, 0.0), up_z, s.hand_speed_m_s)
+    go((0.0, 0.0), up_z, s.hand_speed_m_s)
+    return moves
 
 
 def make_script(name: str, settings: ScriptSettings = ScriptSettings()) -> ScriptedTrajectory:
@@ -105,7 +143,10 @@ def make_script(name: str, settings: ScriptSettings = ScriptSettings()) -> Scrip
       above the start during `rest_s` (so it loops smoothly);
     - withdraw: from depth back to clearance, rest;
     - pull: press, hold, then pull `pull_m` back along +z during `slide_s` and stay there (a grasped
-      tool tearing the tissue: see the physics node's `tool_mode: grasp`).
+      tool tearing the tissue: see the physics node's `tool_mode: grasp`);
+    - explore: a hand exploring the surface at `hand_speed_m_s` (Fig. 8): taps `depth_m` deep at the
+      EXPLORE_TAPS_M spots around the anchor, then strokes in contact along a triangle of side about
+      `slide_m` at depth, and back above the anchor (it loops smoothly); the durations follow from the speed.
 
     Unknown names raise ValueError naming the parameter `script`; `loop` with a script that
     does not end where it starts raises ValueError naming `loop_script`.
@@ -126,6 +167,7 @@ def make_script(name: str, settings: ScriptSettings = ScriptSettings()) -> Scrip
                                              (s.rest_s, up)]),
         "withdraw": (deep, [(s.withdraw_s, up), (s.rest_s, up)]),
         "pull": (up, press + [(s.slide_s, deep + [0.0, 0.0, s.pull_m]), (s.rest_s, deep + [0.0, 0.0, s.pull_m])]),
+        "explore": (up, _explore_moves(anchor, s)),
     }
     if name not in legs:
         raise ValueError(f"parameter script={name!r} is not a script; one of {', '.join(SCRIPT_NAMES)}")
@@ -136,7 +178,7 @@ def make_script(name: str, settings: ScriptSettings = ScriptSettings()) -> Scrip
     trajectory = ScriptedTrajectory(name, times, points, s.loop)
     if s.loop and not trajectory.cyclic:
         raise ValueError(f"parameter loop_script: script {name!r} does not end where it starts, so it cannot "
-                         f"loop; use press_release, slide, press_slide_release or hold")
+                         f"loop; use press_release, slide, press_slide_release, explore or hold")
     return trajectory
 
 
@@ -161,7 +203,9 @@ SCRIPT_PARAMETERS = {
     "slide_s": Param(_DEFAULT.slide_s, "each slide along x, or the pull (s)", *_SEGMENT_S),
     "withdraw_s": Param(_DEFAULT.withdraw_s, "depth → clearance (s)", *_SEGMENT_S),
     "rest_s": Param(_DEFAULT.rest_s, "rest at clearance after the release (s)", *_SEGMENT_S),
-    "loop_script": Param(False, "repeat the script (press_release, slide, press_slide_release, hold)"),
+    "hand_speed_m_s": Param(_DEFAULT.hand_speed_m_s, "peak speed of the tip in each move of script explore (m/s)",
+                            0.001, 1.0),
+    "loop_script": Param(False, "repeat the script (press_release, slide, press_slide_release, explore, hold)"),
 }
 
 
@@ -171,5 +215,5 @@ def script_from(values: dict) -> ScriptedTrajectory:
         anchor_m=tuple(vector_parameter(values, "anchor_m", 3)), loop=values["loop_script"],
         **{name: values[name] for name in ("tool_radius_m", "depth_m", "clearance_m", "slide_m", "pull_m",
                                            "start_delay_s", "approach_s", "press_s", "hold_s", "slide_s",
-                                           "withdraw_s", "rest_s")})
+                                           "withdraw_s", "rest_s", "hand_speed_m_s")})
     return make_script(values["script"], settings)

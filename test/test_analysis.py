@@ -62,3 +62,17 @@ def test_process_costs_are_shares_of_a_core_and_switches_per_second():
     after = {"a": {"cpu_s": 1.5, "voluntary": 1010, "involuntary": 22}, "gone": None}
     assert process_costs(before, after, 2.0) == {"a": {"cpu_share_of_one_core": 0.25, "voluntary_switches_per_s": 500.0,
                                                        "involuntary_switches_per_s": 10.0}}
+
+
+def test_fig8_figures_compare_the_held_force_with_the_rendered_one():
+    from liver_sim.analysis import fig8_figures
+
+    t = np.arange(300) * 1e-3
+    rendered = np.zeros((300, 3))
+    rendered[:, 2] = 0.2 + 2.0 * t                                    # a ramp at 1 kHz: 2 mN per tick
+    held = rendered[(np.floor(t * 150) / 150 * 1000).astype(int)]     # held between 150 Hz updates
+    figures = fig8_figures(rendered, held)
+    assert np.isclose(figures["largest_jump_with_local_model_n"], 0.002)
+    assert figures["largest_jump_without_local_model_n"] > 0.012      # steps of 6-7 ticks' worth
+    assert np.isclose(figures["smoothness_ratio"], figures["largest_jump_without_local_model_n"] / 0.002)
+    assert fig8_figures(held[:1], held)["smoothness_ratio"] is None   # nothing rendered: no ratio

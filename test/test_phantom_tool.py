@@ -224,3 +224,23 @@ def test_matrix_to_quaternion_inverts_quaternion_to_matrix(q):
 def test_all_script_names_build():
     for name in SCRIPT_NAMES:
         assert make_script(name, SETTINGS).name == name
+
+
+def test_explore_taps_and_strokes_the_surface_at_hand_speed():
+    trajectory = make_script("explore", SETTINGS)
+    assert trajectory.cyclic
+    times, points = sampled(trajectory)
+    starts, ends = trajectory.times_s[:-1], trajectory.times_s[1:]
+    middles = ((starts + ends) / 2)[ends - starts > 1e-3]  # an eased move is fastest half-way
+    peaks = np.array([np.linalg.norm(trajectory.position_at(t + 5e-4) - trajectory.position_at(t - 5e-4)) / 1e-3
+                      for t in middles])
+    moving = peaks[peaks > 1e-6]
+    assert len(moving) >= 20 and np.all((moving >= 0.05) & (moving <= 0.2)), moving  # every move at hand speed
+    deep = points[:, 2] <= DEEP_Z + 1e-9
+    tapped = {tuple(np.round(p[:2], 4)) for p in points[deep]}
+    assert len(tapped) > 5 and points[:, 2].min() == pytest.approx(DEEP_Z)  # presses depth_m at several places
+    stroke = np.flatnonzero(deep)
+    in_contact_travel = np.linalg.norm(np.diff(points[stroke, :2], axis=0), axis=1)
+    assert in_contact_travel[np.diff(stroke) == 1].sum() > 2 * SETTINGS.slide_m  # strokes along the surface at depth
+    with pytest.raises(ValueError, match="hand_speed_m_s"):
+        make_script("explore", replace(SETTINGS, hand_speed_m_s=0.0))

@@ -375,3 +375,17 @@ def test_ros_commands_keep_dds_on_this_machine_unless_told():
     env = {"ROS_AUTOMATIC_DISCOVERY_RANGE": "SUBNET", "ROS_DOMAIN_ID": "42"}
     assert keep_dds_local(None, env) == "ROS_DOMAIN_ID=42, ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET (environment)"
     assert "SUBNET (--discovery-range)" in keep_dds_local("SUBNET", {})
+
+
+def test_fig8_offline_on_the_exploration_shows_the_held_force_stepping_at_physics_updates(tmp_path):
+    from liver_sim.sessions.fig8 import exploration_fig8
+
+    figures = exploration_fig8(tmp_path, duration_s=2.2)  # the first taps
+    assert figures["largest_jump_without_local_model_n"] > 0.0 and figures["largest_jump_with_local_model_n"] > 0.0
+    assert 0.0 < figures["smoothness_ratio"] < float("inf")
+    steps = figures["baseline_steps"]
+    assert all(steps["at_physics_update"]), steps  # the held physics force steps when a frame arrives
+    assert steps["jump_n"][0] >= figures["largest_jump_without_local_model_n"]
+    for name in ("fig8.png", "force.png"):
+        assert (tmp_path / name).read_bytes().startswith(PNG)
+    assert json.loads((tmp_path / "fig8.json").read_text())["smoothness_ratio"] == figures["smoothness_ratio"]

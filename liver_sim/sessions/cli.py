@@ -86,6 +86,32 @@ def resimulate(args) -> int:
     return 0
 
 
+def add_fig8_command(commands) -> None:
+    """``liver-sim fig8 [-p name:=value …] [--out DIR] [--json]``."""
+    parser = commands.add_parser("fig8", help="Fig. 8 offline: the explore script's force with and without the "
+                                              "local model, largest change between 1 ms commands in contact")
+    parser.add_argument("-p", dest="overrides", action="append", default=[], metavar="NAME:=VALUE",
+                        help="a liver_physics or haptic_bridge parameter, as for resimulate; repeatable")
+    parser.add_argument("--out", type=Path, default=Path("out/fig8"), help="folder for the plots and fig8.json")
+    parser.add_argument("--json", action="store_true", help="print one JSON object")
+    parser.set_defaults(handler=fig8)
+
+
+def fig8(args) -> int:
+    from liver_sim.sessions.fig8 import exploration_fig8
+
+    figures = exploration_fig8(args.out, args.overrides, progress=(lambda line: None) if args.json else _progress)
+    if args.json:
+        print(json.dumps(figures))
+        return 0
+    ratio = figures["smoothness_ratio"]
+    print(f"largest change between consecutive 1 ms commands in contact: "
+          f"{figures['largest_jump_with_local_model_n']:.4f} N with the local model, "
+          f"{figures['largest_jump_without_local_model_n']:.4f} N without (physics force held): "
+          f"smoothness ratio {'n/a' if ratio is None else f'{ratio:.1f}x'} (target >= 5)")
+    return 0
+
+
 def add_report_command(commands) -> None:
     """``liver-sim report BAG [--out DIR]``."""
     parser = commands.add_parser("report", help="plots and summary of a recorded or re-simulated session")

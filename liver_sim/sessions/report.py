@@ -129,18 +129,38 @@ def _save(fig, path: Path, plt) -> None:
     plt.close(fig)
 
 
-def _plot_force(data: dict, path: Path) -> None:
+def _zoom(ax, centre_s: float, half_width_s: float, series) -> None:
+    """Limit `ax` to centre_s ± half_width_s (s) and to the range of the (t, y) `series` inside it."""
+    inside = [y[(t >= centre_s - half_width_s) & (t <= centre_s + half_width_s)] for t, y in series]
+    values = np.concatenate(inside) if inside else np.zeros(0)
+    ax.set_xlim(centre_s - half_width_s, centre_s + half_width_s)
+    if values.size:
+        margin = 0.1 * max(float(np.ptp(values)), 0.01)
+        ax.set_ylim(float(values.min()) - margin, float(values.max()) + margin)
+
+
+def plot_force(data: dict, path: Path, title: str = "Force over time") -> None:
+    """|force| over time: the 1 kHz commands and the 150 Hz physics contact force (markers); a second panel
+    zooms on 0.1 s of contact, where the command meets the physics force at every update."""
+    from liver_sim.analysis import CONTACT_FORCE_N
+
     plt = _plots()
-    fig, ax = plt.subplots(figsize=(8, 4.2), dpi=110)
+    fig, axes = plt.subplots(2, 1, figsize=(8, 7), dpi=110)
     colours = {"local_model": "tab:red", "without_local_model": "tab:orange"}
-    for label, (t, f) in data["forces"].items():
-        ax.plot(t, np.linalg.norm(f, axis=1), color=colours[label], linewidth=0.8,
-                label=f"force command, {label.replace('_', ' ')}")
     wt, w = data["wrench"]
-    if len(wt):
-        ax.plot(wt, np.linalg.norm(w, axis=1), ".", color="tab:blue", markersize=2, label="physics contact force")
-    ax.set(xlabel="time (s)", ylabel="|force| (N)", title="Force over time")
-    ax.legend(loc="upper right", fontsize=8)
+    physics = np.linalg.norm(np.reshape(w, (-1, 3)), axis=1)
+    series = [(t, np.linalg.norm(f, axis=1)) for t, f in data["forces"].values()] + [(wt, physics)]
+    for ax in axes:
+        for label, (t, norm) in zip(data["forces"], series):
+            ax.plot(t, norm, color=colours[label], linewidth=0.8, label=f"force command, {label.replace('_', ' ')}")
+        if len(wt):
+            ax.plot(wt, physics, "o", color="tab:blue", markersize=2.5, label="physics contact force (150 Hz)")
+        ax.set(xlabel="time (s)", ylabel="|force| (N)")
+    axes[0].set_title(title)
+    axes[0].legend(loc="upper right", fontsize=8)
+    if len(wt) and physics.max() > CONTACT_FORCE_N:
+        _zoom(axes[1], float(wt[np.argmax(physics)]), 0.05, series)  # around the peak physics force
+        axes[1].set_title("0.1 s in contact: the 1 kHz command and the physics force at each update")
     _save(fig, path, plt)
 
 
@@ -186,31 +206,31 @@ def _plot_rates(data: dict, topics: list[str], path: Path) -> None:
     _save(fig, path, plt)
 
 
-def _plot_fig8(data: dict, path: Path) -> None:
+def plot_fig8(data: dict, path: Path) -> None:
+    """Fig. 8: |command| with and without the local model; a second panel zooms on 0.1 s around the baseline's
+    largest step in contact."""
     from liver_sim.analysis import CONTACT_FORCE_N
 
     plt = _plots()
     (t1, f1), (t0, f0) = data["forces"]["local_model"], data["forces"]["without_local_model"]
     n1, n0 = np.linalg.norm(f1, axis=1), np.linalg.norm(f0, axis=1)
-    newest = np.clip(np.searchsorted(t0, t1, side="right") - 1, 0, None)
-    contact = t1[(n1 > CONTACT_FORCE_N) & (n0[newest] > CONTACT_FORCE_N)] if len(t0) else t1[:0]
+    steps = np.abs(np.diff(n0)) * ((n0[1:] > CONTACT_FORCE_N) & (n0[:-1] > CONTACT_FORCE_N))
     fig, axes = plt.subplots(2, 1, figsize=(8, 6), dpi=110)
     for ax in axes:
         ax.plot(t0, n0, color="tab:orange", linewidth=0.8, label="without local model (physics force held)")
         ax.plot(t1, n1, color="tab:red", linewidth=0.8, label="with local model")
         ax.set(xlabel="time (s)", ylabel="|force| (N)")
     axes[0].set_title("Fig. 8: force sent to the device with and without the local model")
-    if contact.size:
-        middle = contact[len(contact) // 2]
-        axes[1].set_xlim(middle - 0.1, middle + 0.1)
-        axes[1].set_title("0.2 s where both are in contact")
+    if steps.size and steps.max() > 0.0:
+        _zoom(axes[1], float(t0[np.argmax(steps) + 1]), 0.05, [(t0, n0), (t1, n1)])
+        axes[1].set_title("0.1 s around the largest step of the held physics force in contact")
     axes[0].legend(loc="upper right", fontsize=8)
     _save(fig, path, plt)
 
 
 def write_report(bag: Path, out: Path, progress=print) -> dict:
     """Read the bag, write the PNGs and summary.json/.md into `out`; return the summary."""
-    from liver_sim.analysis import contact_fraction, largest_force_jump_n, rate_figures
+    from liver_sim.analysis import contact_fraction, fig8_figures, largest_force_jump_n, rate_figures
     from liver_sim.sessions.parameters import node_parameters
     from msg_defs.topics import TOPICS
 
@@ -234,7 +254,7 @@ def write_report(bag: Path, out: Path, progress=print) -> dict:
         latest[name] = kv
     summary["diagnostics_last"] = latest
     if data["forces"] or len(data["wrench"][0]):
-        _plot_force(data, out / "force.png")
+        plot_force(data, out / "force.png")
         figures.append("force.png")
     summary["forces"] = {label: {"commands": len(f), "peak_n": float(np.linalg.norm(f, axis=1).max()),
                                  "contact_fraction": contact_fraction(f),
@@ -259,11 +279,8 @@ def write_report(bag: Path, out: Path, progress=print) -> dict:
         _plot_rates(data, rate_topics, out / "loop_rates.png")
         figures.append("loop_rates.png")
     if {"local_model", "without_local_model"} <= set(data["forces"]):
-        with_lm = summary["forces"]["local_model"]["largest_jump_in_contact_n"]
-        without = summary["forces"]["without_local_model"]["largest_jump_in_contact_n"]
-        summary["fig8"] = {"largest_jump_with_local_model_n": with_lm, "largest_jump_without_local_model_n": without,
-                           "smoothness_ratio": without / with_lm if with_lm > 0 else None}
-        _plot_fig8(data, out / "fig8.png")
+        summary["fig8"] = fig8_figures(data["forces"]["local_model"][1], data["forces"]["without_local_model"][1])
+        plot_fig8(data, out / "fig8.png")
         figures.append("fig8.png")
     else:
         summary["fig8"] = None

@@ -49,6 +49,8 @@ class _Session:
         self.emit, self.progress = emit, progress
         self.commands = 0
         self.peak_force_n = 0.0
+        #: when a dict of lists, run() appends every command (with its baseline) and physics force to it
+        self.trace = None
 
     def _receive(self, message, t: float):
         """Hand the pipeline a recorded pose received at `t`; the tip for the bridge, None when malformed."""
@@ -108,6 +110,9 @@ class _Session:
                 source_time, messages, local, held = pending.popleft()
                 for topic, key, frame_data in messages:
                     self.emit(topic, key, source_time, frame_data)
+                if self.trace is not None:
+                    self.trace["wrench_s"].append(source_time)
+                    self.trace["wrench_n"].append(held)
             pose_tip = self._receive(message, t)
             if pose_tip is not None:
                 tip, tip_time = pose_tip, t
@@ -117,10 +122,15 @@ class _Session:
             self.peak_force_n = max(self.peak_force_n, float(np.linalg.norm(command)))
             self.emit(self.b["force_topic"], "servo_cf", t, serialize_message(conversions.force_message(
                 self.b["force_output"], command, message.header.stamp, self.b["device_frame_id"])))
+            if self.trace is not None:
+                self.trace["command_s"].append(t)
+                self.trace["command_n"].append(command)
             if self.baseline is not None:
                 command = self.baseline.step(t, tip, t - tip_time, held, t - source_time)
                 self.emit(BASELINE_FORCE_TOPIC, "servo_cf", t, serialize_message(conversions.force_message(
                     self.b["force_output"], command, message.header.stamp, self.b["device_frame_id"])))
+                if self.trace is not None:
+                    self.trace["baseline_n"].append(command)
             self.commands += 1
             if t >= next_progress:
                 next_progress += 1.0
@@ -189,3 +199,27 @@ def resimulate(bag: Path, out: Path, overrides=(), storage: str = "mcap", progre
     progress(f"wrote {out}: {pipeline.frames} physics frames, {session.commands} force commands "
              f"(peak {session.peak_force_n:.3f} N), {simulated:.2f} s simulated in {wall:.2f} s")
     return summary
+
+
+def play_script(script, duration_s: float, overrides=(), progress=lambda line: None) -> dict:
+    """Play the tool script `script` (tool_scripts.ScriptedTrajectory) for `duration_s` through the same
+    offline session as resimulate, the poses at the bridge's rate_hz as a device would send them, with a
+    Fig. 8 baseline bridge (local_model none) beside; nothing is written.  Returns arrays: command_s (K,),
+    command_n and baseline_n (K, 3) N, the 1 kHz commands with and without the local model, and wrench_s,
+    wrench_n, the physics contact force (N) as each frame was published."""
+    from msg_defs.conversions import pose_stamped
+    from liver_sim.tool_scripts import IDENTITY_XYZW
+
+    params = node_parameters(overrides)
+    physics, bridge = params["liver_physics"], params["haptic_bridge"]
+    if bridge["local_model"] == "none":
+        raise ValueError("parameter local_model must not be none: Fig. 8 compares the local model with none")
+    session = _Session(physics, bridge, lambda *message: None, progress, compare=True)
+    session.trace = {key: [] for key in ("command_s", "command_n", "baseline_n", "wrench_s", "wrench_n")}
+    period_s = 1.0 / bridge["rate_hz"]
+    poses = []
+    for k in range(int(round(duration_s / period_s))):
+        t = k * period_s
+        poses.append((t, pose_stamped(script.position_at(t), IDENTITY_XYZW, t, physics["frame_id"]), b""))
+    session.run(poses)
+    return {key: np.asarray(values, dtype=np.float64) for key, values in session.trace.items()}
