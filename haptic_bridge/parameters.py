@@ -21,7 +21,7 @@ PARAMETERS = {
     "model_glide_s": Param(round(1.0 / 150.0, 4), "time over which a new local model replaces the rendered one "
                            "(s): the surface glides to its new place instead of jumping at each physics update; "
                            "about one physics period; 0: at once", 0.0, 0.1),
-    "damping_ns_per_m": Param(0.1, "local-model damping B on the penetration rate (N·s/m)", 0.0, 10.0),
+    "damping_ns_per_m": Param(0.0, "local-model damping B on the penetration rate (N·s/m), added to the local model's force; 0 by default: the physics force the local model carries already holds Eq. 3's damping, so any B makes the rendered force differ from it at each update", 0.0, 10.0),
     "device_damping_ns_per_m": Param(0.5, "physical damping b of the device at the stylus (N·s/m), for the "
                                      "passivity check b > K·T/2 + B; PHANToM-like default, identify yours",
                                      0.0, 100.0),

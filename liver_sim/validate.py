@@ -132,8 +132,8 @@ def b4_and_continuity(mesh: TetMesh, params: ModelParams, bridge: dict) -> tuple
     frame_force, frame_time, rendered = [], [], []
     local = None
     for k in range(frames):
-        result = model.step_frame(ToolPose(script.position_at(k * frame_s)))
-        published = (k + 1) * frame_s
+        published = (k + 1) * frame_s  # the frame ends with the tool where the script has it then
+        result = model.step_frame(ToolPose(script.position_at(published)))
         first = True
         local = (result.local_model if result.local_model.valid else None, bridge["lifetime_s"])
         frame_force.append(result.tool_force_n)

@@ -108,17 +108,20 @@ def test_a_gap_gets_its_cause_named_from_what_the_thread_did_meanwhile():
             pass
         named.append(own.name(begin, time.monotonic()))
 
-    # a process spinning on the same core makes the thread wait for it (another thread would only hold the GIL)
+    # processes spinning on the same core make the thread wait for them (another thread would only hold the
+    # GIL); two of them, so that the thread waits for about two thirds of the gap, well past RUNQUEUE_SHARE
     core = min(os.sched_getaffinity(0))
-    hog = subprocess.Popen([sys.executable, "-c", f"import os; os.sched_setaffinity(0, {{{core}}})\nwhile True: pass"])
+    hogs = [subprocess.Popen([sys.executable, "-c", f"import os; os.sched_setaffinity(0, {{{core}}})\nwhile True: pass"])
+            for _ in range(2)]
     try:
         time.sleep(0.2)
         thread = threading.Thread(target=contended)
         thread.start()
         thread.join()
     finally:
-        hog.kill()
-        hog.wait()
+        for hog in hogs:
+            hog.kill()
+            hog.wait()
     assert named[0].startswith("waiting for a CPU"), named[0]
 
 
