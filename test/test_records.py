@@ -218,7 +218,10 @@ def test_a_recorded_demo_under_load_loses_nothing_the_publishers_numbered(ros_do
     reliable = {"/liver/nodes", "/liver/contact_plane", "/liver/tool_wrench", "/phantom/servo_cf",
                 "/diagnostics", "/liver/surface", "/tool/device_map"}
     lost = json.loads(info.custom_data["lost_messages_by_topic"])
-    assert reliable <= set(lost) and all(lost[t] == 0 for t in reliable)
+    late = {t: sum(w["before_match"] for w in writers if w["topic"] == t) for t in reliable}
+    # nothing lost in transit: a reliable topic misses only what a writer published before the recorder
+    # discovered it (counted, before_match; rare, at start-up under load)
+    assert reliable <= set(lost) and all(lost[t] == late[t] for t in reliable)
     assert int(info.custom_data["lost_messages"]) == sum(lost.values())
     for topic in counts:
         assert counts[topic] == sum(w["received"] for w in writers if w["topic"] == topic)
@@ -226,7 +229,7 @@ def test_a_recorded_demo_under_load_loses_nothing_the_publishers_numbered(ros_do
         # every message from the writer's first, numbered by the writer itself, is in the bag or counted lost
         assert w["received"] + w["gaps"] + w["before_match"] == w["last"], w
         if w["topic"] in reliable:
-            assert w["first"] == 1 and w["received"] == w["last"], w
+            assert w["gaps"] == 0 and w["first"] == w["before_match"] + 1, w
             # the recorder received each reliable writer's messages at least as far as an independent client did
             assert w["last"] >= tally.last.get((w["topic"], w["gid"]), 0), w
     seen = {key for key in tally.last if key[0] in reliable}

@@ -16,7 +16,7 @@ from liver_sim.analysis import largest_force_jump_n
 from liver_sim.cli import main
 from liver_sim.local_model import LocalModel
 from liver_sim.processes import cli_command_line
-from liver_sim.sessions.bag import BagWriter, QosSpec, read_messages
+from liver_sim.sessions.bag import BagWriter, QosSpec, bag_info, read_messages
 from liver_sim.sessions.parameters import node_parameters
 from liver_sim.sessions.report import write_report
 from liver_sim.sessions.resimulate import resimulate
@@ -284,7 +284,10 @@ def test_demo_records_its_run_and_the_report_reads_it(ros_domain_id, tmp_path):
             "/phantom/measured_cp", "/phantom/servo_cf", "/diagnostics"} <= set(read)
     assert "/liver/marker" not in read  # only with --marker
     # the recorder starts before the nodes and stops after them: it holds every frame the demo saw
-    assert len(read["/liver/nodes"]) >= summary["physics"]["samples"]
+    writers = json.loads(bag_info(bag).custom_data["writers"])
+    late = sum(w["before_match"] for w in writers if w["topic"] == "/liver/nodes")  # before discovery, counted
+    assert all(w["gaps"] == 0 for w in writers if w["topic"] == "/liver/nodes")
+    assert len(read["/liver/nodes"]) + late >= summary["physics"]["samples"]
     domain_line, recording_line = (tmp_path / "logs" / "recorder.log").read_text().splitlines()[:2]
     assert domain_line.startswith("liver-sim: ROS_DOMAIN_ID=") and recording_line.startswith("recording to")
     report = write_report(bag, tmp_path / "report", progress=lambda line: None)
