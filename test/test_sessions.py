@@ -332,7 +332,7 @@ def test_replay_leaves_out_device_commands_unless_remapped():
 def test_replay_puts_nothing_on_the_device_topic(ros_env, tmp_path, ros_domain_id):
     import rclpy
     from geometry_msgs.msg import WrenchStamped
-    from rclpy.qos import QoSProfile
+    from rclpy.qos import DurabilityPolicy, QoSProfile
 
     bag = tmp_path / "commands"
     with BagWriter(bag) as writer:
@@ -348,7 +348,10 @@ def test_replay_puts_nothing_on_the_device_topic(ros_env, tmp_path, ros_domain_i
     try:
         node = rclpy.create_node("replay_device_listener", context=context)
         for topic, messages in heard.items():
-            node.create_subscription(WrenchStamped, topic, messages.append, QoSProfile(depth=1000), raw=True)
+            # transient local, as a recorder subscribes: what the replay published before this client matched it
+            # (discovery can outlast --delay when the machine is busy) still arrives, and so would any device command
+            node.create_subscription(WrenchStamped, topic, messages.append,
+                                     QoSProfile(depth=1000, durability=DurabilityPolicy.TRANSIENT_LOCAL), raw=True)
         executor = rclpy.executors.SingleThreadedExecutor(context=context)
         executor.add_node(node)
         for extra in ([], ["--remap-device-commands", "/replayed/servo_cf"]):
