@@ -237,11 +237,14 @@ class Recorder:
     def failures(self) -> str:
         """What this recording lost that it must not: messages of reliable topics between two it received (the
         publishers keep enough history for a reader that fell behind), or a subscription's history filled up
-        between two drains.  Best-effort messages dropped on the way, and messages a writer published before
+        between two drains.  Snapshot topics (msg_defs.topics.SNAPSHOT_TOPICS: each message supersedes the
+        last), best-effort messages dropped on the way, and messages a writer published before
         this recorder discovered it (`before_match`: seen at start-up under load, when its transient-local
         history did not reach the recorder), are counted in the metadata and the report, not a failure.
         '' when none."""
-        reliable = {topic for topic, _, spec, _, _ in self._subscriptions if spec.reliable}
+        from msg_defs.topics import SNAPSHOT_TOPICS
+
+        reliable = {topic for topic, _, spec, _, _ in self._subscriptions if spec.reliable} - SNAPSHOT_TOPICS
         gaps: dict[str, int] = {}
         for writer in self.gaps.writers.values():
             if writer.topic in reliable and writer.gaps:
