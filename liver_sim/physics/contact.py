@@ -86,13 +86,7 @@ def candidate_triangles(points: np.ndarray, skin: np.ndarray, shape: ToolShape, 
     """Sorted skin triangles that may come within `reach_m` of the tool: centroid within the tool's bounding
     radius + the largest circumradius + `reach_m` of its core midpoint."""
     a, b = tool_core(shape, pose)
-    corners = points[skin]
-    centroids = corners.mean(axis=1)
-    spread = corners - centroids[:, None, :]
-    circumradius = math.sqrt(np.einsum("ijk,ijk->ij", spread, spread).max()) if len(skin) else 0.0
-    offsets = centroids - (a + b) / 2.0
-    near = np.einsum("ij,ij->i", offsets, offsets) <= (shape.bounding_radius_m + circumradius + reach_m) ** 2
-    return np.flatnonzero(near)
+    return kernels.near_triangles(points, skin, (a + b) / 2.0, shape.bounding_radius_m + reach_m)
 
 
 def fit_sphere(points: np.ndarray) -> tuple[np.ndarray, float]:
@@ -176,43 +170,8 @@ def surface_contacts(x: np.ndarray, v: np.ndarray, tool: kernels.ToolState, shif
     s = n·v_tool (Eq. 3)."""
     ahead = x + dt * v
     probe_contacts(ahead, v, tool, shift, 0.0)
-    keep = tool.share > 0.0
-    normal, weights, nodes = tool.normal[keep], tool.weights[keep], tool.nodes[keep]
-    surface_x = np.einsum("ij,ijk->ik", weights, ahead[nodes])
-    share = tool.share[keep]
-    return Contacts(nodes, weights, np.ascontiguousarray(normal),
-                    tool.depth[keep] + np.einsum("ij,ij->i", normal, surface_x), normal @ tool.velocity_m_s,
-                    share * tool.stiffness_n_per_m, share * tool.damping_ns_per_m)
-
-
-def contact_load(tool: kernels.ToolState, n_nodes: int) -> tuple[np.ndarray, float]:
-    """The pattern of the tool's push on the liver, scaled to a unit total, (N, 3), and how many probes'
-    worth of penalty carry it (the sum of the touching rows' shares): the rows' elastic pushes
-    share·λ·δ·n spread by barycentric weights (as the last step left them); out of contact, a unit push
-    at the nearest row's surface point (none within the candidates: zeros, 0)."""
-    load = np.zeros((n_nodes, 3))
-    finite = np.isfinite(tool.depth)
-    if not finite.any():
-        return load, 0.0
-    touching = finite & (tool.depth > 0.0) & (tool.share > 0.0)
-    if touching.any():
-        amount = np.where(touching, tool.share * tool.depth, 0.0)
-        probes = float(tool.share[touching].sum())
-    else:
-        amount = (np.arange(len(tool.depth)) == np.argmax(np.where(finite, tool.depth, -np.inf))).astype(float)
-        probes = 1.0
-    pushes = amount[:, None] * tool.normal
-    total = float(np.linalg.norm(pushes.sum(axis=0)))
-    if not total > 0.0:
-        return load, 0.0
-    np.add.at(load, tool.nodes.ravel(), (tool.weights[:, :, None] * pushes[:, None, :] / total).reshape(-1, 3))
-    return load, probes
-
-
-def local_stiffness(penalty_n_per_m: float, probes: float, tissue_compliance_m_per_n: float) -> float:
-    """K of the local model (N/m): the touching probes' penalties (in parallel, `probes` × λ) in series with
-    the tissue under them (1/compliance): 1/K = 1/(probes·λ) + compliance."""
-    return 1.0 / (1.0 / (probes * penalty_n_per_m) + max(tissue_compliance_m_per_n, 0.0))
+    return Contacts(*kernels.contact_elements(ahead, tool.nodes, tool.weights, tool.normal, tool.depth, tool.share,
+                                              tool.velocity_m_s, tool.stiffness_n_per_m, tool.damping_ns_per_m))
 
 
 def force_local_model(shape: ToolShape, pose: ToolPose, tool: kernels.ToolState, force_on_tool_n: np.ndarray,
@@ -241,8 +200,10 @@ def force_local_model(shape: ToolShape, pose: ToolPose, tool: kernels.ToolState,
         point = point - max(radius - float((tip - point) @ normal), 0.0) * normal
     touching = magnitude > 0.0 or bool(((tool.depth > 0.0) & (tool.share > 0.0)).any())
     plane = LocalModel("plane", True, point, normal, point, 0.0, depth, touching, stiffness_n_per_m)
+    if kind != "sphere":
+        return plane
     nodes = np.unique(tool.skin[tool.triangles])
-    if kind != "sphere" or len(nodes) < 4:
+    if len(nodes) < 4:
         return plane
     centre, sphere_radius = fit_sphere(positions[nodes])
     if not (math.isfinite(sphere_radius) and (centre - point) @ normal < 0.0 and sphere_radius < 1.0):

@@ -157,7 +157,7 @@ def _contact_forces(x, v, y, inv_mass, h, nodes, weights, normal, offset, speed,
 
 
 @numba.njit(cache=True)
-def _assemble(x, v, y, inv_mass, external, gravity, c_env, h, node_i, node_j, rest, lambda1, lambda2, mu,
+def _assemble(x, v, y, inv_mass, external, gravity, c_env, h, node_i, node_j, inv_rest, lambda1, lambda2, mu,
               unit, iso, axial, shift, diagonal, f, ky, assemble_matrix):
     """Forces f at (x, v) and ky = K·y (y zero on held nodes); with assemble_matrix, also the system
     A = M·(1 + h·c_env) − h·D_springs − h²·K_springs in matrix-free form: per spring the block
@@ -183,23 +183,24 @@ def _assemble(x, v, y, inv_mass, external, gravity, c_env, h, node_i, node_j, re
                 diagonal[n, a, a] = shift[n]
     for s in range(node_i.shape[0]):
         i, j = node_i[s], node_j[s]
-        l0 = rest[s]
+        inv_l0 = inv_rest[s]
         ux = x[j, 0] - x[i, 0]
         uy = x[j, 1] - x[i, 1]
         uz = x[j, 2] - x[i, 2]
         length = math.sqrt(ux * ux + uy * uy + uz * uz)
-        if length <= 1e-12 * l0:
+        if length * inv_l0 <= 1e-12:
             if assemble_matrix:
                 iso[s] = 0.0
                 axial[s] = 0.0
             continue
-        ux, uy, uz = ux / length, uy / length, uz / length
+        inv_length = 1.0 / length
+        ux, uy, uz = ux * inv_length, uy * inv_length, uz * inv_length
         rate = (v[j, 0] - v[i, 0]) * ux + (v[j, 1] - v[i, 1]) * uy + (v[j, 2] - v[i, 2]) * uz
-        d = (length - l0) / l0
+        d = length * inv_l0 - 1.0
         elastic = lambda1[s] * d * d * d + lambda2[s] * d
         tension = elastic + mu[s] * rate
-        material = (3.0 * lambda1[s] * d * d + lambda2[s]) / l0
-        geometric = max(elastic, 0.0) / length
+        material = (3.0 * lambda1[s] * d * d + lambda2[s]) * inv_l0
+        geometric = max(elastic, 0.0) * inv_length
         free_i = inv_mass[i] > 0.0
         free_j = inv_mass[j] > 0.0
         # Ks·(y_j − y_i), y zero on held nodes
@@ -229,13 +230,19 @@ def _assemble(x, v, y, inv_mass, external, gravity, c_env, h, node_i, node_j, re
         t = h * h * (material - geometric) + h * mu[s]
         iso[s] = g
         axial[s] = t
-        for a in range(3):
-            for b in range(3):
-                block = t * unit[s, a] * unit[s, b] + (g if a == b else 0.0)
-                if free_i:
-                    diagonal[i, a, b] += block
-                if free_j:
-                    diagonal[j, a, b] += block
+        bxx, byy, bzz = t * ux * ux + g, t * uy * uy + g, t * uz * uz + g
+        bxy, bxz, byz = t * ux * uy, t * ux * uz, t * uy * uz
+        for n, free in ((i, free_i), (j, free_j)):
+            if free:
+                diagonal[n, 0, 0] += bxx
+                diagonal[n, 1, 1] += byy
+                diagonal[n, 2, 2] += bzz
+                diagonal[n, 0, 1] += bxy
+                diagonal[n, 1, 0] += bxy
+                diagonal[n, 0, 2] += bxz
+                diagonal[n, 2, 0] += bxz
+                diagonal[n, 1, 2] += byz
+                diagonal[n, 2, 1] += byz
 
 
 @numba.njit(cache=True)
@@ -443,7 +450,7 @@ def _bdf2_start(x, v, x_last, v_last, x_prev, v_prev, inv_mass, second_order):
 
 
 @numba.njit(cache=True, nogil=True)
-def implicit_step(x, v, inv_mass, external, gravity, c_env, h, node_i, node_j, rest, lambda1, lambda2, mu,
+def implicit_step(x, v, inv_mass, external, gravity, c_env, h, node_i, node_j, inv_rest, lambda1, lambda2, mu,
                   unit, iso, axial, shift, diagonal, support_nodes, support_rest, support_stiffness,
                   support_damping, nodes, weights, normal, offset, speed, stiffness,
                   damping, coefficient, preconditioner, warm, tolerance, max_iterations, newton_tolerance,
@@ -461,7 +468,7 @@ def implicit_step(x, v, inv_mass, external, gravity, c_env, h, node_i, node_j, r
         if inv_mass[n] == 0.0:
             for a in range(3):
                 warm[n, a] = 0.0  # held: Δv = 0, and CG's vectors vanish there (see _apply)
-    _assemble(x, v, v, inv_mass, external, gravity, c_env, h, node_i, node_j, rest, lambda1, lambda2, mu,
+    _assemble(x, v, v, inv_mass, external, gravity, c_env, h, node_i, node_j, inv_rest, lambda1, lambda2, mu,
               unit, iso, axial, shift, diagonal, f, ky, True)
     _support_terms(x, v, v, inv_mass, h, support_nodes, support_rest, support_stiffness, support_damping, f, ky,
                    shift, diagonal, True)
@@ -478,7 +485,7 @@ def implicit_step(x, v, inv_mass, external, gravity, c_env, h, node_i, node_j, r
         total_iterations += _pcg(node_i, node_j, unit, iso, axial, shift, inv_mass, nodes, weights, normal,
                                  coefficient, preconditioner, rhs, warm, tolerance, max_iterations, r, z, p, q)
         _advance(x, x0, v, v0, warm, inv_mass, h)
-        _assemble(x, v, zero, inv_mass, external, gravity, c_env, h, node_i, node_j, rest, lambda1, lambda2, mu,
+        _assemble(x, v, zero, inv_mass, external, gravity, c_env, h, node_i, node_j, inv_rest, lambda1, lambda2, mu,
                   unit, iso, axial, shift, diagonal, f, ky, False)
         _support_terms(x, v, zero, inv_mass, h, support_nodes, support_rest, support_stiffness, support_damping, f,
                        ky, shift, diagonal, False)
@@ -489,7 +496,7 @@ def implicit_step(x, v, inv_mass, external, gravity, c_env, h, node_i, node_j, r
         if newton >= max_newton or residual <= newton_tolerance:
             break
         newton += 1
-        _assemble(x, v, zero, inv_mass, external, gravity, c_env, h, node_i, node_j, rest, lambda1, lambda2, mu,
+        _assemble(x, v, zero, inv_mass, external, gravity, c_env, h, node_i, node_j, inv_rest, lambda1, lambda2, mu,
                   unit, iso, axial, shift, diagonal, f, ky, True)
         _support_terms(x, v, zero, inv_mass, h, support_nodes, support_rest, support_stiffness, support_damping, f,
                        ky, shift, diagonal, True)
@@ -498,9 +505,10 @@ def implicit_step(x, v, inv_mass, external, gravity, c_env, h, node_i, node_j, r
     return contact, total_iterations, newton, residual
 
 
-#: The step length (s) of the quasi-static solve in ImplicitEuler.compliance, and its CG tolerance.
+#: The step length (s) of the quasi-static solve in ImplicitEuler.compliance, and its CG tolerance (3e-2
+#: leaves the compliance within ~3 % of a 1e-3 solve at a tenth of the iterations, measured on the press).
 COMPLIANCE_HORIZON_S = 30.0
-COMPLIANCE_TOLERANCE = 1e-3
+COMPLIANCE_TOLERANCE = 3e-2
 
 
 class ImplicitEuler:
@@ -523,6 +531,7 @@ class ImplicitEuler:
         # unsigned indices spare numba's negative-index wraparound in the inner loops
         self._node_i = springs.node_i.astype(np.uint32)
         self._node_j = springs.node_j.astype(np.uint32)
+        self._inv_rest = 1.0 / springs.rest_length_m
         self._unit = np.zeros((edges, 3))
         self._iso = np.zeros(edges)
         self._axial = np.zeros(edges)
@@ -558,7 +567,7 @@ class ImplicitEuler:
         s = self.springs
         contact, self.last_cg_iterations, self.last_newton_iterations, self.last_residual_n = implicit_step(
             x, v, inv_mass, external_force, np.asarray(gravity, dtype=np.float64), float(environment_damping),
-            h, self._node_i, self._node_j, s.rest_length_m, s.lambda1_n, s.lambda2_n, s.mu_ns_per_m,
+            h, self._node_i, self._node_j, self._inv_rest, s.lambda1_n, s.lambda2_n, s.mu_ns_per_m,
             self._unit, self._iso, self._axial, self._shift, self._diagonal, *self.support, contacts.nodes,
             contacts.weights,
             contacts.normal, contacts.offset_m, contacts.normal_speed_m_s, contacts.stiffness_n_per_m,
@@ -608,7 +617,7 @@ class ImplicitEuler:
         s = self.springs
         no = Contacts.none()
         _assemble(x, zero, zero, inv_mass, zero, np.zeros(3), float(environment_damping), h, self._node_i,
-                  self._node_j, s.rest_length_m, s.lambda1_n, s.lambda2_n, s.mu_ns_per_m, self._unit, self._iso,
+                  self._node_j, self._inv_rest, s.lambda1_n, s.lambda2_n, s.mu_ns_per_m, self._unit, self._iso,
                   self._axial, self._shift, self._diagonal, f, ky, True)
         _support_terms(x, zero, zero, inv_mass, h, *self.support, f, ky, self._shift, self._diagonal, True)
         coefficient = np.zeros(0)

@@ -171,6 +171,84 @@ def integrate(x, v, f, inv_mass, dt, environment_damping, gravity, symplectic):
                 v[n, k] += dt * a
 
 
+@numba.njit(cache=True)
+def contact_elements(x, nodes, weights, normal, depth, share, tool_velocity, stiffness, damping):
+    """The contact rows with a share, as penalty elements linearised about the skin at x (implicit.Contacts'
+    fields): their nodes, weights and normal; offset o = δ + n·Σ w_a·x_a (so that δ = o − n·Σ w_a·x_a);
+    speed n·v_tool; stiffness share·λ and damping share·μ (Eq. 3)."""
+    count = 0
+    for r in range(share.shape[0]):
+        if share[r] > 0.0:
+            count += 1
+    nodes_out = np.empty((count, 3), dtype=np.int64)
+    weights_out = np.empty((count, 3))
+    normal_out = np.empty((count, 3))
+    offset = np.empty(count)
+    speed = np.empty(count)
+    k = np.empty(count)
+    c = np.empty(count)
+    e = 0
+    for r in range(share.shape[0]):
+        if not share[r] > 0.0:
+            continue
+        along = 0.0
+        for a in range(3):
+            n = nodes[r, a]
+            nodes_out[e, a] = n
+            weights_out[e, a] = weights[r, a]
+            normal_out[e, a] = normal[r, a]
+            if n >= 0:
+                along += weights[r, a] * (normal[r, 0] * x[n, 0] + normal[r, 1] * x[n, 1] + normal[r, 2] * x[n, 2])
+        offset[e] = depth[r] + along
+        speed[e] = normal[r, 0] * tool_velocity[0] + normal[r, 1] * tool_velocity[1] + normal[r, 2] * tool_velocity[2]
+        k[e] = share[r] * stiffness
+        c[e] = share[r] * damping
+        e += 1
+    return nodes_out, weights_out, normal_out, offset, speed, k, c
+
+
+@numba.njit(cache=True)
+def max_speed(x, v):
+    """The largest node speed |v| (m/s); NaN when a position or velocity is not finite."""
+    top = 0.0
+    for n in range(x.shape[0]):
+        s2 = v[n, 0] * v[n, 0] + v[n, 1] * v[n, 1] + v[n, 2] * v[n, 2]
+        if not (math.isfinite(s2) and math.isfinite(x[n, 0] + x[n, 1] + x[n, 2])):
+            return math.nan
+        top = max(top, s2)
+    return math.sqrt(top)
+
+
+@numba.njit(cache=True)
+def near_triangles(x, skin, centre, reach):
+    """Indices of the skin triangles whose centroid lies within `reach` + the largest circumradius
+    (centroid to corner, over all the skin) of `centre` (m): the tool's candidate triangles."""
+    count = skin.shape[0]
+    centroids = np.empty((count, 3))
+    spread = 0.0
+    for t in range(count):
+        for a in range(3):
+            centroids[t, a] = (x[skin[t, 0], a] + x[skin[t, 1], a] + x[skin[t, 2], a]) / 3.0
+        for c in range(3):
+            d2 = 0.0
+            for a in range(3):
+                d = x[skin[t, c], a] - centroids[t, a]
+                d2 += d * d
+            spread = max(spread, d2)
+    limit = (reach + math.sqrt(spread)) ** 2
+    near = np.empty(count, dtype=np.int64)
+    found = 0
+    for t in range(count):
+        d2 = 0.0
+        for a in range(3):
+            d = centroids[t, a] - centre[a]
+            d2 += d * d
+        if d2 <= limit:
+            near[found] = t
+            found += 1
+    return near[:found]
+
+
 @numba.njit(cache=True, inline="always")
 def _barycentric(q, corners):
     """Barycentric weights (3-tuple, ≥ 0, sum 1) of a point q of the triangle `corners` (3, 3)."""

@@ -16,9 +16,9 @@ import numpy as np
 from liver_sim.local_model import LocalModel
 from liver_sim.mesh.tetmesh import TetMesh
 from liver_sim.physics import kernels
-from liver_sim.physics.contact import (ToolPose, ToolShape, contact_load, force_local_model, local_stiffness,
-                                      probe_contacts, pull_local_model, surface_contacts, tool_state)
+from liver_sim.physics.contact import (ToolPose, ToolShape, force_local_model, probe_contacts, pull_local_model, surface_contacts, tool_state)
 from liver_sim.physics.implicit import ImplicitEuler
+from liver_sim.physics.local_stiffness import LocalStiffness
 from liver_sim.physics.params import ModelParams
 from liver_sim.physics.springs import build_springs, estimate_stable_time_step, stable_time_step
 from liver_sim.physics.support import build_support
@@ -69,6 +69,7 @@ class LiverModel:
     `capsule_triangles` are the skin triangles carrying capsule springs (the whole skin until a tear
     or a cut opens faces); `apply_topology` replaces the mesh and increments `topology_version`.
     `held_nodes` (see `hold`) are moved by the tool, like the fixed nodes by the scene, not integrated.
+    `local_stiffness` (physics.local_stiffness) gives the local model's K under the tool.
     `support` (physics.support) ties the supported capsule nodes to their rest positions; with
     `params.support` 'organ' and `fixed_nodes` None, no node is fixed unless the support regions hold
     no capsule node of the mesh (then the paper's central tet is, as with 'paper').
@@ -119,7 +120,7 @@ class LiverModel:
                                         self.parallel)
         self._skin = np.ascontiguousarray(mesh.skin, dtype=np.int64)
         self._solver = ImplicitEuler(springs, len(mesh.points), support=self.support)
-        self._compliance_guess = np.zeros_like(mesh.points)
+        self.local_stiffness = LocalStiffness(self._solver, len(mesh.points))
         self.hold(self.held_nodes)
 
     @property
@@ -167,6 +168,7 @@ class LiverModel:
         self.velocities = np.zeros_like(self.positions)
         self._previous_pose: ToolPose | None = None
         self._solver.reset()
+        self.local_stiffness.reset()
         if self.held_nodes.size:
             self.hold(np.zeros(0, dtype=np.int64))
 
@@ -177,6 +179,8 @@ class LiverModel:
         state = self.positions.copy(), self.velocities.copy()
         self._implicit_frame(self._tool_state(ToolPose(np.full(3, 1e3))), 1)
         self._spring_forces()
+        self._solver.compliance(self.positions, self.inv_mass, np.ones_like(self.positions), 0.0,
+                                np.zeros_like(self.positions))
         self.positions[:], self.velocities[:] = state
         self._solver.reset()
         self._previous_pose = None
@@ -222,23 +226,15 @@ class LiverModel:
             local_model = pull_local_model(pose, -liver_force, self.params.contact_stiffness_n_per_m,
                                            self.tool.radius_m)
         else:
-            local_model = force_local_model(self.tool, pose, tool, -liver_force, self.local_stiffness_n_per_m(tool),
+            local_model = force_local_model(self.tool, pose, tool, -liver_force, self._stiffness_under(tool),
                                             self.local_model_reach_m, self.local_model_kind, self.positions)
         return FrameResult(self.time_s, -liver_force, local_model, None, torn, failure)
 
-    def local_stiffness_n_per_m(self, tool: kernels.ToolState) -> float:
-        """K of the local model under the tool (contact.local_stiffness): the penalty of the touching
-        probes in series with the tissue's static compliance under their push (contact.contact_load), from
-        the tangent stiffness of the springs at the current state with the fixed and held nodes held
-        (ImplicitEuler.compliance, warm-started from the last frame's solution); the penalty alone when
-        no probe is within reach."""
-        load, probes = contact_load(tool, len(self.positions))
-        penalty = self.params.contact_stiffness_n_per_m
-        if probes == 0.0:
-            return penalty
-        compliance = self._solver.compliance(self.positions, self.inv_mass, load, self.params.environment_damping_per_s,
-                                             self._compliance_guess)
-        return local_stiffness(penalty, probes, compliance)
+    def _stiffness_under(self, tool: kernels.ToolState) -> float:
+        """K of the local model under the tool (physics.local_stiffness)."""
+        return self.local_stiffness.stiffness_n_per_m(tool, self.positions, self.inv_mass,
+                                                      self.params.contact_stiffness_n_per_m,
+                                                      self.params.environment_damping_per_s)
 
     def _detector(self) -> TearDetector:
         """The TearDetector of the current mesh and thresholds (rebuilt when either changes)."""
@@ -311,9 +307,8 @@ class LiverModel:
 
     def _check_divergence(self) -> str | None:
         """None, or the cause when the state is non-finite or a node outruns max_node_speed_m_s."""
-        finite = np.isfinite(self.positions).all() and np.isfinite(self.velocities).all()
-        if finite:
-            speed = float(np.sqrt((self.velocities ** 2).sum(axis=1)).max())
+        speed = kernels.max_speed(self.positions, self.velocities)
+        if math.isfinite(speed):
             if speed <= self.params.max_node_speed_m_s:
                 return None
             cause = f"node speed {speed:.3g} m/s above max_node_speed_m_s={self.params.max_node_speed_m_s:g}"

@@ -1,0 +1,89 @@
+"""K of the haptic local model: the stiffness the tool meets under its contact (paper §2.5, P11).
+
+The tool's penalty springs (λ per probe, paper Eq. 3) push on the tissue, which yields under them:
+the two act in series, 1/K = 1/(probes·λ) + c, with c = bᵀ·K_t⁻¹·b the static compliance of the
+spring network under the tool's unit load pattern b (implicit.ImplicitEuler.compliance).  The
+compliance changes slowly — with the tissue's strain and as the touched patch moves — so it is solved
+every `refresh_frames` frames (warm-started from the last solution) and reused in between, while the
+penalty part follows the probes touching at each frame.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from liver_sim.physics import kernels
+from liver_sim.physics.implicit import ImplicitEuler
+
+#: Frames between two solves of the tissue's compliance under the tool (10: 15 Hz at 150 Hz; K then stays
+#: within 10 % of a solve at every frame over the demo's press and slide, a test).
+REFRESH_FRAMES = 10
+
+
+def contact_load(tool: kernels.ToolState, n_nodes: int) -> np.ndarray:
+    """The pattern of the tool's push on the liver, scaled to a unit total, (N, 3): the touching rows'
+    elastic pushes share·λ·δ·n spread by barycentric weights (as the last step left them); out of
+    contact, a unit push at the nearest row's surface point (none within the candidates: zeros)."""
+    load = np.zeros((n_nodes, 3))
+    finite = np.isfinite(tool.depth)
+    if not finite.any():
+        return load
+    touching = finite & (tool.depth > 0.0) & (tool.share > 0.0)
+    if touching.any():
+        amount = np.where(touching, tool.share * tool.depth, 0.0)
+    else:
+        amount = (np.arange(len(tool.depth)) == np.argmax(np.where(finite, tool.depth, -np.inf))).astype(float)
+    pushes = amount[:, None] * tool.normal
+    total = float(np.linalg.norm(pushes.sum(axis=0)))
+    if total > 0.0:
+        np.add.at(load, tool.nodes.ravel(), (tool.weights[:, :, None] * pushes[:, None, :] / total).reshape(-1, 3))
+    return load
+
+
+def touching_probes(tool: kernels.ToolState) -> float:
+    """How many probes' worth of penalty carry the tool's push: the sum of the touching rows' shares;
+    1 when none touches but one is within the candidates (the first touch), 0 when none is."""
+    finite = np.isfinite(tool.depth)
+    if not finite.any():
+        return 0.0
+    touching = finite & (tool.depth > 0.0) & (tool.share > 0.0)
+    return float(tool.share[touching].sum()) if touching.any() else 1.0
+
+
+def local_stiffness(penalty_n_per_m: float, probes: float, tissue_compliance_m_per_n: float) -> float:
+    """K of the local model (N/m): the touching probes' penalties (in parallel, `probes` × λ) in series with
+    the tissue under them (1/compliance): 1/K = 1/(probes·λ) + compliance."""
+    return 1.0 / (1.0 / (probes * penalty_n_per_m) + max(tissue_compliance_m_per_n, 0.0))
+
+
+class LocalStiffness:
+    """K under the tool, frame after frame, for one spring network (build a new one after a topology
+    change): the tissue's compliance is solved every `refresh_frames` frames in which a probe is within
+    reach, and at the first such frame after `reset`."""
+
+    def __init__(self, solver: ImplicitEuler, n_nodes: int, refresh_frames: int = REFRESH_FRAMES):
+        self._solver = solver
+        self._guess = np.zeros((n_nodes, 3))
+        self.refresh_frames = int(refresh_frames)
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the compliance: the next frame near the surface solves it afresh."""
+        self._guess[:] = 0.0
+        self._compliance_m_per_n = None
+        self._frames_since_solve = 0
+
+    def stiffness_n_per_m(self, tool: kernels.ToolState, positions: np.ndarray, inv_mass: np.ndarray,
+                          penalty_n_per_m: float, environment_damping_per_s: float) -> float:
+        """K (N/m) for this frame's tool (its probes' contact geometry as the step left it): the penalty of
+        the touching probes in series with the tissue's compliance under their push, from the tangent
+        stiffness at `positions` with the held nodes (inv_mass 0) fixed; the penalty alone when no probe
+        is within reach."""
+        probes = touching_probes(tool)
+        if probes == 0.0:
+            return penalty_n_per_m
+        self._frames_since_solve += 1
+        if self._compliance_m_per_n is None or self._frames_since_solve >= self.refresh_frames:
+            self._compliance_m_per_n = self._solver.compliance(positions, inv_mass, contact_load(tool, len(positions)),
+                                                               environment_damping_per_s, self._guess)
+            self._frames_since_solve = 0
+        return local_stiffness(penalty_n_per_m, probes, self._compliance_m_per_n)
