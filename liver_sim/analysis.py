@@ -22,19 +22,21 @@ def rate_figures(arrival_s: np.ndarray, nominal_hz: float) -> dict:
 
 
 def largest_force_jump_n(forces_n: np.ndarray, contact_force_n: float = CONTACT_FORCE_N,
-                         times_s: np.ndarray | None = None, max_period_s: float | None = None) -> float:
-    """Largest |F_k − F_{k−1}| (N) between consecutive commands while both are in contact (Fig. 8's harshness).
+                         times_s: np.ndarray | None = None, max_period_s: float | None = None,
+                         onsets: bool = False) -> float:
+    """Largest |F_k − F_{k−1}| (N) between consecutive commands while both are in contact (Fig. 8's harshness);
+    with `onsets`, while either is: the steps of touching and leaving the surface count too.
 
     With `times_s` (when each command was sent) and `max_period_s`, only pairs sent at most
     `max_period_s` apart count: a scheduling gap is not a step of the rendered force.
     """
     if len(forces_n) < 2:
         return 0.0
-    norms = np.linalg.norm(forces_n, axis=1)
-    steady = (norms[1:] > contact_force_n) & (norms[:-1] > contact_force_n)
+    touching = np.linalg.norm(forces_n, axis=1) > contact_force_n
+    pairs = (touching[1:] | touching[:-1]) if onsets else (touching[1:] & touching[:-1])
     if times_s is not None and max_period_s is not None:
-        steady &= np.diff(times_s) <= max_period_s
-    jumps = np.linalg.norm(np.diff(forces_n, axis=0), axis=1)[steady]
+        pairs &= np.diff(times_s) <= max_period_s
+    jumps = np.linalg.norm(np.diff(forces_n, axis=0), axis=1)[pairs]
     return float(jumps.max()) if jumps.size else 0.0
 
 
@@ -65,10 +67,26 @@ def held_wrench_baseline(tick_s: np.ndarray, wrench_arrival_s: np.ndarray, wrenc
 
 def fig8_figures(with_local_model_n: np.ndarray, without_local_model_n: np.ndarray, times_s: np.ndarray | None = None,
                  max_period_s: float | None = None) -> dict:
-    """Fig. 8 as numbers: the largest change (N) between consecutive commands in contact with and without the
-    local model (:func:`largest_force_jump_n`, `times_s`/`max_period_s` as there) and their ratio, the
-    smoothness ratio (without / with; None when nothing changed with the local model)."""
-    with_lm = largest_force_jump_n(with_local_model_n, times_s=times_s, max_period_s=max_period_s)
-    without = largest_force_jump_n(without_local_model_n, times_s=times_s, max_period_s=max_period_s)
-    return {"largest_jump_with_local_model_n": with_lm, "largest_jump_without_local_model_n": without,
-            "smoothness_ratio": without / with_lm if with_lm > 0 else None}
+    """Fig. 8 as numbers: the largest change (N) between consecutive commands in contact — at either of the
+    two, so touching and leaving the surface count (:func:`largest_force_jump_n` with onsets) — with and
+    without the local model, and their ratio, the smoothness ratio (without / with; None when nothing
+    changed with the local model); the same with both commands in contact (`…_steady`), which leaves out
+    the held force's steps onto and off the surface.  `times_s`/`max_period_s` as in largest_force_jump_n."""
+    figures = {}
+    for suffix, onsets in (("", True), ("_steady", False)):
+        with_lm = largest_force_jump_n(with_local_model_n, times_s=times_s, max_period_s=max_period_s, onsets=onsets)
+        without = largest_force_jump_n(without_local_model_n, times_s=times_s, max_period_s=max_period_s,
+                                       onsets=onsets)
+        figures.update({f"largest_jump_with_local_model{suffix}_n": with_lm,
+                        f"largest_jump_without_local_model{suffix}_n": without,
+                        f"smoothness_ratio{suffix}": without / with_lm if with_lm > 0 else None})
+    return figures
+
+
+def fig8_line(figures: dict) -> str:
+    """Fig. 8's figures (analysis.fig8_figures) in one line, against the target ratio of 5."""
+    ratio = figures["smoothness_ratio"]
+    return (f"largest change between consecutive 1 ms commands in contact (touching and leaving included): "
+            f"{figures['largest_jump_with_local_model_n']:.4f} N with the local model, "
+            f"{figures['largest_jump_without_local_model_n']:.4f} N without (physics force held): "
+            f"smoothness ratio {'n/a' if ratio is None else f'{ratio:.1f}x'} (target >= 5)")

@@ -313,11 +313,11 @@ def loop_run(duration_s: float, log_dir, progress=None, observers: dict | None =
         "pose_to_force_p50_s": float(np.percentile(latency, 50)) if latency.size else None,
         "pose_to_force_p99_s": float(np.percentile(latency, 99)) if latency.size else None,
         "contact_fraction": contact_fraction(force),
-        "largest_jump_with_local_model_n": fig8["largest_jump_with_local_model_n"],
-        "largest_jump_without_local_model_n": fig8["largest_jump_without_local_model_n"],
+        **{key: value for key, value in fig8.items() if key.startswith("largest_jump")},
         "fig8_script": "explore",
         "fig8_baseline": "offline: BridgeTick(local_model none) at the live bridge's tick times",
         "fig8_smoothness_ratio": fig8["smoothness_ratio"],
+        "fig8_smoothness_ratio_steady": fig8["smoothness_ratio_steady"],
     }
     physics, haptic = figures["physics_on_wire"], figures["haptic_on_wire"]
     t = LOOP_TARGETS

@@ -14,11 +14,14 @@ def test_rate_figures_of_a_regular_stream_with_one_gap():
     assert np.isclose(figures["rate_hz"], 199 / (arrival[-1] - arrival[0]))
 
 
-def test_largest_jump_counts_only_pairs_both_in_contact():
+def test_largest_jump_counts_pairs_both_in_contact_or_with_onsets_either():
     forces = np.zeros((6, 3))
     forces[:, 2] = [0.0, 1.0, 1.1, 1.4, 0.0, 0.0]  # onset and release are not steady contact
     assert np.isclose(largest_force_jump_n(forces), 0.3)
     assert largest_force_jump_n(forces[:2]) == 0.0
+    assert np.isclose(largest_force_jump_n(forces, onsets=True), 1.4)  # the release
+    assert np.isclose(largest_force_jump_n(forces[:3], onsets=True), 1.0)  # the onset
+    assert largest_force_jump_n(forces[4:], onsets=True) == 0.0  # out of contact on both sides
     assert contact_fraction(forces) == 0.5
 
 
@@ -76,3 +79,11 @@ def test_fig8_figures_compare_the_held_force_with_the_rendered_one():
     assert figures["largest_jump_without_local_model_n"] > 0.012      # steps of 6-7 ticks' worth
     assert np.isclose(figures["smoothness_ratio"], figures["largest_jump_without_local_model_n"] / 0.002)
     assert fig8_figures(held[:1], held)["smoothness_ratio"] is None   # nothing rendered: no ratio
+    touch = np.zeros((340, 3))
+    touch[40:, 2] = rendered[:, 2]                                    # the same, from touching the surface on
+    touch_held = np.zeros((340, 3))
+    touch_held[40:, 2] = held[:, 2]
+    figures = fig8_figures(touch, touch_held)
+    assert np.isclose(figures["largest_jump_without_local_model_n"], 0.2)  # the held force's step onto the surface
+    assert np.isclose(figures["largest_jump_with_local_model_n"], 0.2)     # the rendered one's too: no ramp in
+    assert figures["smoothness_ratio_steady"] > 6.0                        # in steady contact, the ramp's steps

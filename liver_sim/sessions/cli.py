@@ -98,17 +98,16 @@ def add_fig8_command(commands) -> None:
 
 
 def fig8(args) -> int:
+    from liver_sim.analysis import fig8_line
     from liver_sim.sessions.fig8 import exploration_fig8
 
     figures = exploration_fig8(args.out, args.overrides, progress=(lambda line: None) if args.json else _progress)
     if args.json:
         print(json.dumps(figures))
         return 0
-    ratio = figures["smoothness_ratio"]
-    print(f"largest change between consecutive 1 ms commands in contact: "
-          f"{figures['largest_jump_with_local_model_n']:.4f} N with the local model, "
-          f"{figures['largest_jump_without_local_model_n']:.4f} N without (physics force held): "
-          f"smoothness ratio {'n/a' if ratio is None else f'{ratio:.1f}x'} (target >= 5)")
+    steady = figures["smoothness_ratio_steady"]
+    print(fig8_line(figures) + f"; in steady contact (touching and leaving left out) "
+          f"{'n/a' if steady is None else f'{steady:.1f}x'}")
     return 0
 
 

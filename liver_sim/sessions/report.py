@@ -292,6 +292,8 @@ def write_report(bag: Path, out: Path, progress=print) -> dict:
 
 
 def _markdown(s: dict) -> str:
+    from liver_sim.analysis import fig8_line
+
     ms = lambda v: f"{v * 1e3:.2f} ms" if v is not None else "n/a"  # noqa: E731
     lines = [f"# Session {s['bag']}", "", f"- {s['storage']} bag, {s['duration_s']:.2f} s, "
              f"{sum(t['messages'] for t in s['topics'].values())} messages", "", "| topic | type | messages |",
@@ -309,11 +311,7 @@ def _markdown(s: dict) -> str:
                      f"tool path {s['tool_path']['length_m'] * 1e3:.0f} mm long")
     if s["fig8"]:
         f8 = s["fig8"]
-        ratio = f"{f8['smoothness_ratio']:.1f}x" if f8["smoothness_ratio"] else "n/a"
-        lines += ["", "## Fig. 8: with and without the local model", "",
-                  f"- largest force change between consecutive 1 ms commands in steady contact: "
-                  f"{f8['largest_jump_with_local_model_n']:.4f} N with, {f8['largest_jump_without_local_model_n']:.4f} N "
-                  f"without the local model (smoothness ratio {ratio})"]
+        lines += ["", "## Fig. 8: with and without the local model", "", "- " + fig8_line(f8)]
     lines += ["", "## Rates", "", "| topic | rate | period error p50 | p99 | largest gap |", "|---|---|---|---|---|"]
     for t, r in s["rates_on_wire"].items():
         lines.append(f"| `{t}` | {r['rate_hz']:.1f} Hz | {ms(r['period_error_p50_s'])} | "
