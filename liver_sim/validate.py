@@ -18,7 +18,10 @@ Runs on the default liver and parameters (or the given ones), offline and withou
   physics force: norm within 5 % or 0.01 N, direction within 5°, contact in both or in neither.
 * R1 with the materials: the traction cylinder whose springs are the parenchyma's (then parenchyma and
   capsule) from `TissueProperties` (liver_sim.traction); its small-strain stiffness against the tissue's
-  (E·πR², plus Y·2πR for the capsule) and the largest deviation from Eq. 1's shape.
+  (E·πR², plus Y·2πR for the capsule) and the largest deviation from Eq. 1's shape.  The sum is the
+  section's stiffness; with the capsule the cylinder falls short of it because the bottom forces act on
+  the parenchyma only (the chamfered rim keeps the capsule tube off the loaded nodes) and reach the
+  capsule by shear over ~0.8·R, and the 12.5 mm skin is anisotropic (docs/paper.md, R1).
 """
 from __future__ import annotations
 

@@ -134,3 +134,54 @@ def test_stretch_is_mesh_independent_with_material_springs(fine_liver):
     assert material[1] == pytest.approx(material[0], rel=0.25)
     assert raw[1] / raw[0] > 2.0  # per-spring constants: the finer mesh is far stiffer
 
+
+
+def test_membrane_patch_has_capsule_modulus_and_poisson_third():
+    # a flat equilateral triangle network with k·l0² = Y·A_tri per triangle edge (the capsule's rule), pulled
+    # by 1 N over its width in two lattice directions 90° apart: Y and ν = 1/3 in the middle (2-D derivation of the docstring)
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.linalg import spsolve
+    from scipy.spatial import Delaunay
+
+    from liver_sim.mesh.tetmesh import TRIANGLE_EDGES, unique_edges
+    from liver_sim.physics.materials import triangle_areas
+
+    capsule = 500.0  # N/m
+    cell = 0.005
+    grid = np.array([[(i + 0.5 * (j % 2)) * cell, j * cell * math.sqrt(3) / 2] for j in range(40) for i in range(30)])
+    for points in (grid, grid[:, ::-1].copy()):  # rows across the pull, then along it
+        triangles = Delaunay(points).simplices
+        edges = unique_edges(triangles, TRIANGLE_EDGES)
+        keys = edges[:, 0] * len(points) + edges[:, 1]
+        ends = np.sort(triangles[:, TRIANGLE_EDGES], axis=2)
+        areas = triangle_areas(np.c_[points, np.zeros(len(points))], triangles)
+        area_sum = np.bincount(np.searchsorted(keys, (ends[..., 0] * len(points) + ends[..., 1]).ravel()),
+                               np.repeat(areas, 3), len(edges))
+        d = points[edges[:, 1]] - points[edges[:, 0]]
+        length = np.linalg.norm(d, axis=1)
+        u = d / length[:, None]
+        k = capsule * area_sum / length ** 2
+        dof = 2 * edges[:, :, None] + np.arange(2)  # (E, 2 ends, 2 axes)
+        block = k[:, None, None] * u[:, :, None] * u[:, None, :]
+        rows, cols, vals = [], [], []
+        for a, b, sign in ((0, 0, 1), (1, 1, 1), (0, 1, -1), (1, 0, -1)):
+            rows.append(np.repeat(dof[:, a, :], 2, axis=1).ravel())
+            cols.append(np.tile(dof[:, b, :], 2).ravel())
+            vals.append(sign * block.ravel())
+        n = 2 * len(points)
+        stiffness = coo_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), (n, n)).tocsr()
+        x, y = points[:, 0], points[:, 1]
+        width, height = np.ptp(x), np.ptp(y)
+        bottom, top = np.flatnonzero(y < y.min() + 1e-9), np.flatnonzero(y > y.max() - 1e-9)
+        held = np.zeros(n, bool)
+        held[2 * bottom + 1] = True
+        held[2 * bottom[np.argmin(np.abs(x[bottom] - x.mean()))]] = True
+        force = np.zeros(n)
+        force[2 * top + 1] = 1.0 / len(top)
+        displacement = np.zeros(n)
+        displacement[~held] = spsolve(stiffness[~held][:, ~held].tocsc(), force[~held])
+        middle = np.flatnonzero((np.abs(y - y.mean()) < 0.2 * height) & (np.abs(x - x.mean()) < 0.3 * width))
+        strain_y = np.polyfit(y[middle], displacement[2 * middle + 1], 1)[0]
+        strain_x = np.polyfit(x[middle], displacement[2 * middle], 1)[0]
+        assert (1.0 / width) / strain_y == pytest.approx(capsule, rel=0.03)
+        assert -strain_x / strain_y == pytest.approx(1.0 / 3.0, abs=0.01)
