@@ -22,8 +22,8 @@ from liver_sim.mesh.liver_shape import build_liver, default_liver
 from liver_sim.mesh.tetmesh import TetMesh
 from liver_sim.processes import DISCOVERY_RANGES, NodeFailure, keep_dds_local
 from liver_sim.sessions.bag import STORAGES
-from liver_sim.sessions.cli import (add_bag_command, add_bench_record_parser, add_fig8_command, add_record_command,
-                                   add_replay_command, add_report_command, add_resimulate_command)
+from liver_sim.sessions.cli import (add_bag_command, add_fig8_command, add_record_command, add_replay_command,
+                                   add_report_command, add_resimulate_command)
 
 PROG = "liver-sim"
 #: Exit status of a command that refused its input.
@@ -196,7 +196,14 @@ def add_bench_command(commands) -> None:
                           help="target tet counts of the larger livers (default: 10000)")
     topology.add_argument("--repeats", type=positive_int, default=9, help="timed repetitions (default: 9)")
     topology.set_defaults(handler=bench_topology)
-    add_bench_record_parser(kinds)
+    record = kinds.add_parser("record", help="the closed loop while `liver-sim record` records it: recorder CPU "
+                                             "share, haptic loop figures with and without it")
+    record.add_argument("--json", action="store_true", help="print one JSON object")
+    record.add_argument("--duration", type=float, default=30.0, help="seconds of closed loop per run (default: 30)")
+    record.add_argument("--storage", choices=STORAGES, default="mcap", help="bag storage (default: %(default)s)")
+    record.add_argument("--out", type=Path, default=Path("out/bench_record"), help="folder for the bag and the logs")
+    record.add_argument("--no-compare", action="store_true", help="skip the first run without the recorder")
+    record.set_defaults(handler=bench_record)
 
 
 def bench_physics(args) -> int:
@@ -267,6 +274,27 @@ def bench_loop(args) -> int:
     print(json.dumps(report["results"], indent=2, default=float))
     for target, met in report["met"].items():
         print(f"target {target} = {report['targets'][target]}: {'met' if met else 'NOT met'}")
+    return 0
+
+
+def bench_record(args) -> int:
+    from liver_sim.bench_record import run_record_bench
+
+    report = run_record_bench(args.duration, args.out, args.storage,
+                              None if args.json else (lambda line: print(line, flush=True)), compare=not args.no_compare)
+    if args.json:
+        print(json.dumps(report, default=float))
+        return 0
+    print(json.dumps({k: report[k] for k in ("recorder", "bag")}, indent=2, default=float))
+    number = lambda value: float("nan") if value is None else value  # noqa: E731
+    without = report.get("loop_without_recorder", {})
+    print(f"{'haptic loop':<28}{'without recorder':>18}{'with recorder':>16}")
+    for name, value in report["loop_with_recorder"].items():
+        print(f"{name:<28}{number(without.get(name)):>18.4g}{number(value):>16.4g}")
+    for target, met in report["met"].items():
+        before = report.get("met_without_recorder", {}).get(target)
+        print(f"target {target} = {report['targets'][target]}: {'met' if met else 'NOT met'} while recording"
+              + ("" if before is None else f" ({'met' if before else 'NOT met'} without)"))
     return 0
 
 

@@ -235,7 +235,7 @@ def run_demo(out_dir: Path, duration_s: float | None = None, progress=print, rec
     """
     from liver_sim.analysis import largest_force_jump_n, rate_figures
     from liver_sim.network import closed_loop_plan, run_network
-    from liver_sim.sessions.bench import recorder_command
+    from liver_sim.sessions.record import recorder_command
 
     if scenario not in SCENARIOS:
         raise ValueError(f"--scenario must be one of {', '.join(SCENARIOS)}, got {scenario!r}")

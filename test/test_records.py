@@ -97,7 +97,7 @@ def test_a_bag_whose_recorder_was_killed_is_repaired_into_a_new_bag(tmp_path, ca
 
 
 def test_bench_record_never_replaces_an_existing_bag(tmp_path):
-    from liver_sim.sessions.bench import new_path
+    from liver_sim.bench_record import new_path
 
     (tmp_path / "bench_session").mkdir()
     assert new_path(tmp_path / "bench_session") == tmp_path / "bench_session_2"

@@ -142,36 +142,3 @@ def bag_repair(args) -> int:
 
     repair_bag(args.bag, _output(args, "_repaired"), _progress)
     return 0
-
-
-def add_bench_record_parser(kinds) -> None:
-    """``liver-sim bench record [--json] [--duration S] [--storage …] [--out DIR] [--no-compare]``."""
-    parser = kinds.add_parser("record", help="the closed loop while `liver-sim record` records it: recorder CPU "
-                                             "share, haptic loop figures with and without it")
-    parser.add_argument("--json", action="store_true", help="print one JSON object")
-    parser.add_argument("--duration", type=float, default=30.0, help="seconds of closed loop per run (default: 30)")
-    parser.add_argument("--storage", choices=STORAGES, default="mcap", help="bag storage (default: %(default)s)")
-    parser.add_argument("--out", type=Path, default=Path("out/bench_record"), help="folder for the bag and the logs")
-    parser.add_argument("--no-compare", action="store_true", help="skip the first run without the recorder")
-    parser.set_defaults(handler=bench_record)
-
-
-def bench_record(args) -> int:
-    from liver_sim.sessions.bench import run_record_bench
-
-    report = run_record_bench(args.duration, args.out, args.storage, None if args.json else _progress,
-                              compare=not args.no_compare)
-    if args.json:
-        print(json.dumps(report, default=float))
-        return 0
-    print(json.dumps({k: report[k] for k in ("recorder", "bag")}, indent=2, default=float))
-    number = lambda value: float("nan") if value is None else value  # noqa: E731
-    without = report.get("loop_without_recorder", {})
-    print(f"{'haptic loop':<28}{'without recorder':>18}{'with recorder':>16}")
-    for name, value in report["loop_with_recorder"].items():
-        print(f"{name:<28}{number(without.get(name)):>18.4g}{number(value):>16.4g}")
-    for target, met in report["met"].items():
-        before = report.get("met_without_recorder", {}).get(target)
-        print(f"target {target} = {report['targets'][target]}: {'met' if met else 'NOT met'} while recording"
-              + ("" if before is None else f" ({'met' if before else 'NOT met'} without)"))
-    return 0

@@ -19,6 +19,7 @@ import threading
 import time
 from pathlib import Path
 
+from liver_sim.processes import cli_command_line
 from liver_sim.sessions.bag import BagWriter, QosSpec
 from liver_sim.sessions.gaps import SequenceGaps
 
@@ -47,6 +48,11 @@ def default_topics(marker: bool = False) -> list[str]:
 
     names = [t.name for key, t in TOPICS.items() if marker or key != "marker"]
     return names + [BASELINE_FORCE_TOPIC]
+
+
+def recorder_command(out: Path, storage: str = "mcap") -> list[str]:
+    """The command line of `liver-sim record` into `out`."""
+    return cli_command_line("record", "--out", str(out), "--storage", storage)
 
 
 def known_topics() -> dict:

@@ -4,12 +4,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from liver_sim.processes import cli_command_line
-
-
-def recorder_command(out: Path, storage: str = "mcap") -> list[str]:
-    """The command line of `liver-sim record` into `out`."""
-    return cli_command_line("record", "--out", str(out), "--storage", storage)
+from liver_sim.bench import run_loop_bench
+from liver_sim.sessions.bag import bag_info, check_bag
+from liver_sim.sessions.record import recorder_command
 
 
 def new_path(path: Path) -> Path:
@@ -41,9 +38,6 @@ def run_record_bench(duration_s: float = 30.0, out: Path = Path("out/bench_recor
     `compare` — adding the recorder's CPU share (CPU seconds per wall second, of one core and of the
     machine, from its rclpy start-up to the closed bag; imports excluded), the bag's counts and rates,
     and the loop figures side by side."""
-    from liver_sim.bench import run_loop_bench
-    from liver_sim.sessions.bag import bag_info, check_bag
-
     say = progress or (lambda line: None)
     without = None
     if compare:
