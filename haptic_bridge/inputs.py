@@ -1,7 +1,7 @@
 """Plausibility of the bridge's inputs (no ROS): every number that reaches the tick is finite and physically
 possible, or the sample is refused with the reason (the node counts it and keeps the previous good one).
 
-Finiteness and well-formed quaternions are the message conversions' part (msg_defs.conversions); here:
+Finiteness and well-formed quaternions are the message conversions' part (msg_defs.finite); here:
 the workspace bound around the liver (a tip, a plane point or a sphere centre farther than `radius_m` from
 `centre` is implausible, and so an infinite plane pushes no tool 50 m away) and the size of a force.
 """

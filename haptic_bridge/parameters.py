@@ -5,7 +5,7 @@ The device map is not among them: the bridge takes the one `liver_tool` publishe
 (latched), so the map that places the tool and the map that turns the force can never differ."""
 from haptic_bridge.safety import DEFAULT_MAX_FORCE_N, PHANTOM_MAX_FORCE_N
 from liver_sim.parameters import Param, realtime_priority_parameter
-from msg_defs.conversions import FORCE_OUTPUT_FORMATS
+from msg_defs.forces import FORCE_OUTPUT_FORMATS
 from msg_defs.topics import TOPICS
 
 MODES = ("plane", "sphere", "none")

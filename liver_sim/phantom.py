@@ -15,7 +15,7 @@ from liver_sim.checks import non_negative, positive
 from liver_sim.geometry.device_map import DEVICE_MAP_PARAMETERS, DeviceMap
 from liver_sim.parameters import Param, realtime_priority_parameter
 from liver_sim.tool_scripts import SCRIPT_PARAMETERS, ScriptedTrajectory
-from msg_defs.conversions import FORCE_OUTPUT_FORMATS
+from msg_defs.forces import FORCE_OUTPUT_FORMATS
 from msg_defs.topics import TOPICS
 
 #: Most integration steps one `advance_to` call takes to catch up; beyond, the script skips ahead.

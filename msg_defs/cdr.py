@@ -9,7 +9,7 @@ the byte after the header: stamp.sec int32, stamp.nanosec uint32, frame_id as ui
 (PoseStamped: position x y z, orientation x y z w; WrenchStamped: force x y z, torque x y z).
 
 Readers refuse truncated or inconsistent bytes with a ValueError naming the field; checking that
-the numbers are finite is the caller's (msg_defs.conversions).
+the numbers are finite is the caller's (msg_defs.poses, msg_defs.forces).
 """
 from __future__ import annotations
 

@@ -20,7 +20,7 @@ from visualization_msgs.msg import Marker
 class Topic:
     """A topic's default name, message class and QoS: keep-last `depth`, reliable or best effort,
     transient local or volatile. `type` is None where a parameter chooses it (servo_cf: `force_output`,
-    see msg_defs.conversions.force_message_type)."""
+    see msg_defs.forces.force_message_type)."""
 
     name: str
     type: type | None
@@ -63,7 +63,7 @@ TOPICS = {
     "tool_pose": Topic("/tool/pose", PoseStamped, 1, reliable=False),
     "measured_cp": Topic("/phantom/measured_cp", PoseStamped, 1, reliable=False),
     "servo_cf": Topic("/phantom/servo_cf", None, catch_up_depth(1000.0), transient_local=True),
-    # the device map liver_tool uses, for the bridge (msg_defs.conversions.device_map_message): published once
+    # the device map liver_tool uses, for the bridge (msg_defs.device_map.device_map_message): published once
     "device_map": Topic("/tool/device_map", Float64MultiArray, 1, transient_local=True),
     # 1 Hz per node
     "diagnostics": Topic("/diagnostics", DiagnosticArray, catch_up_depth(1.0), transient_local=True),

@@ -12,7 +12,9 @@ import time
 import rclpy
 
 from liver_sim.mesh.liver_shape import default_liver
-from msg_defs import conversions
+from msg_defs.forces import force_message, force_message_type, wrench_stamped
+from msg_defs.point_cloud import nodes_to_pointcloud2
+from msg_defs.poses import pose_stamped
 from msg_defs.topics import TOPICS
 
 
@@ -23,7 +25,7 @@ def main(ticks: int, other: bool) -> None:
         publish_other(node, ticks)
         return
     nodes = default_liver().points
-    publishers = {key: node.create_publisher(TOPICS[key].type or conversions.force_message_type("wrench_stamped"),
+    publishers = {key: node.create_publisher(TOPICS[key].type or force_message_type("wrench_stamped"),
                                              TOPICS[key].name, TOPICS[key].qos)
                   for key in ("servo_cf", "tool_pose", "nodes")}
     wait_for_subscribers(publishers.values())
@@ -34,12 +36,12 @@ def main(ticks: int, other: bool) -> None:
         while time.monotonic() < start + k * 0.001:
             time.sleep(0.0002)
         t = 1000.0 + k * 0.001
-        publishers["servo_cf"].publish(conversions.wrench_stamped([0.0, 0.0, k * 1e-4], t, "phantom_base"))
-        publishers["tool_pose"].publish(conversions.pose_stamped([0.0, 0.0, 0.1 + k * 1e-6], [0, 0, 0, 1], t, "liver"))
+        publishers["servo_cf"].publish(wrench_stamped([0.0, 0.0, k * 1e-4], t, "phantom_base"))
+        publishers["tool_pose"].publish(pose_stamped([0.0, 0.0, 0.1 + k * 1e-6], [0, 0, 0, 1], t, "liver"))
         counts["servo_cf"] += 1
         counts["tool_pose"] += 1
         if (k * 150) // 1000 != ((k - 1) * 150) // 1000 or k == 0:
-            publishers["nodes"].publish(conversions.nodes_to_pointcloud2(nodes + k * 1e-6, t, "liver"))
+            publishers["nodes"].publish(nodes_to_pointcloud2(nodes + k * 1e-6, t, "liver"))
             counts["nodes"] += 1
     time.sleep(1.0)  # reliable messages still in flight reach the recorder before the publishers go
     print(json.dumps({TOPICS[key].name: n for key, n in counts.items()}), flush=True)
@@ -59,13 +61,13 @@ def wait_for_subscribers(publishers) -> None:
 def publish_other(node, ticks: int) -> None:
     from std_msgs.msg import String
 
-    force = node.create_publisher(conversions.force_message_type("vector3"), TOPICS["servo_cf"].name,
+    force = node.create_publisher(force_message_type("vector3"), TOPICS["servo_cf"].name,
                                   TOPICS["servo_cf"].qos)
     text = node.create_publisher(String, "/custom/topic", 10)
     wait_for_subscribers((force, text))
     print("publishing", flush=True)
     for k in range(ticks):
-        force.publish(conversions.force_message("vector3", [0.0, 0.0, k * 1e-3], 0.0, ""))
+        force.publish(force_message("vector3", [0.0, 0.0, k * 1e-3], 0.0, ""))
         text.publish(String(data=str(k)))
         time.sleep(0.001)
     time.sleep(1.0)

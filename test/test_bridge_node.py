@@ -22,7 +22,10 @@ from rclpy.signals import SignalHandlerOptions
 from liver_sim.geometry.device_map import DeviceMap
 from liver_sim.geometry.rotations import quaternion_to_matrix
 from liver_sim.local_model import LocalModel
-from msg_defs import conversions
+from msg_defs.device_map import device_map_message
+from msg_defs.forces import force_from_message, force_message_type, wrench_stamped
+from msg_defs.local_model import local_model_marker
+from msg_defs.poses import pose_stamped
 from msg_defs.topics import TOPICS
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -92,37 +95,37 @@ class Rig:
         self.wrench = None    # a force (N) published as the physics wrench, or None
         self._publishers = {key: self.node.create_publisher(TOPICS[key].type, TOPICS[key].name, TOPICS[key].qos)
                             for key in ("tool_pose", "contact_plane", "tool_wrench")}
-        self.node.create_subscription(conversions.force_message_type(force_output), TOPICS["servo_cf"].name,
+        self.node.create_subscription(force_message_type(force_output), TOPICS["servo_cf"].name,
                                       self._on_force, TOPICS["servo_cf"].qos)
         self.node.create_subscription(TOPICS["diagnostics"].type, TOPICS["diagnostics"].name,
                                       self.diagnostics.append, TOPICS["diagnostics"].qos)
         self.node.create_timer(PUBLISH_PERIOD_S, self._publish)
         self._map = self.node.create_publisher(TOPICS["device_map"].type, TOPICS["device_map"].name,
                                                TOPICS["device_map"].qos)
-        self._map.publish(conversions.device_map_message(DeviceMap(rotation_xyzw)))
+        self._map.publish(device_map_message(DeviceMap(rotation_xyzw)))
 
     def _on_force(self, message) -> None:
         self.arrivals.append(time.monotonic())
-        self.forces.append(conversions.force_from_message(self.force_output, message))
+        self.forces.append(force_from_message(self.force_output, message))
         if self.force_output == "wrench_stamped":
             self.stamps.append((message.header.stamp.sec, message.header.stamp.nanosec))
 
     def _publish(self) -> None:
         stamp = self.node.get_clock().now().to_msg()
         if self.tool is not None:
-            pose = conversions.pose_stamped(self.tool, (0.0, 0.0, 0.0, 1.0), stamp, "liver")
+            pose = pose_stamped(self.tool, (0.0, 0.0, 0.0, 1.0), stamp, "liver")
             if self.nan_pose:
                 pose = PoseStamped(header=pose.header)
                 pose.pose.position.z = math.nan
             self.pose_stamps.add((stamp.sec, stamp.nanosec))
             self._publishers["tool_pose"].publish(pose)
         if self.model is not None:
-            marker = conversions.local_model_marker(self.model, stamp, "liver", 0.05)
+            marker = local_model_marker(self.model, stamp, "liver", 0.05)
             if self.zero_quaternion:
                 marker.pose.orientation.w = 0.0
             self._publishers["contact_plane"].publish(marker)
         if self.wrench is not None:
-            self._publishers["tool_wrench"].publish(conversions.wrench_stamped(self.wrench, stamp, "liver"))
+            self._publishers["tool_wrench"].publish(wrench_stamped(self.wrench, stamp, "liver"))
 
     def wait_until(self, condition, what: str, bridge: subprocess.Popen) -> None:
         """Spin (publishing and receiving) until `condition()`; fail if the bridge exits or WAIT_S passes."""

@@ -14,7 +14,8 @@ from liver_sim.physics.model import LiverModel
 from liver_sim.physics.params import ModelParams
 from liver_sim.scenarios import press_anchor
 from liver_sim.tool_scripts import ScriptSettings, make_script
-from msg_defs.conversions import local_model_marker, marker_to_local_model, stamp_from_seconds
+from msg_defs.local_model import local_model_marker, marker_to_local_model
+from msg_defs.stamps import stamp_from_seconds
 
 PUSH_N = 0.05
 

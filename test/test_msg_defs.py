@@ -16,10 +16,17 @@ from visualization_msgs.msg import Marker
 
 from liver_sim.geometry.rotations import quaternion_from_z_axis, quaternion_to_matrix
 from liver_sim.local_model import LocalModel
-from msg_defs import conversions as conv
+from msg_defs.device_map import device_map_from_message, device_map_message
+from msg_defs.forces import (FORCE_OUTPUT_FORMATS, force_from_bytes, force_from_message, force_message,
+                             force_message_bytes, force_message_type, wrench_stamped, wrench_stamped_bytes)
+from msg_defs.local_model import PLANE_THICKNESS_M, local_model_marker, marker_to_local_model
+from msg_defs.point_cloud import nodes_to_pointcloud2, pointcloud2_to_nodes
+from msg_defs.poses import pose_from_bytes, pose_stamped, pose_stamped_bytes, pose_to_arrays
+from msg_defs.skin import mesh_msg_to_arrays, skin_marker, skin_marker_serialized, skin_mesh_msg
+from msg_defs.stamps import seconds_from_stamp, stamp_from_seconds, stamp_s_from_bytes
 from msg_defs.topics import TOPICS
 
-STANDARD_FORCE_FORMATS = [fmt for fmt in conv.FORCE_OUTPUT_FORMATS if fmt != "omni_feedback"]
+STANDARD_FORCE_FORMATS = [fmt for fmt in FORCE_OUTPUT_FORMATS if fmt != "omni_feedback"]
 AXES = [(0, 0, 1), (0, 0, -1), (1, 0, 0), (-1, 0, 0), (0, 1, 0), (0.3, -0.2, -0.9)]
 
 
@@ -40,30 +47,30 @@ def sphere_model(centre, radius):
 # ---------------------------------------------------------------- time
 
 def test_stamp_round_trip_to_the_nanosecond():
-    stamp = conv.stamp_from_seconds(1_700_000_000.25)
+    stamp = stamp_from_seconds(1_700_000_000.25)
     assert (stamp.sec, stamp.nanosec) == (1_700_000_000, 250_000_000)
-    assert conv.seconds_from_stamp(conv.stamp_from_seconds(12.345678901)) == pytest.approx(12.345678901, abs=1e-9)
-    carried = conv.stamp_from_seconds(2.9999999999)
+    assert seconds_from_stamp(stamp_from_seconds(12.345678901)) == pytest.approx(12.345678901, abs=1e-9)
+    carried = stamp_from_seconds(2.9999999999)
     assert (carried.sec, carried.nanosec) == (3, 0)
 
 
 @pytest.mark.parametrize("bad", [-1.0, float("nan"), float("inf"), 2.0 ** 31])
 def test_stamp_refuses_negative_non_finite_and_overflowing_times(bad):
     with pytest.raises(ValueError, match="stamp"):
-        conv.stamp_from_seconds(bad)
+        stamp_from_seconds(bad)
 
 
 # ---------------------------------------------------------------- PointCloud2
 
 def test_pointcloud_round_trip_is_exact_in_float32(rng):
     positions = rng.normal(scale=0.1, size=(2000, 3))
-    msg = conv.nodes_to_pointcloud2(positions, 3.5, "liver")
+    msg = nodes_to_pointcloud2(positions, 3.5, "liver")
     assert (msg.height, msg.width, msg.point_step, msg.row_step) == (1, 2000, 12, 24000)
     assert [(f.name, f.offset, f.datatype, f.count) for f in msg.fields] == [
         ("x", 0, PointField.FLOAT32, 1), ("y", 4, PointField.FLOAT32, 1), ("z", 8, PointField.FLOAT32, 1)]
     assert msg.is_dense and not msg.is_bigendian
-    assert msg.header.frame_id == "liver" and conv.seconds_from_stamp(msg.header.stamp) == 3.5
-    back = conv.pointcloud2_to_nodes(deserialize_message(serialize_message(msg), PointCloud2))
+    assert msg.header.frame_id == "liver" and seconds_from_stamp(msg.header.stamp) == 3.5
+    back = pointcloud2_to_nodes(deserialize_message(serialize_message(msg), PointCloud2))
     assert back.dtype == np.float64 and back.shape == (2000, 3)
     np.testing.assert_array_equal(back, positions.astype(np.float32))
 
@@ -80,11 +87,11 @@ def test_pointcloud_accepts_other_layouts(rng):
                   for name, offset in (("intensity", 0), ("z", 4), ("x", 12), ("y", 20))]
         msg = PointCloud2(height=2, width=3, fields=fields, is_bigendian=bigendian, point_step=32, row_step=96,
                           data=records.tobytes(), is_dense=True)
-        np.testing.assert_array_equal(conv.pointcloud2_to_nodes(msg), xyz)
+        np.testing.assert_array_equal(pointcloud2_to_nodes(msg), xyz)
 
 
 def _cloud_with(**changes):
-    msg = conv.nodes_to_pointcloud2(np.arange(30.0).reshape(10, 3), 0.0, "liver")
+    msg = nodes_to_pointcloud2(np.arange(30.0).reshape(10, 3), 0.0, "liver")
     for key, value in changes.items():
         setattr(msg, key, value)
     return msg
@@ -112,7 +119,7 @@ def _nan_data():
 ], ids=["data length", "row_step", "point_step", "missing field", "datatype", "offset", "NaN"])
 def test_malformed_pointcloud_is_refused_naming_the_field(changes, message):
     with pytest.raises(ValueError, match=message):
-        conv.pointcloud2_to_nodes(_cloud_with(**changes))
+        pointcloud2_to_nodes(_cloud_with(**changes))
 
 
 @pytest.mark.parametrize("positions, message", [
@@ -122,7 +129,7 @@ def test_malformed_pointcloud_is_refused_naming_the_field(changes, message):
 ])
 def test_pointcloud_builder_refuses_what_would_not_be_finite_float32(positions, message):
     with pytest.raises(ValueError, match=message):
-        conv.nodes_to_pointcloud2(positions, 0.0, "liver")
+        nodes_to_pointcloud2(positions, 0.0, "liver")
 
 
 # ---------------------------------------------------------------- skin: Mesh and Marker
@@ -133,8 +140,8 @@ def _skin(rng, n_points, n_triangles):
 
 def test_mesh_round_trip(rng):
     points, skin = rng.random((40, 3)), _skin(rng, 40, 60)
-    msg = deserialize_message(serialize_message(conv.skin_mesh_msg(skin, points)), Mesh)
-    back_skin, back_points = conv.mesh_msg_to_arrays(msg)
+    msg = deserialize_message(serialize_message(skin_mesh_msg(skin, points)), Mesh)
+    back_skin, back_points = mesh_msg_to_arrays(msg)
     np.testing.assert_array_equal(back_skin, skin)
     np.testing.assert_array_equal(back_points, points)
     assert back_skin.dtype == np.int64
@@ -143,19 +150,19 @@ def test_mesh_round_trip(rng):
 def test_mesh_refuses_indices_out_of_range_both_ways(rng):
     points = rng.random((4, 3))
     with pytest.raises(ValueError, match=r"skin holds node indices outside \[0, 4\)"):
-        conv.skin_mesh_msg(np.array([[0, 1, 4]]), points)
-    msg = conv.skin_mesh_msg(np.array([[0, 1, 3]]), points)
+        skin_mesh_msg(np.array([[0, 1, 4]]), points)
+    msg = skin_mesh_msg(np.array([[0, 1, 3]]), points)
     msg.vertices.pop()
     with pytest.raises(ValueError, match=r"Mesh\.triangles holds node indices outside \[0, 3\)"):
-        conv.mesh_msg_to_arrays(msg)
+        mesh_msg_to_arrays(msg)
     msg.vertices[0].y = float("inf")
     with pytest.raises(ValueError, match=r"Mesh\.vertices must be finite"):
-        conv.mesh_msg_to_arrays(msg)
+        mesh_msg_to_arrays(msg)
 
 
 def test_skin_marker_lists_the_triangle_corners_in_order(rng):
     positions, skin = rng.random((30, 3)), _skin(rng, 30, 20)
-    marker = conv.skin_marker(positions, skin, 2.0, "liver")
+    marker = skin_marker(positions, skin, 2.0, "liver")
     assert (marker.ns, marker.id, marker.type, marker.action) == ("liver", 0, Marker.TRIANGLE_LIST, Marker.ADD)
     assert marker.pose.orientation.w == 1.0 and marker.color.a == 1.0
     corners = np.array([(p.x, p.y, p.z) for p in marker.points])
@@ -165,9 +172,9 @@ def test_skin_marker_lists_the_triangle_corners_in_order(rng):
 @pytest.mark.parametrize("n_triangles", [0, 1, 450])
 def test_serialized_skin_marker_is_the_same_message(rng, n_triangles):
     positions, skin = rng.random((300, 3)), _skin(rng, 300, n_triangles)
-    stamp = conv.stamp_from_seconds(5.25)
-    expected = deserialize_message(serialize_message(conv.skin_marker(positions, skin, stamp, "liver")), Marker)
-    assert deserialize_message(conv.skin_marker_serialized(positions, skin, stamp, "liver"), Marker) == expected
+    stamp = stamp_from_seconds(5.25)
+    expected = deserialize_message(serialize_message(skin_marker(positions, skin, stamp, "liver")), Marker)
+    assert deserialize_message(skin_marker_serialized(positions, skin, stamp, "liver"), Marker) == expected
 
 
 # ---------------------------------------------------------------- rotations and poses
@@ -190,10 +197,10 @@ def test_quaternion_from_z_axis_is_the_shortest_arc_and_refuses_zero(rng):
 
 
 def test_pose_round_trip_normalises_the_quaternion():
-    msg = conv.pose_stamped((0.1, -0.2, 0.3), (0.0, 0.0, 2.0, 2.0), 1.0, "liver")
+    msg = pose_stamped((0.1, -0.2, 0.3), (0.0, 0.0, 2.0, 2.0), 1.0, "liver")
     assert msg.header.frame_id == "liver"
     for pose in (msg, msg.pose):
-        position, orientation = conv.pose_to_arrays(pose)
+        position, orientation = pose_to_arrays(pose)
         np.testing.assert_array_equal(position, (0.1, -0.2, 0.3))
         np.testing.assert_allclose(orientation, (0.0, 0.0, np.sqrt(0.5), np.sqrt(0.5)))
 
@@ -202,13 +209,13 @@ def test_pose_with_bad_fields_is_refused_by_name():
     bad_position = Pose()
     bad_position.position.z = float("nan")
     with pytest.raises(ValueError, match=r"Pose\.position must be finite"):
-        conv.pose_to_arrays(bad_position)
+        pose_to_arrays(bad_position)
     zero_orientation = PoseStamped()
     zero_orientation.pose.orientation.w = 0.0
     with pytest.raises(ValueError, match=r"PoseStamped\.pose\.orientation must be a non-zero quaternion"):
-        conv.pose_to_arrays(zero_orientation)
+        pose_to_arrays(zero_orientation)
     with pytest.raises(ValueError, match="orientation_xyzw"):
-        conv.pose_stamped((0, 0, 0), (0, 0, 0, 0), 0.0, "liver")
+        pose_stamped((0, 0, 0), (0, 0, 0, 0), 0.0, "liver")
 
 
 # ---------------------------------------------------------------- local model
@@ -220,10 +227,10 @@ def _through_the_wire(marker):
 @pytest.mark.parametrize("normal", AXES)
 def test_plane_local_model_round_trip(normal):
     point = (0.01, -0.02, 0.03)
-    marker = conv.local_model_marker(plane_model(point, normal), 4.0, "liver", 0.05, patch_size_m=0.03)
+    marker = local_model_marker(plane_model(point, normal), 4.0, "liver", 0.05, patch_size_m=0.03)
     assert (marker.ns, marker.id, marker.type, marker.action) == ("local_model", 0, Marker.CUBE, Marker.ADD)
-    assert (marker.scale.x, marker.scale.y, marker.scale.z) == (0.03, 0.03, conv.PLANE_THICKNESS_M)
-    model, lifetime_s = conv.marker_to_local_model(_through_the_wire(marker))
+    assert (marker.scale.x, marker.scale.y, marker.scale.z) == (0.03, 0.03, PLANE_THICKNESS_M)
+    model, lifetime_s = marker_to_local_model(_through_the_wire(marker))
     assert model.kind == "plane" and lifetime_s == pytest.approx(0.05)
     np.testing.assert_array_equal(model.point, point)
     np.testing.assert_allclose(model.normal, np.asarray(normal) / np.linalg.norm(normal), atol=1e-12)
@@ -231,37 +238,37 @@ def test_plane_local_model_round_trip(normal):
 
 def test_plane_local_model_round_trip_random_normals(rng):
     for normal in rng.normal(size=(20, 3)):
-        model, _ = conv.marker_to_local_model(conv.local_model_marker(plane_model(np.zeros(3), normal), 0.0, "l", 0.05))
+        model, _ = marker_to_local_model(local_model_marker(plane_model(np.zeros(3), normal), 0.0, "l", 0.05))
         np.testing.assert_allclose(model.normal, normal / np.linalg.norm(normal), atol=1e-12)
 
 
 def test_sphere_local_model_round_trip():
-    marker = conv.local_model_marker(sphere_model((0.0, 0.1, -0.2), 0.07), 4.0, "liver", 0.02)
+    marker = local_model_marker(sphere_model((0.0, 0.1, -0.2), 0.07), 4.0, "liver", 0.02)
     assert marker.type == Marker.SPHERE and (marker.scale.x, marker.scale.y, marker.scale.z) == (0.14, 0.14, 0.14)
-    model, lifetime_s = conv.marker_to_local_model(_through_the_wire(marker))
+    model, lifetime_s = marker_to_local_model(_through_the_wire(marker))
     assert model.kind == "sphere" and lifetime_s == pytest.approx(0.02)
     np.testing.assert_array_equal(model.centre, (0.0, 0.1, -0.2))
     assert model.radius_m == pytest.approx(0.07)
 
 
 def test_invalid_local_model_is_a_delete_marker_read_as_none():
-    marker = conv.local_model_marker(LocalModel.invalid(), 4.0, "liver", 0.05)
+    marker = local_model_marker(LocalModel.invalid(), 4.0, "liver", 0.05)
     assert (marker.ns, marker.id, marker.action, marker.header.frame_id) == ("local_model", 0, Marker.DELETE, "liver")
-    assert conv.marker_to_local_model(_through_the_wire(marker)) == (None, pytest.approx(0.05))
-    assert conv.marker_to_local_model(Marker(action=Marker.DELETEALL)) == (None, 0.0)
+    assert marker_to_local_model(_through_the_wire(marker)) == (None, pytest.approx(0.05))
+    assert marker_to_local_model(Marker(action=Marker.DELETEALL)) == (None, 0.0)
 
 
 def test_local_model_marker_refuses_bad_models():
     with pytest.raises(ValueError, match=r"LocalModel\.point must be finite"):
-        conv.local_model_marker(plane_model((0, np.nan, 0), (0, 0, 1)), 0.0, "liver", 0.05)
+        local_model_marker(plane_model((0, np.nan, 0), (0, 0, 1)), 0.0, "liver", 0.05)
     with pytest.raises(ValueError, match=r"LocalModel\.radius_m must be finite and > 0"):
-        conv.local_model_marker(sphere_model((0, 0, 0), 0.0), 0.0, "liver", 0.05)
+        local_model_marker(sphere_model((0, 0, 0), 0.0), 0.0, "liver", 0.05)
     with pytest.raises(ValueError, match="lifetime_s"):
-        conv.local_model_marker(plane_model((0, 0, 0), (0, 0, 1)), 0.0, "liver", -0.05)
+        local_model_marker(plane_model((0, 0, 0), (0, 0, 1)), 0.0, "liver", -0.05)
 
 
 def _marker(**changes):
-    marker = conv.local_model_marker(sphere_model((0.0, 0.0, 0.0), 0.05), 0.0, "liver", 0.05)
+    marker = local_model_marker(sphere_model((0.0, 0.0, 0.0), 0.05), 0.0, "liver", 0.05)
     for path, value in changes.items():
         owner = marker
         *parents, leaf = path.split("__")
@@ -282,28 +289,28 @@ def _marker(**changes):
 ])
 def test_bad_local_model_marker_is_refused_by_field(changes, message):
     with pytest.raises(ValueError, match=message):
-        conv.marker_to_local_model(_marker(**changes))
+        marker_to_local_model(_marker(**changes))
 
 
 # ---------------------------------------------------------------- forces
 
 def test_wrench_stamped_carries_force_torque_and_header():
-    msg = conv.wrench_stamped((0.5, -1.0, 1.5), 7.0, "liver", torque=(0.0, 0.1, 0.0))
+    msg = wrench_stamped((0.5, -1.0, 1.5), 7.0, "liver", torque=(0.0, 0.1, 0.0))
     wrench = msg.wrench
     assert (wrench.force.x, wrench.force.y, wrench.force.z, wrench.torque.y) == (0.5, -1.0, 1.5, 0.1)
-    assert msg.header.frame_id == "liver" and conv.seconds_from_stamp(msg.header.stamp) == 7.0
+    assert msg.header.frame_id == "liver" and seconds_from_stamp(msg.header.stamp) == 7.0
     with pytest.raises(ValueError, match="force must be finite"):
-        conv.wrench_stamped((0.0, float("inf"), 0.0), 7.0, "liver")
+        wrench_stamped((0.0, float("inf"), 0.0), 7.0, "liver")
 
 
 @pytest.mark.parametrize("fmt, msg_type", [("wrench_stamped", WrenchStamped), ("wrench", Wrench),
                                            ("vector3", Vector3), ("float64_array", Float64MultiArray)])
 def test_each_force_output_format_carries_the_same_force(fmt, msg_type):
     force = (0.25, -1.5, 0.75)
-    assert conv.force_message_type(fmt) is msg_type
-    msg = conv.force_message(fmt, force, Time(sec=3), "phantom_base")
+    assert force_message_type(fmt) is msg_type
+    msg = force_message(fmt, force, Time(sec=3), "phantom_base")
     assert isinstance(msg, msg_type)
-    back = conv.force_from_message(fmt, deserialize_message(serialize_message(msg), msg_type))
+    back = force_from_message(fmt, deserialize_message(serialize_message(msg), msg_type))
     np.testing.assert_array_equal(back, force)
 
 
@@ -318,71 +325,71 @@ def _padding_zeroed(data: bytes, frame_id: str) -> bytes:
 def test_serialized_pose_and_wrench_are_the_bytes_rclpy_writes(frame_id, rng):
     stamp = Time(sec=1_700_000_123, nanosec=987_654_321)
     position, quaternion = rng.normal(size=3), rng.normal(size=4)
-    expected = serialize_message(conv.pose_stamped(position, quaternion, stamp, frame_id))
-    assert conv.pose_stamped_bytes(position, quaternion, stamp, frame_id) == _padding_zeroed(expected, frame_id)
+    expected = serialize_message(pose_stamped(position, quaternion, stamp, frame_id))
+    assert pose_stamped_bytes(position, quaternion, stamp, frame_id) == _padding_zeroed(expected, frame_id)
     force = rng.normal(size=3)
-    expected = serialize_message(conv.wrench_stamped(force, stamp, frame_id))
-    assert conv.wrench_stamped_bytes(force, stamp, frame_id) == _padding_zeroed(expected, frame_id)
-    assert conv.force_message_bytes("wrench_stamped", force, stamp, frame_id) == _padding_zeroed(expected, frame_id)
+    expected = serialize_message(wrench_stamped(force, stamp, frame_id))
+    assert wrench_stamped_bytes(force, stamp, frame_id) == _padding_zeroed(expected, frame_id)
+    assert force_message_bytes("wrench_stamped", force, stamp, frame_id) == _padding_zeroed(expected, frame_id)
 
 
 @pytest.mark.parametrize("frame_id", ["", "liver", "phantom_base"])
 def test_serialized_pose_and_wrench_read_back(frame_id, rng):
     position, quaternion = rng.normal(size=3), rng.normal(size=4)
-    data = serialize_message(conv.pose_stamped(position, quaternion, (5, 17), frame_id))
-    back_position, back_quaternion, stamp = conv.pose_from_bytes(data)
+    data = serialize_message(pose_stamped(position, quaternion, (5, 17), frame_id))
+    back_position, back_quaternion, stamp = pose_from_bytes(data)
     np.testing.assert_array_equal(back_position, position)
     np.testing.assert_allclose(back_quaternion, quaternion / np.linalg.norm(quaternion))
-    assert stamp == (5, 17) and conv.stamp_s_from_bytes(data, "PoseStamped") == 5 + 17e-9
+    assert stamp == (5, 17) and stamp_s_from_bytes(data, "PoseStamped") == 5 + 17e-9
     force = rng.normal(size=3)
     for fmt in ("wrench_stamped", "wrench", "vector3", "float64_array"):
-        data = conv.force_message_bytes(fmt, force, Time(sec=2), frame_id)
-        np.testing.assert_array_equal(conv.force_from_bytes(fmt, data), force)
+        data = force_message_bytes(fmt, force, Time(sec=2), frame_id)
+        np.testing.assert_array_equal(force_from_bytes(fmt, data), force)
 
 
 def test_big_endian_cdr_pose_is_read():
     head = struct.pack(">iII", 3, 4, 6) + b"liver\x00" + bytes(6)
     data = b"\x00\x00\x00\x00" + head + struct.pack(">7d", 0.1, 0.2, 0.3, 0.0, 0.0, 0.0, 2.0)
-    position, quaternion, stamp = conv.pose_from_bytes(data)
+    position, quaternion, stamp = pose_from_bytes(data)
     assert position.tolist() == [0.1, 0.2, 0.3] and quaternion.tolist() == [0.0, 0.0, 0.0, 1.0] and stamp == (3, 4)
 
 
 def test_malformed_serialized_pose_and_force_are_refused_by_field():
-    good = conv.pose_stamped_bytes((0.0, 0.0, 0.1), (0.0, 0.0, 0.0, 1.0), 1.0, "liver")
+    good = pose_stamped_bytes((0.0, 0.0, 0.1), (0.0, 0.0, 0.0, 1.0), 1.0, "liver")
     with pytest.raises(ValueError, match="PoseStamped: truncated"):
-        conv.pose_from_bytes(good[:-1])
+        pose_from_bytes(good[:-1])
     with pytest.raises(ValueError, match="PoseStamped: not a CDR message"):
-        conv.pose_from_bytes(b"\x07" * 40)
+        pose_from_bytes(b"\x07" * 40)
     with pytest.raises(ValueError, match=r"PoseStamped.header.frame_id: bad string length"):
-        conv.pose_from_bytes(good[:12] + struct.pack("<I", 10_000) + good[16:])
+        pose_from_bytes(good[:12] + struct.pack("<I", 10_000) + good[16:])
     nan_position = good[:-56] + struct.pack("<d", float("nan")) + good[-48:]
     with pytest.raises(ValueError, match=r"PoseStamped.pose.position must be finite"):
-        conv.pose_from_bytes(nan_position)
+        pose_from_bytes(nan_position)
     with pytest.raises(ValueError, match=r"PoseStamped.pose.orientation must be a non-zero quaternion"):
-        conv.pose_from_bytes(good[:-32] + bytes(32))
-    force = conv.wrench_stamped_bytes((0.0, 1.0, 0.0), 1.0, "phantom_base")
+        pose_from_bytes(good[:-32] + bytes(32))
+    force = wrench_stamped_bytes((0.0, 1.0, 0.0), 1.0, "phantom_base")
     with pytest.raises(ValueError, match="WrenchStamped force must be finite"):
-        conv.force_from_bytes("wrench_stamped", force[:-48] + struct.pack("<d", float("inf")) + force[-40:])
+        force_from_bytes("wrench_stamped", force[:-48] + struct.pack("<d", float("inf")) + force[-40:])
     with pytest.raises(ValueError, match="force must be finite"):
-        conv.wrench_stamped_bytes((0.0, float("nan"), 0.0), 1.0, "phantom_base")
+        wrench_stamped_bytes((0.0, float("nan"), 0.0), 1.0, "phantom_base")
 
 
 def test_force_output_refusals():
     with pytest.raises(ValueError, match=r"needs omni_msgs \(Geomagic Touch ROS 2 driver workspace\) sourced"):
-        conv.force_message_type("omni_feedback")
+        force_message_type("omni_feedback")
     with pytest.raises(ValueError, match="needs omni_msgs"):
-        conv.force_message("omni_feedback", (0.0, 0.0, 1.0), 0.0, "phantom_base")
+        force_message("omni_feedback", (0.0, 0.0, 1.0), 0.0, "phantom_base")
     with pytest.raises(ValueError, match="force_output must be one of"):
-        conv.force_message_type("twist")
+        force_message_type("twist")
     with pytest.raises(ValueError, match=r"Float64MultiArray\.data has 2 values, expected 3"):
-        conv.force_from_message("float64_array", Float64MultiArray(data=[1.0, 2.0]))
+        force_from_message("float64_array", Float64MultiArray(data=[1.0, 2.0]))
     with pytest.raises(ValueError, match="'vector3' carries Vector3, got Wrench"):
-        conv.force_from_message("vector3", Wrench())
+        force_from_message("vector3", Wrench())
     with pytest.raises(ValueError, match="Vector3 force must be finite"):
-        conv.force_from_message("vector3", Vector3(x=float("nan")))
+        force_from_message("vector3", Vector3(x=float("nan")))
     for fmt in STANDARD_FORCE_FORMATS:
         with pytest.raises(ValueError, match="force must be finite"):
-            conv.force_message(fmt, (0.0, float("nan"), 0.0), 0.0, "phantom_base")
+            force_message(fmt, (0.0, float("nan"), 0.0), 0.0, "phantom_base")
 
 
 # ---------------------------------------------------------------- topics
@@ -416,8 +423,8 @@ def test_pointcloud_and_serialized_marker_cross_loopback_dds(ros_domain_id, rng)
     from rclpy.executors import SingleThreadedExecutor
 
     positions, skin = rng.random((2000, 3)), _skin(rng, 2000, 450)
-    cloud = conv.nodes_to_pointcloud2(positions, 9.0, "liver")
-    marker_bytes = conv.skin_marker_serialized(positions, skin, 9.0, "liver")
+    cloud = nodes_to_pointcloud2(positions, 9.0, "liver")
+    marker_bytes = skin_marker_serialized(positions, skin, 9.0, "liver")
     received = {}
     context = rclpy.Context()
     rclpy.init(context=context, domain_id=ros_domain_id)
@@ -445,7 +452,7 @@ def test_pointcloud_and_serialized_marker_cross_loopback_dds(ros_domain_id, rng)
     finally:
         rclpy.shutdown(context=context)
     assert set(received) == set(topics), f"received only {sorted(received)} within 5 s"
-    np.testing.assert_array_equal(conv.pointcloud2_to_nodes(received["nodes"]), positions.astype(np.float32))
+    np.testing.assert_array_equal(pointcloud2_to_nodes(received["nodes"]), positions.astype(np.float32))
     assert received["nodes"].header.frame_id == "liver"
     corners = np.array([(p.x, p.y, p.z) for p in received["marker"].points])
     np.testing.assert_array_equal(corners, positions[skin].reshape(-1, 3))
@@ -457,29 +464,29 @@ def test_device_map_round_trips_and_refuses_a_bad_message():
     from liver_sim.geometry.device_map import DeviceMap
 
     original = DeviceMap([0.0, math.sin(0.4), 0.0, math.cos(0.4)], [0.1, -0.2, 0.3], 0.5)
-    message = conv.device_map_message(original)
-    back = conv.device_map_from_message(message)
+    message = device_map_message(original)
+    back = device_map_from_message(message)
     np.testing.assert_allclose(back.rotation, original.rotation, atol=1e-12)
     np.testing.assert_array_equal(back.translation, original.translation)
     assert back.scale == 0.5
     message.data[7] = -1.0
     with pytest.raises(ValueError, match="scale"):
-        conv.device_map_from_message(message)
+        device_map_from_message(message)
     message.data[7], message.data[4] = 0.5, float("nan")
     with pytest.raises(ValueError, match="finite"):
-        conv.device_map_from_message(message)
+        device_map_from_message(message)
     message.layout.dim = message.layout.dim[:2]
     with pytest.raises(ValueError, match="layout"):
-        conv.device_map_from_message(message)
+        device_map_from_message(message)
 
 
 @pytest.mark.parametrize("component", [1e200, 1e-200, 1.7e308])
 def test_quaternions_of_huge_or_tiny_components_normalise(component):
-    pose = conv.pose_stamped([0.0, 0.0, 0.0], (component, component, 0.0, 0.0), 0.0, "liver")
-    _, q = conv.pose_to_arrays(pose)
+    pose = pose_stamped([0.0, 0.0, 0.0], (component, component, 0.0, 0.0), 0.0, "liver")
+    _, q = pose_to_arrays(pose)
     np.testing.assert_allclose(q, [math.sqrt(0.5), math.sqrt(0.5), 0.0, 0.0])
     with pytest.raises(ValueError, match="non-zero"):
-        conv.pose_stamped([0.0, 0.0, 0.0], (0.0, 0.0, 0.0, 0.0), 0.0, "liver")
+        pose_stamped([0.0, 0.0, 0.0], (0.0, 0.0, 0.0, 0.0), 0.0, "liver")
 
 
 def test_devices_subscribe_to_force_commands_volatile_so_no_old_command_is_replayed_to_them():

@@ -14,7 +14,8 @@ from liver_sim.network import closed_loop_plan, default_anchor, run_network
 from liver_sim.nodes.common import spin
 from liver_sim.nodes.listener import NetworkListener
 from liver_sim.processes import NodeProcesses, command_line
-from msg_defs import conversions
+from msg_defs.point_cloud import nodes_to_pointcloud2
+from msg_defs.poses import pose_stamped
 from msg_defs.topics import TOPICS
 
 MAX_FORCE_N = 2.0
@@ -113,10 +114,10 @@ def test_bad_input_does_not_crash_the_network_nor_reach_the_device(network):
     node = rclpy.create_node("bad_input", context=network.context)
     poses = node.create_publisher(TOPICS["tool_pose"].type, TOPICS["tool_pose"].name, TOPICS["tool_pose"].qos)
     clouds = node.create_publisher(PointCloud2, TOPICS["nodes"].name, TOPICS["nodes"].qos)
-    nan_pose = conversions.pose_stamped([0.0, 0.0, 0.0], (0.0, 0.0, 0.0, 1.0), 0.0, "liver")
+    nan_pose = pose_stamped([0.0, 0.0, 0.0], (0.0, 0.0, 0.0, 1.0), 0.0, "liver")
     nan_pose.pose.position.x = float("nan")
-    far_pose = conversions.pose_stamped([50.0, 0.0, 0.0], (0.0, 0.0, 0.0, 1.0), 0.0, "liver")
-    broken = conversions.nodes_to_pointcloud2(np.zeros((10, 3)), 0.0, "liver")
+    far_pose = pose_stamped([50.0, 0.0, 0.0], (0.0, 0.0, 0.0, 1.0), 0.0, "liver")
+    broken = nodes_to_pointcloud2(np.zeros((10, 3)), 0.0, "liver")
     broken.data = bytes(broken.data)[:50]
     t0 = time.monotonic()
     for _ in range(200):

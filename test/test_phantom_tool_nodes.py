@@ -15,7 +15,10 @@ import rclpy
 from geometry_msgs.msg import PoseStamped
 from rclpy.executors import SingleThreadedExecutor
 
-from msg_defs import conversions
+from msg_defs.device_map import device_map_from_message
+from msg_defs.forces import force_message, force_message_type
+from msg_defs.poses import pose_to_arrays
+from msg_defs.stamps import seconds_from_stamp, stamp_from_seconds
 from msg_defs.topics import TOPICS
 
 CONFIG = Path(__file__).resolve().parent.parent / "config"
@@ -105,7 +108,7 @@ def ros(ros_domain_id):
 
 
 def positions(messages) -> np.ndarray:
-    return np.array([conversions.pose_to_arrays(m.pose)[0] for m in messages]).reshape(-1, 3)
+    return np.array([pose_to_arrays(m.pose)[0] for m in messages]).reshape(-1, 3)
 
 
 def statuses(diagnostics: list, name: str) -> list[dict]:
@@ -119,15 +122,15 @@ def test_phantom_sim_plays_its_script(ros, ros_env):
     try:
         ros.wait_until(lambda: len(poses) > 10, "the first stylus poses", process)
         del poses[:]
-        ros.wait_until(lambda: len(poses) > 1 and conversions.seconds_from_stamp(poses[-1].header.stamp)
-                       - conversions.seconds_from_stamp(poses[0].header.stamp) > 2.5, "two script cycles", process)
+        ros.wait_until(lambda: len(poses) > 1 and seconds_from_stamp(poses[-1].header.stamp)
+                       - seconds_from_stamp(poses[0].header.stamp) > 2.5, "two script cycles", process)
     finally:
         stop(process)
     z = positions(poses)[:, 2]
     assert z.max() == pytest.approx(UP_Z, abs=1.5e-3)
     assert z.min() == pytest.approx(DEEP_Z, abs=1.5e-3)
     assert {m.header.frame_id for m in poses} == {"phantom_base"}
-    stamps = [conversions.seconds_from_stamp(m.header.stamp) for m in poses]
+    stamps = [seconds_from_stamp(m.header.stamp) for m in poses]
     assert np.all(np.diff(stamps) > 0.0), "stamps are the sample times, increasing"
 
 
@@ -135,13 +138,13 @@ def test_phantom_sim_plays_its_script(ros, ros_env):
 def test_phantom_sim_feels_the_commanded_force(ros, ros_env, force_output):
     poses = ros.collect("measured_cp")
     diagnostics = ros.collect("diagnostics")
-    command_type = conversions.force_message_type(force_output)
+    command_type = force_message_type(force_output)
     commands = ros.node.create_publisher(command_type, TOPICS["servo_cf"].name, TOPICS["servo_cf"].qos)
     pushing = [False]
 
     def send():
         force = [0.0, 0.0, 2.0] if pushing[0] else [0.0, 0.0, 0.0]
-        commands.publish(conversions.force_message(force_output, force, 0.0, "phantom_base"))
+        commands.publish(force_message(force_output, force, 0.0, "phantom_base"))
 
     ros.node.create_timer(0.01, send)
     params = dict(SHORT_SCRIPT, script="hold", loop_script=False, force_output=force_output,
@@ -175,7 +178,7 @@ def test_liver_tool_maps_device_samples_into_the_liver_frame(ros, ros_env):
 
     def send():
         message = PoseStamped()
-        message.header.stamp = conversions.stamp_from_seconds(sample["stamp"])
+        message.header.stamp = stamp_from_seconds(sample["stamp"])
         message.header.frame_id = "phantom_base"
         (message.pose.position.x, message.pose.position.y, message.pose.position.z) = sample["position"]
         message.pose.orientation.w = 1.0
@@ -198,18 +201,18 @@ def test_liver_tool_maps_device_samples_into_the_liver_frame(ros, ros_env):
             assert counted > rejected, f"bad sample {bad} counted"
             rejected = counted
         sample.update(position=[0.0, 0.0, 0.01], stamp=30.0)
-        ros.wait_until(lambda: conversions.seconds_from_stamp(tool_poses[-1].header.stamp) == 30.0,
+        ros.wait_until(lambda: seconds_from_stamp(tool_poses[-1].header.stamp) == 30.0,
                        "a good sample after the bad ones", process)
         assert process.poll() is None, "bad samples do not stop the node"
     finally:
         stop(process)
-    position, orientation = conversions.pose_to_arrays(first.pose)
+    position, orientation = pose_to_arrays(first.pose)
     # p_liver = 2·Rz(90°)·(0.01, 0.02, 0.03) + (0.1, −0.2, 0.05)
     np.testing.assert_allclose(position, [0.1 - 0.04, -0.2 + 0.02, 0.05 + 0.06], atol=1e-9)
     np.testing.assert_allclose(orientation, QUARTER_TURN_Z, atol=1e-9)
     assert first.header.frame_id == "liver"
-    assert conversions.seconds_from_stamp(first.header.stamp) == 12.5
-    forwarded = {conversions.seconds_from_stamp(m.header.stamp) for m in tool_poses}
+    assert seconds_from_stamp(first.header.stamp) == 12.5
+    forwarded = {seconds_from_stamp(m.header.stamp) for m in tool_poses}
     assert not forwarded & {20.0, 21.0}, "bad samples are not forwarded"
     np.testing.assert_allclose(positions(tool_poses[-1:])[0], [0.1, -0.2, 0.07], atol=1e-9)
 
@@ -222,11 +225,11 @@ def test_liver_tool_forwards_each_device_sample_once(ros, ros_env):
 
     def send():
         message = PoseStamped()
-        message.header.stamp = conversions.stamp_from_seconds(100.0 + 0.001 * len(sent))
+        message.header.stamp = stamp_from_seconds(100.0 + 0.001 * len(sent))
         message.pose.position.z = 0.01
         message.pose.orientation.w = 1.0
         device.publish(message)
-        sent.append(conversions.seconds_from_stamp(message.header.stamp))
+        sent.append(seconds_from_stamp(message.header.stamp))
 
     ros.node.create_timer(0.005, send)
     process = start("liver_tool", {"source": "device"}, ros_env)
@@ -235,7 +238,7 @@ def test_liver_tool_forwards_each_device_sample_once(ros, ros_env):
         ros.wait_until(lambda: statuses(diagnostics, "liver_tool: loop"), "the tool's diagnostics", process)
     finally:
         stop(process)
-    stamps = [conversions.seconds_from_stamp(m.header.stamp) for m in tool_poses]
+    stamps = [seconds_from_stamp(m.header.stamp) for m in tool_poses]
     assert len(stamps) == len(set(stamps)), "each device sample is forwarded once, never repeated"
     assert set(stamps) <= set(sent), "a pose is published only for a device sample (no loop of its own)"
     status = statuses(diagnostics, "liver_tool: loop")[-1]
@@ -248,8 +251,8 @@ def test_liver_tool_plays_a_script(ros, ros_env):
     tool_poses = ros.collect("tool_pose")
     process = start("liver_tool", dict(SHORT_SCRIPT, source="script", anchor_m=[0.02, -0.01, 0.0]), ros_env)
     try:
-        ros.wait_until(lambda: len(tool_poses) > 1 and conversions.seconds_from_stamp(tool_poses[-1].header.stamp)
-                       - conversions.seconds_from_stamp(tool_poses[0].header.stamp) > 1.5, "a script cycle", process)
+        ros.wait_until(lambda: len(tool_poses) > 1 and seconds_from_stamp(tool_poses[-1].header.stamp)
+                       - seconds_from_stamp(tool_poses[0].header.stamp) > 1.5, "a script cycle", process)
     finally:
         stop(process)
     points = positions(tool_poses)
@@ -268,7 +271,7 @@ def test_liver_tool_holds_a_static_pose(ros, ros_env):
     finally:
         stop(process)
     for message in tool_poses:
-        position, orientation = conversions.pose_to_arrays(message.pose)
+        position, orientation = pose_to_arrays(message.pose)
         np.testing.assert_allclose(position, [0.01, 0.02, 0.1])
         np.testing.assert_allclose(orientation, QUARTER_TURN_Z, atol=1e-12)
 
@@ -311,7 +314,7 @@ def test_liver_tool_publishes_its_device_map_latched_and_refuses_to_change_it(ro
         ros.wait_until(lambda: len(poses) > 10, "the tool running", process)
         maps = ros.collect("device_map")  # subscribed late: the latched map still arrives
         ros.wait_until(lambda: len(maps) > 0, "the latched device map", process)
-        device_map = conversions.device_map_from_message(maps[-1])
+        device_map = device_map_from_message(maps[-1])
         np.testing.assert_allclose(device_map.device_to_liver(np.array([0.01, 0.0, 0.0])), [0.1, -0.18, 0.05],
                                    atol=1e-12)
         assert device_map.scale == 2.0

@@ -66,10 +66,10 @@ KILLED_WRITER = """
 import os, sys
 from rclpy.serialization import serialize_message
 from liver_sim.sessions.bag import BagWriter
-from msg_defs import conversions
+from msg_defs.forces import wrench_stamped
 writer = BagWriter(sys.argv[1], sys.argv[2])
 for k in range(500):
-    data = serialize_message(conversions.wrench_stamped([0.0, 0.0, k * 1e-3], 1.0 + k * 1e-3, "liver"))
+    data = serialize_message(wrench_stamped([0.0, 0.0, k * 1e-3], 1.0 + k * 1e-3, "liver"))
     writer.write("/liver/tool_wrench", "geometry_msgs/msg/WrenchStamped", 10**9 + k * 10**6, data)
     if k == 299:
         writer.flush()

@@ -21,7 +21,9 @@ from liver_sim.sessions.parameters import node_parameters
 from liver_sim.sessions.report import write_report
 from liver_sim.sessions.resimulate import resimulate
 from liver_sim.tool_scripts import ScriptSettings, make_script
-from msg_defs import conversions
+from msg_defs.forces import wrench_stamped
+from msg_defs.local_model import local_model_marker
+from msg_defs.poses import pose_stamped
 
 PUBLISHER = Path(__file__).with_name("session_publisher.py")
 POSE = "geometry_msgs/msg/PoseStamped"
@@ -104,7 +106,7 @@ def pose_bag(path, duration_s=1.6, depth_m=0.01, storage="mcap", script_name="pr
     with BagWriter(path, storage) as writer:
         for k in range(int(duration_s * 1000)):
             t = 50.0 + k * 1e-3
-            message = conversions.pose_stamped(script.position_at(k * 1e-3), (0, 0, 0, 1), t, "liver")
+            message = pose_stamped(script.position_at(k * 1e-3), (0, 0, 0, 1), t, "liver")
             writer.write("/tool/pose", POSE, round(t * 1e9), serialize_message(message), QosSpec(False, False, 1))
     return path
 
@@ -179,11 +181,11 @@ def test_replay_republishes_the_recorded_messages_in_order(ros_env, tmp_path, ro
     sent = []
     with BagWriter(bag) as writer:
         for k in range(300):
-            data = serialize_message(conversions.wrench_stamped([0.0, 0.0, 0.01 * k], 10.0 + k / 150, "liver"))
+            data = serialize_message(wrench_stamped([0.0, 0.0, 0.01 * k], 10.0 + k / 150, "liver"))
             writer.write("/liver/tool_wrench", WRENCH, round((10.0 + k / 150) * 1e9), data)
             sent.append(data)
         writer.write("/tool/pose", POSE, round(20e9), serialize_message(
-            conversions.pose_stamped([0, 0, 0], (0, 0, 0, 1), 20.0, "liver")))
+            pose_stamped([0, 0, 0], (0, 0, 0, 1), 20.0, "liver")))
     context = rclpy.Context()
     rclpy.init(context=context)
     received = []
@@ -214,18 +216,18 @@ def test_report_plots_the_session_and_the_fig8_comparison(tmp_path):
     t = np.arange(3000) * 1e-3
     smooth = np.clip(np.sin(np.pi * t / 3.0), 0, None)[:, None] * [0.0, 0.0, 1.0]     # rendered at 1 kHz
     held = smooth[(np.floor(t * 150) / 150 * 1000).astype(int)]                       # held between 150 Hz frames
-    plane = conversions.local_model_marker(LocalModel.plane(np.zeros(3), [0.0, 0.0, 1.0]), 0.0, "liver", 0.05)
+    plane = local_model_marker(LocalModel.plane(np.zeros(3), [0.0, 0.0, 1.0]), 0.0, "liver", 0.05)
     with BagWriter(bag) as writer:
         writer.write("/liver/contact_plane", "visualization_msgs/msg/Marker", 1, serialize_message(plane))
         for k, tk in enumerate(t):
             ns = round((1.0 + tk) * 1e9)
             tip = [0.0, 0.0, 0.015 - 0.004 * smooth[k, 2]]
-            writer.write("/tool/pose", POSE, ns, serialize_message(conversions.pose_stamped(tip, (0, 0, 0, 1), tk,
-                                                                                              "liver")))
-            writer.write("/phantom/servo_cf", WRENCH, ns, serialize_message(conversions.wrench_stamped(
+            writer.write("/tool/pose", POSE, ns, serialize_message(pose_stamped(tip, (0, 0, 0, 1), tk,
+                                                                                  "liver")))
+            writer.write("/phantom/servo_cf", WRENCH, ns, serialize_message(wrench_stamped(
                 smooth[k], tk, "phantom_base")))
             writer.write("/phantom/servo_cf_without_local_model", WRENCH, ns, serialize_message(
-                conversions.wrench_stamped(held[k], tk, "phantom_base")))
+                wrench_stamped(held[k], tk, "phantom_base")))
     summary = write_report(bag, tmp_path / "report", progress=lambda line: None)
     for name in ("force.png", "penetration.png", "tool_path.png", "loop_rates.png", "fig8.png"):
         assert (tmp_path / "report" / name).read_bytes()[:8] == PNG
@@ -338,7 +340,7 @@ def test_replay_puts_nothing_on_the_device_topic(ros_env, tmp_path, ros_domain_i
     with BagWriter(bag) as writer:
         for k in range(100):
             t = 10.0 + k / 100
-            data = serialize_message(conversions.wrench_stamped([0.0, 0.0, 1.0], t, "phantom_base"))
+            data = serialize_message(wrench_stamped([0.0, 0.0, 1.0], t, "phantom_base"))
             writer.write("/phantom/servo_cf", WRENCH, round(t * 1e9), data)
             writer.write("/liver/tool_wrench", WRENCH, round(t * 1e9), data)
     context = rclpy.Context()

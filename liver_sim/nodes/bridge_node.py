@@ -36,7 +36,10 @@ from haptic_bridge.supervisor import Supervisor
 from haptic_bridge.tick import BridgeTick, check_passivity, checked_change, passivity_problem
 from liver_sim.nodes.common import (Latest, LoopInputs, RateLoop, apply_realtime_priority, declare_parameters,
                                     diagnostic_status, on_parameter_changes, on_rate, publish_diagnostics, run_node)
-from msg_defs import conversions
+from msg_defs.device_map import device_map_from_message
+from msg_defs.forces import force_from_message, force_message_bytes, force_message_type
+from msg_defs.local_model import marker_to_local_model
+from msg_defs.poses import pose_from_bytes
 from msg_defs.topics import TOPICS
 
 #: How long (s) close waits for the driver to acknowledge the last zero.
@@ -75,7 +78,7 @@ class BridgeShell:
         self._last_force = np.zeros(3)
         self._last_report = time.monotonic()
         self._loop = self.supervisor = None
-        self._publisher = node.create_publisher(conversions.force_message_type(p["force_output"]), p["force_topic"],
+        self._publisher = node.create_publisher(force_message_type(p["force_output"]), p["force_topic"],
                                                 TOPICS["servo_cf"].qos)
         self._diagnostics = node.create_publisher(TOPICS["diagnostics"].type, TOPICS["diagnostics"].name,
                                                   TOPICS["diagnostics"].qos)
@@ -132,7 +135,7 @@ class BridgeShell:
 
     def _on_device_map(self, message) -> None:
         try:
-            device_map = conversions.device_map_from_message(message)
+            device_map = device_map_from_message(message)
             if self.p["drives_device"]:
                 check_passivity(self.p, device_map.scale)
         except ValueError as exc:
@@ -150,7 +153,7 @@ class BridgeShell:
     # -- the loop (its own thread)
     def _on_pose(self, data: bytes, received: float) -> None:
         try:
-            position, _, stamp = conversions.pose_from_bytes(data)
+            position, _, stamp = pose_from_bytes(data)
         except ValueError as exc:
             self._refuse("tool_pose", str(exc))
             return
@@ -162,7 +165,7 @@ class BridgeShell:
 
     def _on_marker(self, message, received: float) -> None:
         try:
-            model, lifetime = conversions.marker_to_local_model(message)
+            model, lifetime = marker_to_local_model(message)
         except ValueError as exc:
             self._refuse("local_model", str(exc))
             return
@@ -175,7 +178,7 @@ class BridgeShell:
 
     def _on_wrench(self, message, received: float) -> None:
         try:
-            force = conversions.force_from_message("wrench_stamped", message)
+            force = force_from_message("wrench_stamped", message)
         except ValueError as exc:
             self._refuse("tool_wrench", str(exc))
             return
@@ -215,15 +218,15 @@ class BridgeShell:
         self._last_force = command
         if stamp is None:
             stamp = self.node.get_clock().now().to_msg()
-        self.supervisor.send(conversions.force_message_bytes(self.p["force_output"], command, stamp,
-                                                             self.p["device_frame_id"]))
+        self.supervisor.send(force_message_bytes(self.p["force_output"], command, stamp,
+                                                 self.p["device_frame_id"]))
 
     def _on_error(self, now: float, exc: Exception) -> None:
         self.supervisor.error(now, exc)
 
     def _zero_message(self) -> bytes:
-        return conversions.force_message_bytes(self.p["force_output"], np.zeros(3), self.node.get_clock().now().to_msg(),
-                                               self.p["device_frame_id"])
+        return force_message_bytes(self.p["force_output"], np.zeros(3), self.node.get_clock().now().to_msg(),
+                                   self.p["device_frame_id"])
 
     # -- diagnostics (executor callbacks, as above)
     def _publish_diagnostics(self) -> None:

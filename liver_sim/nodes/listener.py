@@ -10,7 +10,11 @@ from rclpy.node import Node
 from rclpy.serialization import deserialize_message
 
 from liver_sim.nodes.common import LoopInputs, RateLoop
-from msg_defs import conversions
+from msg_defs.forces import force_from_bytes, force_message_type
+from msg_defs.point_cloud import pointcloud2_to_nodes
+from msg_defs.poses import pose_from_bytes
+from msg_defs.skin import mesh_msg_to_arrays
+from msg_defs.stamps import seconds_from_stamp, stamp_s_from_bytes
 from msg_defs.topics import TOPICS, batch_qos
 
 
@@ -49,7 +53,7 @@ class NetworkListener(Node):
         self._peak_displacement = -1.0
         self._polled = LoopInputs(self)
         for label, (topic, fmt) in force_topics.items():
-            self._take(("force", label), conversions.force_message_type(fmt), topic, TOPICS["servo_cf"])
+            self._take(("force", label), force_message_type(fmt), topic, TOPICS["servo_cf"])
         self._take("tool_pose", TOPICS["tool_pose"].type, TOPICS["tool_pose"].name, TOPICS["tool_pose"])
         self._take("nodes", TOPICS["nodes"].type, TOPICS["nodes"].name, TOPICS["nodes"])
         self._take("tool_wrench", TOPICS["tool_wrench"].type, TOPICS["tool_wrench"].name, TOPICS["tool_wrench"])
@@ -88,8 +92,8 @@ class NetworkListener(Node):
         fmt = self._force_formats[label]
         decoded = self._decoded["force", label]
         for arrival, published, data in self._new(("force", label)):
-            force = conversions.force_from_bytes(fmt, data)
-            stamp = conversions.stamp_s_from_bytes(data, "WrenchStamped") if fmt == "wrench_stamped" else np.nan
+            force = force_from_bytes(fmt, data)
+            stamp = stamp_s_from_bytes(data, "WrenchStamped") if fmt == "wrench_stamped" else np.nan
             decoded.append((arrival, published, force, stamp))
         return (np.array([d[0] for d in decoded]), np.array([d[1] for d in decoded]),
                 np.array([d[2] for d in decoded]).reshape(-1, 3), np.array([d[3] for d in decoded]))
@@ -99,7 +103,7 @@ class NetworkListener(Node):
         decoded = self._decoded["tool_pose"]
         for arrival, published, data in self._new("tool_pose"):
             try:
-                position, _, (sec, nanosec) = conversions.pose_from_bytes(data)
+                position, _, (sec, nanosec) = pose_from_bytes(data)
             except ValueError:
                 continue  # a refused pose is the nodes' business; it has no place in the figures
             decoded.append((arrival, published, sec + nanosec * 1e-9, position))
@@ -111,9 +115,9 @@ class NetworkListener(Node):
         decoded = self._decoded["nodes"]
         for arrival, published, data in self._new("nodes"):
             message = deserialize_message(data, TOPICS["nodes"].type)
-            decoded.append((arrival, published, conversions.seconds_from_stamp(message.header.stamp)))
+            decoded.append((arrival, published, seconds_from_stamp(message.header.stamp)))
             try:
-                positions = conversions.pointcloud2_to_nodes(message)
+                positions = pointcloud2_to_nodes(message)
             except ValueError as exc:
                 self.get_logger().warning(f"ignored /liver/nodes message: {exc}", throttle_duration_sec=1.0)
                 continue
@@ -132,14 +136,14 @@ class NetworkListener(Node):
         decoded = self._decoded["tool_wrench"]
         for arrival, _, data in self._new("tool_wrench"):
             try:
-                decoded.append((arrival, conversions.force_from_bytes("wrench_stamped", data)))
+                decoded.append((arrival, force_from_bytes("wrench_stamped", data)))
             except ValueError:
                 continue  # a refused wrench is the bridge's business
         return np.array([d[0] for d in decoded]), np.array([d[1] for d in decoded]).reshape(-1, 3)
 
     def _on_surface(self, message) -> None:
         try:
-            surface = conversions.mesh_msg_to_arrays(message)
+            surface = mesh_msg_to_arrays(message)
         except ValueError as exc:
             self.get_logger().warning(f"ignored /liver/surface message: {exc}")
             return

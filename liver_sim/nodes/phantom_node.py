@@ -21,7 +21,9 @@ from liver_sim.nodes.common import (Latest, LoopInputs, RateLoop, apply_realtime
                                     loop_status, on_parameter_changes, publish_diagnostics, read_at_start, run_node)
 from liver_sim.phantom import PARAMETERS, PhantomSim, StylusParams
 from liver_sim.tool_scripts import IDENTITY_XYZW, script_from
-from msg_defs import conversions
+from msg_defs.forces import force_from_bytes, force_message_type
+from msg_defs.poses import pose_stamped_bytes
+from msg_defs.stamps import stamp_from_seconds
 from msg_defs.topics import TOPICS, device_command_qos
 
 _ZERO = np.zeros(3)
@@ -43,7 +45,7 @@ class PhantomNode(Node):
         self._diagnostics = self.create_publisher(TOPICS["diagnostics"].type, TOPICS["diagnostics"].name,
                                                   TOPICS["diagnostics"].qos)
         self._inputs = LoopInputs(self)  # read by the 1 kHz loop itself, not by the executor
-        self._inputs.subscribe(conversions.force_message_type(p["force_output"]), p["servo_cf_topic"],
+        self._inputs.subscribe(force_message_type(p["force_output"]), p["servo_cf_topic"],
                                device_command_qos(TOPICS["servo_cf"]), self._on_command, raw=True, received=True)
         self.create_timer(1.0, self._publish_diagnostics)
         self._refuse = read_at_start("phantom_sim", {"command_timeout_s"})
@@ -78,7 +80,7 @@ class PhantomNode(Node):
 
     def _on_command(self, data: bytes, received: float) -> None:
         try:
-            force = conversions.force_from_bytes(self.p["force_output"], data)
+            force = force_from_bytes(self.p["force_output"], data)
         except ValueError as exc:
             self.bad_commands += 1
             self.get_logger().warning(f"force command taken as zero: {exc}", throttle_duration_sec=1.0)
@@ -95,9 +97,9 @@ class PhantomNode(Node):
             force = _ZERO
         if self.sim.advance_to(now - self._start, force, self._loop.period_s) == 0 and self.sim.time_s > 0.0:
             return  # a late tick already caught up with this one's sample
-        stamp = conversions.stamp_from_seconds(self._clock_origin_s + self.sim.time_s)
-        self._publisher.publish(conversions.pose_stamped_bytes(self.sim.position, IDENTITY_XYZW, stamp,
-                                                               self.p["frame_id"]))
+        stamp = stamp_from_seconds(self._clock_origin_s + self.sim.time_s)
+        self._publisher.publish(pose_stamped_bytes(self.sim.position, IDENTITY_XYZW, stamp,
+                                                   self.p["frame_id"]))
 
     def _publish_diagnostics(self) -> None:
         _, received = self._command.get()

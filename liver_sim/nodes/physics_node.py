@@ -19,7 +19,12 @@ from liver_sim.nodes.common import (Latest, LoopInputs, RateLoop, apply_realtime
                                     loop_status, publish_diagnostics, run_node)
 from liver_sim.parameters import check_parameter
 from liver_sim.physics.pipeline import PARAMETERS, Frame, FramePipeline, build_model
-from msg_defs import conversions
+from msg_defs.forces import wrench_stamped_bytes
+from msg_defs.local_model import local_model_marker
+from msg_defs.point_cloud import nodes_to_pointcloud2
+from msg_defs.poses import pose_from_bytes
+from msg_defs.skin import skin_marker_serialized, skin_mesh_msg
+from msg_defs.stamps import stamp_from_seconds
 from msg_defs.topics import TOPICS
 
 
@@ -73,7 +78,7 @@ class PhysicsNode(Node):
 
     def publish_surface(self) -> None:
         """Skin triangles and rest positions: on start and on every topology change."""
-        self._outputs["surface"].publish(conversions.skin_mesh_msg(self.model.mesh.skin, self.model.mesh.points))
+        self._outputs["surface"].publish(skin_mesh_msg(self.model.mesh.skin, self.model.mesh.points))
 
     def _on_set_parameters(self, parameters) -> SetParametersResult:
         """Accept a new tool_mode (press, grasp, cut) at run time; every other parameter is read at start."""
@@ -97,7 +102,7 @@ class PhysicsNode(Node):
             return
         self._last_pose_bytes = data
         try:
-            position, orientation, _ = conversions.pose_from_bytes(data)
+            position, orientation, _ = pose_from_bytes(data)
         except ValueError as exc:
             self._pipeline.refuse(str(exc), received)
         else:
@@ -126,14 +131,14 @@ class PhysicsNode(Node):
         if frame.surface_changed:
             self.publish_surface()
         result = frame.result
-        stamp = conversions.stamp_from_seconds(self._clock_origin_s + self.model.time_s)
+        stamp = stamp_from_seconds(self._clock_origin_s + self.model.time_s)
         frame_id = self.p["frame_id"]
-        self._outputs["nodes"].publish(conversions.nodes_to_pointcloud2(self.model.positions, stamp, frame_id))
-        self._outputs["contact_plane"].publish(conversions.local_model_marker(
+        self._outputs["nodes"].publish(nodes_to_pointcloud2(self.model.positions, stamp, frame_id))
+        self._outputs["contact_plane"].publish(local_model_marker(
             result.local_model, stamp, frame_id, self.p["local_model_lifetime_s"]))
-        self._outputs["tool_wrench"].publish(conversions.wrench_stamped_bytes(result.tool_force_n, stamp, frame_id))
+        self._outputs["tool_wrench"].publish(wrench_stamped_bytes(result.tool_force_n, stamp, frame_id))
         if frame.marker_due:
-            self._outputs["marker"].publish(conversions.skin_marker_serialized(
+            self._outputs["marker"].publish(skin_marker_serialized(
                 self.model.positions, self.model.mesh.skin, stamp, frame_id))
         with self._frame_seconds_lock:
             self._frame_seconds.append(time.perf_counter() - started)

@@ -27,7 +27,8 @@ from liver_sim.nodes.common import (LoopStats, RateLoop, apply_realtime_priority
 from liver_sim.parameters import quaternion_parameter, vector_parameter
 from liver_sim.tool_parameters import PARAMETERS
 from liver_sim.tool_scripts import IDENTITY_XYZW, ScriptedTrajectory, script_from
-from msg_defs import conversions
+from msg_defs.device_map import device_map_message
+from msg_defs.poses import pose_from_bytes, pose_stamped_bytes
 from msg_defs.topics import TOPICS
 
 
@@ -47,7 +48,7 @@ class ToolNode(Node):
                                                   TOPICS["diagnostics"].qos)
         self._map_publisher = self.create_publisher(TOPICS["device_map"].type, p["device_map_topic"],
                                                     TOPICS["device_map"].qos)
-        self._map_publisher.publish(conversions.device_map_message(device_map))
+        self._map_publisher.publish(device_map_message(device_map))
         self._device_map = device_map
         self.published = 0
         self.rejected = 0
@@ -103,21 +104,21 @@ class ToolNode(Node):
             self._arrivals.record(gap, gap > 2.0 * self._arrivals.period_s)
         self._last_arrival = now
         try:
-            position, orientation, stamp = conversions.pose_from_bytes(data)
+            position, orientation, stamp = pose_from_bytes(data)
             position, orientation = self._device_map.pose(position, orientation)
         except ValueError as exc:
             self.rejected += 1
             self.get_logger().warning(f"dropped device sample: {exc}", throttle_duration_sec=1.0)
             return
-        self._publisher.publish(conversions.pose_stamped_bytes(position, orientation, stamp, self.p["frame_id"]))
+        self._publisher.publish(pose_stamped_bytes(position, orientation, stamp, self.p["frame_id"]))
         self.published += 1
 
     def _step(self, now: float) -> None:
         if self._start is None:
             self._start = now
         position = self._trajectory.position_at(now - self._start)
-        self._publisher.publish(conversions.pose_stamped_bytes(position, self._orientation,
-                                                               self.get_clock().now().to_msg(), self.p["frame_id"]))
+        self._publisher.publish(pose_stamped_bytes(position, self._orientation,
+                                                   self.get_clock().now().to_msg(), self.p["frame_id"]))
         self.published += 1
 
     def _publish_diagnostics(self) -> None:

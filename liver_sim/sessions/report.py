@@ -19,7 +19,7 @@ from liver_sim.sessions.bag import BagError, bag_info, read_messages
 def _force_format(msgtype: str) -> str | None:
     """The force_output format whose message type is `msgtype`, or None."""
     from liver_sim.sessions.record import type_name
-    from msg_defs.conversions import FORCE_OUTPUT_FORMATS, force_message_type
+    from msg_defs.forces import FORCE_OUTPUT_FORMATS, force_message_type
 
     for fmt in FORCE_OUTPUT_FORMATS:
         try:
@@ -36,7 +36,9 @@ def session_arrays(bag: Path, physics: dict, bridge: dict) -> dict:
 
     from msg_defs.topics import BASELINE_FORCE_TOPIC
     from liver_sim.sessions.record import message_class
-    from msg_defs import conversions
+    from msg_defs.forces import force_from_message
+    from msg_defs.local_model import marker_to_local_model
+    from msg_defs.poses import pose_to_arrays
     from msg_defs.topics import TOPICS
 
     force_topics = {"local_model": bridge["force_topic"], "without_local_model": BASELINE_FORCE_TOPIC}
@@ -59,13 +61,13 @@ def session_arrays(bag: Path, physics: dict, bridge: dict) -> dict:
                 fmt = _force_format(m.msgtype)
                 if fmt is None:
                     raise ValueError(f"{m.msgtype} is not a force command type")
-                value = conversions.force_from_message(fmt, message)
+                value = force_from_message(fmt, message)
             elif m.topic == physics["tool_wrench_topic"]:
-                value = conversions.force_from_message("wrench_stamped", message)
+                value = force_from_message("wrench_stamped", message)
             elif m.topic == physics["tool_pose_topic"]:
-                value = conversions.pose_to_arrays(message.pose)[0]
+                value = pose_to_arrays(message.pose)[0]
             elif m.topic == physics["contact_plane_topic"]:
-                value = conversions.marker_to_local_model(message)[0]
+                value = marker_to_local_model(message)[0]
             else:
                 for status in message.status:
                     diagnostics.append((t, status.name, {kv.key: kv.value for kv in status.values}))

@@ -8,7 +8,7 @@ bridge ticks once per recorded pose with the newest published frame (BridgeTick,
 tick), and its command is stamped with the pose; `--compare` adds the Fig. 8 baseline bridge
 (local_model none) on the same poses.  Nothing depends on the wall clock, and the outputs' CDR
 padding is zeroed (canonical_cdr), so the same bag and parameters give byte-identical messages.
-Messages are built by msg_defs.conversions and serialized by rclpy's serializer (no node, no context).
+Messages are built by msg_defs' builders and serialized by rclpy's serializer (no node, no context).
 """
 from __future__ import annotations
 
@@ -25,7 +25,7 @@ from msg_defs.topics import BASELINE_FORCE_TOPIC
 
 def _ns(seconds: float) -> int:
     """Nanoseconds of a time as its message stamp carries it."""
-    from msg_defs.conversions import stamp_from_seconds
+    from msg_defs.stamps import stamp_from_seconds
 
     stamp = stamp_from_seconds(seconds)
     return stamp.sec * 1_000_000_000 + stamp.nanosec
@@ -54,7 +54,7 @@ class _Session:
 
     def _receive(self, message, t: float):
         """Hand the pipeline a recorded pose received at `t`; the tip for the bridge, None when malformed."""
-        from msg_defs.conversions import pose_to_arrays
+        from msg_defs.poses import pose_to_arrays
 
         try:
             position, orientation = pose_to_arrays(message.pose)
@@ -68,37 +68,42 @@ class _Session:
         """Step one frame; return (publish time s, messages, (local model, lifetime), contact force N)."""
         from rclpy.serialization import serialize_message
 
-        from msg_defs import conversions
+        from msg_defs.forces import force_from_message, wrench_stamped
+        from msg_defs.local_model import local_model_marker, marker_to_local_model
+        from msg_defs.point_cloud import nodes_to_pointcloud2
+        from msg_defs.skin import skin_marker_serialized, skin_mesh_msg
+        from msg_defs.stamps import stamp_from_seconds
 
         frame = self.pipeline.step(t0 + self.model.time_s)
         t = t0 + self.model.time_s
-        stamp, frame_id = conversions.stamp_from_seconds(t), self.p["frame_id"]
-        marker = conversions.local_model_marker(frame.result.local_model, stamp, frame_id,
-                                                self.p["local_model_lifetime_s"])
-        wrench = conversions.wrench_stamped(frame.result.tool_force_n, stamp, frame_id)
+        stamp, frame_id = stamp_from_seconds(t), self.p["frame_id"]
+        marker = local_model_marker(frame.result.local_model, stamp, frame_id,
+                                    self.p["local_model_lifetime_s"])
+        wrench = wrench_stamped(frame.result.tool_force_n, stamp, frame_id)
         messages = [(self.p["nodes_topic"], "nodes",
-                     serialize_message(conversions.nodes_to_pointcloud2(self.model.positions, stamp, frame_id))),
+                     serialize_message(nodes_to_pointcloud2(self.model.positions, stamp, frame_id))),
                     (self.p["contact_plane_topic"], "contact_plane", serialize_message(marker)),
                     (self.p["tool_wrench_topic"], "tool_wrench", serialize_message(wrench))]
         if frame.surface_changed:  # the new surface before the node cloud that indexes it
             messages.insert(0, (self.p["surface_topic"], "surface", serialize_message(
-                conversions.skin_mesh_msg(self.model.mesh.skin, self.model.mesh.points))))
+                skin_mesh_msg(self.model.mesh.skin, self.model.mesh.points))))
         if frame.marker_due:
-            messages.append((self.p["marker_topic"], "marker", conversions.skin_marker_serialized(
+            messages.append((self.p["marker_topic"], "marker", skin_marker_serialized(
                 self.model.positions, self.model.mesh.skin, stamp, frame_id)))
-        model, lifetime = conversions.marker_to_local_model(marker)
+        model, lifetime = marker_to_local_model(marker)
         return (t, messages, (model, lifetime if lifetime > 0.0 else self.b["lifetime_s"]),
-                conversions.force_from_message("wrench_stamped", wrench))
+                force_from_message("wrench_stamped", wrench))
 
     def run(self, poses: list) -> None:
         """`poses`: [(time s, PoseStamped, recorded bytes)] in time order."""
         from rclpy.serialization import serialize_message
 
-        from msg_defs import conversions
+        from msg_defs.forces import force_message
+        from msg_defs.skin import skin_mesh_msg
 
         t0 = poses[0][0]
         self.emit(self.p["surface_topic"], "surface", t0, serialize_message(
-            conversions.skin_mesh_msg(self.model.mesh.skin, self.model.mesh.points)))
+            skin_mesh_msg(self.model.mesh.skin, self.model.mesh.points)))
         tip, tip_time = None, -np.inf
         pending = deque()
         local, held, source_time = None, None, -np.inf
@@ -120,14 +125,14 @@ class _Session:
             command = self.tick.step(t, tip, t - tip_time, held if self.b["local_model"] == "none" else local,
                                      t - source_time)
             self.peak_force_n = max(self.peak_force_n, float(np.linalg.norm(command)))
-            self.emit(self.b["force_topic"], "servo_cf", t, serialize_message(conversions.force_message(
+            self.emit(self.b["force_topic"], "servo_cf", t, serialize_message(force_message(
                 self.b["force_output"], command, message.header.stamp, self.b["device_frame_id"])))
             if self.trace is not None:
                 self.trace["command_s"].append(t)
                 self.trace["command_n"].append(command)
             if self.baseline is not None:
                 command = self.baseline.step(t, tip, t - tip_time, held, t - source_time)
-                self.emit(BASELINE_FORCE_TOPIC, "servo_cf", t, serialize_message(conversions.force_message(
+                self.emit(BASELINE_FORCE_TOPIC, "servo_cf", t, serialize_message(force_message(
                     self.b["force_output"], command, message.header.stamp, self.b["device_frame_id"])))
                 if self.trace is not None:
                     self.trace["baseline_n"].append(command)
@@ -142,7 +147,7 @@ def recorded_poses(bag: Path, topic: str) -> list:
     from geometry_msgs.msg import PoseStamped
     from rclpy.serialization import deserialize_message
 
-    from msg_defs.conversions import seconds_from_stamp
+    from msg_defs.stamps import seconds_from_stamp
 
     poses = []
     for recorded in read_messages(bag, [topic]):
@@ -163,7 +168,7 @@ def resimulate(bag: Path, out: Path, overrides=(), storage: str = "mcap", progre
     write the outputs (and the input poses) to a new bag `out`; return a summary.  With `compare`, a
     second bridge without local model writes BASELINE_FORCE_TOPIC from the same inputs (Fig. 8)."""
     from liver_sim.sessions.record import known_topics, type_name
-    from msg_defs.conversions import force_message_type
+    from msg_defs.forces import force_message_type
     from msg_defs.topics import TOPICS
 
     params = node_parameters(overrides)
@@ -207,7 +212,7 @@ def play_script(script, duration_s: float, overrides=(), progress=lambda line: N
     Fig. 8 baseline bridge (local_model none) beside; nothing is written.  Returns arrays: command_s (K,),
     command_n and baseline_n (K, 3) N, the 1 kHz commands with and without the local model, and wrench_s,
     wrench_n, the physics contact force (N) as each frame was published."""
-    from msg_defs.conversions import pose_stamped
+    from msg_defs.poses import pose_stamped
     from liver_sim.tool_scripts import IDENTITY_XYZW
 
     params = node_parameters(overrides)

@@ -1,0 +1,86 @@
+"""The local model (liver_sim.local_model.LocalModel) as the /liver/contact_plane Marker, and back."""
+from __future__ import annotations
+
+from geometry_msgs.msg import Vector3
+from visualization_msgs.msg import Marker
+
+from liver_sim.checks import positive
+from liver_sim.geometry.rotations import quaternion_from_z_axis, quaternion_to_matrix
+from liver_sim.local_model import LocalModel
+from msg_defs.finite import colour_msg
+from msg_defs.poses import pose_arrays, pose_msg
+from msg_defs.stamps import duration_msg, header_msg, seconds_from_stamp
+
+PLANE_COLOUR = (0.2, 0.8, 0.3, 0.5)
+SPHERE_COLOUR = (0.2, 0.5, 0.9, 0.3)
+#: Thickness (m) of the CUBE that draws a plane local model.
+PLANE_THICKNESS_M = 0.001
+#: The key of the local model's stiffness K (N/m) in the Marker's `text` ("key=value").
+STIFFNESS_KEY = "stiffness_n_per_m"
+
+
+def local_model_marker(model: LocalModel, stamp, frame_id: str, lifetime_s: float,
+                       patch_size_m: float = 0.04) -> Marker:
+    """The physics' local model as the /liver/contact_plane Marker (ns "local_model", id 0), to be trusted
+    for `lifetime_s` seconds.
+
+    plane: CUBE at `point`, orientation's z axis = outward `normal`, scale (patch, patch, 1 mm);
+    sphere: SPHERE at `centre`, scale = diameter (m) on all axes; not valid: action DELETE.  The model's
+    stiffness K, when it has one, rides in `text` as "stiffness_n_per_m=<K>" (STIFFNESS_KEY).
+    """
+    marker = Marker(header=header_msg(stamp, frame_id), ns="local_model", id=0,
+                    lifetime=duration_msg(lifetime_s, "lifetime_s"))
+    if not model.valid:
+        marker.action = Marker.DELETE
+        return marker
+    if model.kind == "plane":
+        patch = positive(patch_size_m, "patch_size_m")
+        marker.type = Marker.CUBE
+        marker.pose = pose_msg(model.point, quaternion_from_z_axis(model.normal), "LocalModel.point")
+        marker.scale = Vector3(x=patch, y=patch, z=PLANE_THICKNESS_M)
+        marker.color = colour_msg(PLANE_COLOUR)
+    else:
+        diameter = 2.0 * model.radius_m
+        marker.type = Marker.SPHERE
+        marker.pose = pose_msg(model.centre, (0.0, 0.0, 0.0, 1.0), "LocalModel.centre")
+        marker.scale = Vector3(x=diameter, y=diameter, z=diameter)
+        marker.color = colour_msg(SPHERE_COLOUR)
+    if model.stiffness_n_per_m is not None:
+        marker.text = f"{STIFFNESS_KEY}={model.stiffness_n_per_m!r}"
+    return marker
+
+
+def _marker_stiffness(text: str) -> float | None:
+    """K (N/m) from a local-model Marker's `text`: None when it carries no STIFFNESS_KEY entry; ValueError
+    naming the field for a value that is not a finite number > 0."""
+    for entry in text.split():
+        key, _, value = entry.partition("=")
+        if key == STIFFNESS_KEY:
+            try:
+                return positive(float(value), f"Marker.text {STIFFNESS_KEY}")
+            except ValueError:
+                raise ValueError(f"Marker.text {STIFFNESS_KEY} must be a finite number > 0, got {value!r}") from None
+    return None
+
+
+def marker_to_local_model(msg: Marker) -> tuple[LocalModel | None, float]:
+    """(local model, lifetime s) from a /liver/contact_plane Marker; the model is None for DELETE and
+    DELETEALL (no surface near the tool).
+
+    CUBE → LocalModel.plane(pose.position, normal = the orientation's z axis); SPHERE →
+    LocalModel.sphere(pose.position, radius = scale.x / 2); K from `text` (local_model_marker). A lifetime
+    of 0 means "forever" to RViz: the caller decides what it trusts.
+    """
+    lifetime_s = seconds_from_stamp(msg.lifetime)
+    if msg.action in (Marker.DELETE, Marker.DELETEALL):
+        return None, lifetime_s
+    if msg.action != Marker.ADD:
+        raise ValueError(f"Marker.action is {msg.action}, expected ADD ({Marker.ADD}), DELETE ({Marker.DELETE}) "
+                         f"or DELETEALL ({Marker.DELETEALL})")
+    if msg.type not in (Marker.CUBE, Marker.SPHERE):
+        raise ValueError(f"Marker.type is {msg.type}, expected CUBE ({Marker.CUBE}) or SPHERE ({Marker.SPHERE})")
+    position, orientation = pose_arrays(msg.pose, "Marker.pose")
+    stiffness = _marker_stiffness(msg.text)
+    if msg.type == Marker.CUBE:
+        return LocalModel.plane(position, quaternion_to_matrix(orientation)[:, 2], stiffness), lifetime_s
+    return LocalModel.sphere(position, positive(msg.scale.x, "Marker.scale.x") / 2.0, stiffness), lifetime_s
