@@ -5,7 +5,7 @@ import pytest
 from meshes import box_mesh
 
 from liver_sim.mesh.liver_shape import default_liver
-from liver_sim.physics import implicit, kernels, reference
+from liver_sim.physics import implicit_kernels, kernels, pcg, reference
 from liver_sim.physics.contact import ToolPose, ToolShape, surface_contacts, tool_state
 from liver_sim.physics.implicit import Contacts, ImplicitEuler
 from liver_sim.physics.model import LiverModel
@@ -188,16 +188,16 @@ def test_contact_jacobian_matches_finite_differences():
 
     def force(xs, vs):
         f = np.zeros_like(xs)
-        implicit._contact_forces(xs, vs, np.zeros_like(xs), inv_mass, 0.0, *arrays, f, np.zeros_like(xs),
-                                 np.zeros(len(contacts)))
+        implicit_kernels.contact_forces(xs, vs, np.zeros_like(xs), inv_mass, 0.0, *arrays, f, np.zeros_like(xs),
+                                        np.zeros(len(contacts)))
         return f
 
     def operator(coefficient, p):
         """The solver's contact term of A·p with per-element coefficient (springs and mass left out)."""
         out = np.zeros_like(p)
         none = np.zeros(0, np.int64)
-        implicit._apply(none, none, np.zeros((0, 3)), np.zeros(0), np.zeros(0), np.zeros(len(p)), inv_mass,
-                        contacts.nodes, contacts.weights, contacts.normal, coefficient, p, out)
+        pcg.apply(none, none, np.zeros((0, 3)), np.zeros(0), np.zeros(0), np.zeros(len(p)), inv_mass,
+                  contacts.nodes, contacts.weights, contacts.normal, coefficient, p, out)
         return out
 
     direction = np.random.default_rng(5).normal(size=x.shape)
@@ -208,7 +208,8 @@ def test_contact_jacobian_matches_finite_differences():
     np.testing.assert_allclose(-operator(contacts.stiffness_n_per_m, direction), dfdx, atol=1e-6)
     np.testing.assert_allclose(-operator(contacts.damping_ns_per_m, direction), dfdv, atol=1e-6)
     ky = np.zeros_like(x)
-    implicit._contact_forces(x, v, direction, inv_mass, 0.0, *arrays, np.zeros_like(x), ky, np.zeros(len(contacts)))
+    implicit_kernels.contact_forces(x, v, direction, inv_mass, 0.0, *arrays, np.zeros_like(x), ky,
+                                    np.zeros(len(contacts)))
     np.testing.assert_allclose(ky, dfdx, atol=1e-6)
 
 
