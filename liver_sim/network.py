@@ -110,7 +110,7 @@ def run_network(plan: NetworkPlan, duration_s: float, log_dir: Path, progress=pr
     import rclpy
     from rclpy.experimental import EventsExecutor
 
-    from liver_sim.nodes.common import spin
+    from liver_sim.nodes.run import spin
     from liver_sim.nodes.listener import NetworkListener
 
     progress(f"ROS_DOMAIN_ID={os.environ.get('ROS_DOMAIN_ID', '0')} "

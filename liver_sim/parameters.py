@@ -1,6 +1,6 @@
 """Node parameter declarations without ROS: name → default, description with unit, range or choices.
 
-The nodes declare them through rclpy (liver_sim.nodes.common.declare_parameters); offline runs
+The nodes declare them through rclpy (liver_sim.nodes.parameters.declare_parameters); offline runs
 (liver_sim.sessions) read and check the same tables, so both refuse the same values. List values
 (vectors, quaternions) are read through vector_parameter and quaternion_parameter.
 """

@@ -11,7 +11,7 @@ from sensor_msgs.msg import PointCloud2
 
 from liver_sim.mesh.liver_shape import default_liver
 from liver_sim.network import closed_loop_plan, default_anchor, run_network
-from liver_sim.nodes.common import spin
+from liver_sim.nodes.run import spin
 from liver_sim.nodes.listener import NetworkListener
 from liver_sim.processes import NodeProcesses, command_line
 from msg_defs.point_cloud import nodes_to_pointcloud2

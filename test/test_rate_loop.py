@@ -1,7 +1,7 @@
 """RateLoop's schedule, on a simulated clock: absolute deadlines, catching up a short stall, skipping a long one."""
 import pytest
 
-from liver_sim.nodes.common import CATCH_UP_PERIODS, RateLoop, set_realtime_priority
+from liver_sim.nodes.rate_loop import CATCH_UP_PERIODS, RateLoop, set_realtime_priority
 
 PERIOD_S = 0.001
 
@@ -61,7 +61,7 @@ def test_a_long_stall_skips_to_the_newest_deadline():
 def test_an_attached_executor_runs_between_ticks_at_its_rate_and_its_failures_are_not_the_loops():
     """attach_executor: spin_once(timeout 0) after every EXECUTOR_RATE_HZ-th of a second of ticks; a raising
     callback is counted in executor_errors, the step's own errors stay 0 and the loop keeps its deadlines."""
-    from liver_sim.nodes.common import EXECUTOR_RATE_HZ
+    from liver_sim.nodes.rate_loop import EXECUTOR_RATE_HZ
 
     time = SimulatedTime()
     origin = time.now
@@ -108,7 +108,8 @@ def test_a_gap_gets_its_cause_named_from_what_the_thread_did_meanwhile():
     import threading
     import time
 
-    from liver_sim.nodes.common import GARBAGE, GapCauses
+    from liver_sim.nodes.gap_causes import GapCauses
+    from liver_sim.nodes.garbage import GARBAGE
 
     causes = GapCauses()
     causes.sample()
@@ -155,7 +156,8 @@ def test_a_gap_gets_its_cause_named_from_what_the_thread_did_meanwhile():
 
 
 def test_loop_statistics_keep_a_ring_of_the_newest_periods():
-    from liver_sim.nodes.common import Latest, LoopStats
+    from liver_sim.nodes.inputs import Latest
+    from liver_sim.nodes.rate_loop import LoopStats
 
     stats = LoopStats(0.001, window=10)
     for k in range(25):
@@ -174,7 +176,7 @@ def test_freezing_the_collector_moves_everything_to_the_permanent_generation_and
     import subprocess
     import sys
 
-    script = ("import gc; from liver_sim.nodes.common import freeze_garbage, garbage_fields, collect_garbage\n"
+    script = ("import gc; from liver_sim.nodes.garbage import freeze_garbage, garbage_fields, collect_garbage\n"
               "freeze_garbage(); f = garbage_fields(); collect_garbage()\n"
               "assert f['gc_frozen_objects'] > 1000, f\n"
               "assert f['gc_automatic_full_collection'] is False, f\n"

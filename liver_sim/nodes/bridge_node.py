@@ -34,8 +34,11 @@ from haptic_bridge.inputs import InputCheck
 from haptic_bridge.parameters import PARAMETERS
 from haptic_bridge.supervisor import Supervisor
 from haptic_bridge.tick import BridgeTick, check_passivity, checked_change, passivity_problem
-from liver_sim.nodes.common import (Latest, LoopInputs, RateLoop, apply_realtime_priority, declare_parameters,
-                                    diagnostic_status, on_parameter_changes, on_rate, publish_diagnostics, run_node)
+from liver_sim.nodes.diagnostics import diagnostic_status, on_rate, publish_diagnostics
+from liver_sim.nodes.inputs import Latest, LoopInputs
+from liver_sim.nodes.parameters import declare_parameters, on_parameter_changes
+from liver_sim.nodes.rate_loop import RateLoop, apply_realtime_priority
+from liver_sim.nodes.run import run_node
 from msg_defs.device_map import device_map_from_message
 from msg_defs.forces import force_from_message, force_message_bytes, force_message_type
 from msg_defs.local_model import marker_to_local_model

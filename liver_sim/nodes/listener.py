@@ -9,7 +9,8 @@ import numpy as np
 from rclpy.node import Node
 from rclpy.serialization import deserialize_message
 
-from liver_sim.nodes.common import LoopInputs, RateLoop
+from liver_sim.nodes.inputs import LoopInputs
+from liver_sim.nodes.rate_loop import RateLoop
 from msg_defs.forces import force_from_bytes, force_message_type
 from msg_defs.point_cloud import pointcloud2_to_nodes
 from msg_defs.poses import pose_from_bytes

@@ -17,8 +17,11 @@ import numpy as np
 from rclpy.node import Node
 
 from liver_sim.geometry.device_map import DeviceMap
-from liver_sim.nodes.common import (Latest, LoopInputs, RateLoop, apply_realtime_priority, declare_parameters,
-                                    loop_status, on_parameter_changes, publish_diagnostics, read_at_start, run_node)
+from liver_sim.nodes.diagnostics import loop_status, publish_diagnostics
+from liver_sim.nodes.inputs import Latest, LoopInputs
+from liver_sim.nodes.parameters import declare_parameters, on_parameter_changes, read_at_start
+from liver_sim.nodes.rate_loop import RateLoop, apply_realtime_priority
+from liver_sim.nodes.run import run_node
 from liver_sim.phantom import PARAMETERS, PhantomSim, StylusParams
 from liver_sim.tool_scripts import IDENTITY_XYZW, script_from
 from msg_defs.forces import force_from_bytes, force_message_type

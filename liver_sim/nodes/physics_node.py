@@ -15,8 +15,11 @@ import numpy as np
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 
-from liver_sim.nodes.common import (Latest, LoopInputs, RateLoop, apply_realtime_priority, declare_parameters,
-                                    loop_status, publish_diagnostics, run_node)
+from liver_sim.nodes.diagnostics import loop_status, publish_diagnostics
+from liver_sim.nodes.inputs import Latest, LoopInputs
+from liver_sim.nodes.parameters import declare_parameters
+from liver_sim.nodes.rate_loop import RateLoop, apply_realtime_priority
+from liver_sim.nodes.run import run_node
 from liver_sim.parameters import check_parameter
 from liver_sim.physics.pipeline import PARAMETERS, Frame, FramePipeline, build_model
 from msg_defs.forces import wrench_stamped_bytes

@@ -22,8 +22,10 @@ import numpy as np
 from rclpy.node import Node
 
 from liver_sim.geometry.device_map import DeviceMap
-from liver_sim.nodes.common import (LoopStats, RateLoop, apply_realtime_priority, declare_parameters, loop_status,
-                                    on_parameter_changes, publish_diagnostics, read_at_start, run_node)
+from liver_sim.nodes.diagnostics import loop_status, publish_diagnostics
+from liver_sim.nodes.parameters import declare_parameters, on_parameter_changes, read_at_start
+from liver_sim.nodes.rate_loop import LoopStats, RateLoop, apply_realtime_priority
+from liver_sim.nodes.run import run_node
 from liver_sim.parameters import quaternion_parameter, vector_parameter
 from liver_sim.tool_parameters import PARAMETERS
 from liver_sim.tool_scripts import IDENTITY_XYZW, ScriptedTrajectory, script_from

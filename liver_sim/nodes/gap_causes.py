@@ -1,0 +1,110 @@
+"""The cause of each long gap between two ticks of a loop thread: garbage collection, waiting for a CPU,
+or blocked off CPU (GapCauses)."""
+from __future__ import annotations
+
+import os
+import threading
+from collections import deque
+
+from liver_sim.nodes.garbage import GARBAGE
+
+#: A gap between two ticks longer than this (s), or than two periods of a slower loop, gets its cause named
+#: (GapCauses).
+GAP_CAUSE_S = 0.005
+#: Every this many ticks a loop samples its thread's scheduler statistics, the baseline a gap is measured from.
+SCHEDSTAT_EVERY_TICKS = 10
+#: A gap is put down to waiting for a CPU when the thread waited in the run queue for at least this share of it.
+RUNQUEUE_SHARE = 0.5
+
+
+def rt_throttle_s() -> float | None:
+    """How long (s) the kernel stops every SCHED_FIFO thread once they used their share of a period
+    (sched_rt_period_us − sched_rt_runtime_us), or None when unknown or unlimited."""
+    try:
+        period = int(open("/proc/sys/kernel/sched_rt_period_us").read())
+        runtime = int(open("/proc/sys/kernel/sched_rt_runtime_us").read())
+    except (OSError, ValueError):
+        return None
+    return None if runtime < 0 else (period - runtime) * 1e-6
+
+
+class GapCauses:
+    """Names the cause of each gap longer than GAP_CAUSE_S between two ticks of one loop thread, from what the
+    kernel and the interpreter saw meanwhile:
+
+    - ``garbage collection``: collector passes of this process (GARBAGE) took at least RUNQUEUE_SHARE of it;
+    - ``waiting for a CPU``: the thread was runnable but not running for at least RUNQUEUE_SHARE of the gap
+      (its run-queue wait in /proc/thread-self/schedstat): other processes held both cores, or — a SCHED_FIFO
+      thread stopped for about sched_rt_period_us − sched_rt_runtime_us — the kernel's RT throttling once the
+      real-time threads used their share of the second;
+    - ``blocked off CPU``: the thread was not runnable: it waited for the GIL held by another thread of this
+      process (the executor, a DDS callback into Python; or that thread itself waiting for a core) or for a
+      lock inside rmw/DDS.
+
+    Call :meth:`sample` from the loop thread every few ticks and :meth:`name` when a gap ended; both only
+    read one small /proc file of the thread.
+    """
+
+    EVENTS_KEPT = 32
+
+    def __init__(self):
+        self._fd = None
+        self._wait_ns = 0
+        self.events = deque(maxlen=self.EVENTS_KEPT)  # (monotonic end s, gap s, cause)
+        self.counts = {"garbage collection": 0, "waiting for a CPU": 0, "blocked off CPU": 0}
+        self.largest = (0.0, "")
+        self.reported = 0
+        self._fifo = False
+        self._throttle_s = rt_throttle_s()
+
+    def _wait(self) -> int:
+        """The calling thread's cumulative run-queue wait (ns)."""
+        if self._fd is None:
+            self._fd = os.open(f"/proc/self/task/{threading.get_native_id()}/schedstat", os.O_RDONLY)
+            self._fifo = os.sched_getscheduler(0) == os.SCHED_FIFO
+        return int(os.pread(self._fd, 64, 0).split()[1])
+
+    def sample(self) -> None:
+        self._wait_ns = self._wait()
+
+    def name(self, start_s: float, end_s: float) -> str:
+        """The cause of the gap from `start_s` to `end_s` (monotonic s); kept in `events`, counted."""
+        gap = end_s - start_s
+        wait_ns = self._wait()
+        waited, self._wait_ns = (wait_ns - self._wait_ns) * 1e-9, wait_ns
+        collections = GARBAGE.during(start_s, end_s)
+        collecting = sum(min(c[1], end_s) - max(c[0], start_s) for c in collections)
+        if collecting >= RUNQUEUE_SHARE * gap:
+            kind = "garbage collection"
+            cause = f"{kind}: generation {max(c[2] for c in collections)}, {collecting * 1e3:.1f} ms"
+        elif waited >= RUNQUEUE_SHARE * gap:
+            kind = "waiting for a CPU"
+            throttled = (self._fifo and self._throttle_s is not None
+                         and abs(gap - self._throttle_s) <= 0.2 * self._throttle_s)
+            cause = (f"{kind}: runnable {waited * 1e3:.1f} ms without a core ("
+                     + ("SCHED_FIFO, as long as the kernel's RT throttling: the real-time threads used "
+                        "sched_rt_runtime_us of the period" if throttled else "other processes held the cores")
+                     + ")")
+        else:
+            kind = "blocked off CPU"
+            cause = (f"{kind}: not runnable for {(gap - waited) * 1e3:.1f} ms (the GIL held by another thread of "
+                     f"this process, or a lock inside rmw/DDS)")
+        self.counts[kind] += 1
+        self.events.append((end_s, gap, cause))
+        if gap > self.largest[0]:
+            self.largest = (gap, cause)
+        return cause
+
+    def summary(self) -> dict:
+        """Counts of the named gaps by cause, and the cause of the largest."""
+        return {"gaps_named": sum(self.counts.values()),
+                **{f"gaps_{kind.replace(' ', '_')}": n for kind, n in self.counts.items()},
+                "largest_gap_cause": self.largest[1] or "-"}
+
+    def new_events(self) -> list[tuple[float, float, str]]:
+        """The events since the last call (for the diagnostics' log)."""
+        events = list(self.events)
+        total = sum(self.counts.values())
+        fresh = events[max(0, len(events) - (total - self.reported)):]
+        self.reported = total
+        return fresh

@@ -1,0 +1,85 @@
+"""The entry point of a node process (run_node) and the executor's spin."""
+from __future__ import annotations
+
+import signal
+import sys
+import threading
+import time
+
+import rclpy
+from rclpy.duration import Duration
+from rclpy.executors import ExternalShutdownException
+from rclpy.experimental import EventsExecutor
+from rclpy.signals import SignalHandlerOptions
+
+from liver_sim.nodes.garbage import FULL_COLLECTION_PERIOD_S, collect_garbage, freeze_garbage
+
+#: How often (s) a thread holding the GIL is asked to hand it over.
+GIL_SWITCH_INTERVAL_S = 0.0002
+#: How long (s) a closing node waits for its reliable subscribers to acknowledge what it published.
+CLOSE_ACK_TIMEOUT_S = 1.0
+
+
+def spin(executor, context=None, stop: threading.Event | None = None) -> None:
+    """Run the executor until its context shuts down or `stop` is set.
+
+    `EventsExecutor.spin()` of the rclpy 7.1 wheels neither runs callbacks nor returns on SIGINT
+    here, so the executor is driven with spin_once.
+    """
+    ok = (context.ok if context is not None else rclpy.ok)
+    try:
+        while ok() and not (stop is not None and stop.is_set()):
+            executor.spin_once(timeout_sec=0.1)
+    except ExternalShutdownException:
+        pass
+
+
+def run_node(make_node, args=None) -> int:
+    """Entry point of a node process: create it, spin an EventsExecutor until SIGINT or SIGTERM, clean up.
+
+    The process handles SIGINT and SIGTERM itself (rclpy's handlers would shut the context down first):
+    a signal ends the spin, then `node.close()` runs while the context is still up — the bridge sends its
+    zero force there — then the node waits up to CLOSE_ACK_TIMEOUT_S for its reliable subscribers (a
+    recorder) to acknowledge what it published; only then does the context go.  A refused parameter ends
+    the process with status 2 and a message naming it.  The interpreter hands the GIL over every GIL_SWITCH_INTERVAL_S so
+    that a rate loop and the executor thread do not hold each other up for Python's default 5 ms.  Once the node
+    is built, the garbage collector is frozen (:func:`freeze_garbage`) and the executor runs the full collection
+    every FULL_COLLECTION_PERIOD_S.  A node whose `rate_loop` (a running RateLoop) is given has its executor run
+    by that loop between ticks (RateLoop.attach_executor); the others are spun by this thread.
+    """
+    sys.setswitchinterval(GIL_SWITCH_INTERVAL_S)
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    stop = threading.Event()
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(signum, lambda *_: stop.set())
+    node = None
+    try:
+        node = make_node()
+        freeze_garbage()
+        node.create_timer(FULL_COLLECTION_PERIOD_S, collect_garbage)
+        executor = EventsExecutor()
+        executor.add_node(node)
+        loop = getattr(node, "rate_loop", None)
+        if loop is not None and loop.is_alive():  # the loop runs the executor: this thread only waits
+            loop.attach_executor(executor)
+            while not stop.wait(0.1) and rclpy.ok() and loop.is_alive():
+                pass
+            if not stop.is_set() and rclpy.ok():  # the loop ended on its own: the executor goes on here
+                spin(executor, stop=stop)
+        else:
+            spin(executor, stop=stop)
+    except ValueError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            node.close()
+            deadline = time.monotonic() + CLOSE_ACK_TIMEOUT_S
+            for publisher in node.publishers:  # a recorder that fell behind still gets the last messages
+                publisher.wait_for_all_acked(Duration(seconds=max(0.0, deadline - time.monotonic())))
+            node.destroy_node()
+        if rclpy.ok():
+            rclpy.shutdown()
+    return 0
