@@ -2,7 +2,8 @@
 real-time scheduling that keeps it on time.
 
 Loops with a rate to keep run in their own thread (rclpy timers jitter by milliseconds on a
-2-core machine); the executor only delivers messages and 1 Hz diagnostics.  A loop's tick does no
+2-core machine), and run their node's executor callbacks between ticks (RateLoop.attach_executor), so
+the node's Python runs in one thread.  A loop's tick does no
 avoidable work: its statistics go into preallocated rings without a lock (one writer; a reader
 copies), percentiles are computed by the diagnostics, and after start-up the garbage collector
 never runs a full collection on its own (:func:`freeze_garbage`).
