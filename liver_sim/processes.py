@@ -33,6 +33,23 @@ NODE_MODULES = {"liver_physics": "liver_sim.nodes.physics_node", "haptic_bridge"
                 "liver_tool": "liver_sim.nodes.tool_node", "phantom_sim": "liver_sim.nodes.phantom_node"}
 
 
+def set_realtime_priority(priority: int) -> str | None:
+    """Schedule every thread of this process SCHED_FIFO at `priority` (0: leave them as they are).
+
+    All of them: a node's rate loop and the DDS threads that deliver its inputs, a recorder's drain loop;
+    threads started later inherit it. Returns None when done (or not asked), else why the system refused.
+    """
+    if priority <= 0:
+        return None
+    try:
+        for thread_id in os.listdir("/proc/self/task"):
+            os.sched_setscheduler(int(thread_id), os.SCHED_FIFO, os.sched_param(priority))
+    except OSError as exc:
+        return (f"realtime_priority {priority} refused ({exc.strerror}): normal scheduling; grant CAP_SYS_NICE "
+                f"or an rtprio limit to keep the rate under load")
+    return None
+
+
 def keep_dds_local(discovery_range: str | None = None, environ=os.environ) -> str:
     """Set ROS_AUTOMATIC_DISCOVERY_RANGE for this process and every node it starts: `discovery_range` when
     given (the user's opt-out), else the environment's when set explicitly, else DEFAULT_DISCOVERY_RANGE.

@@ -1,7 +1,8 @@
 """RateLoop's schedule, on a simulated clock: absolute deadlines, catching up a short stall, skipping a long one."""
 import pytest
 
-from liver_sim.nodes.rate_loop import CATCH_UP_PERIODS, RateLoop, set_realtime_priority
+from liver_sim.nodes.rate_loop import CATCH_UP_PERIODS, RateLoop
+from liver_sim.processes import set_realtime_priority
 
 PERIOD_S = 0.001
 

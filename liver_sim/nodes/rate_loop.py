@@ -22,6 +22,7 @@ from rclpy.executors import ExternalShutdownException
 
 from liver_sim.nodes.gap_causes import GAP_CAUSE_S, SCHEDSTAT_EVERY_TICKS, GapCauses
 from liver_sim.nodes.garbage import freeze_garbage
+from liver_sim.processes import set_realtime_priority
 
 #: Seconds before a deadline at which a loop stops sleeping and spins.
 SPIN_MARGIN_S = 0.0001
@@ -176,23 +177,6 @@ class RateLoop(threading.Thread):
             due = int((clock() - start) / self.period_s)
             if due - tick > CATCH_UP_PERIODS:
                 tick = due
-
-
-def set_realtime_priority(priority: int) -> str | None:
-    """Schedule every thread of this process SCHED_FIFO at `priority` (0: leave them as they are).
-
-    All of them: the rate loop, the executor and the DDS threads that deliver its inputs; threads
-    started later inherit it. Returns None when done (or not asked), else why the system refused.
-    """
-    if priority <= 0:
-        return None
-    try:
-        for thread_id in os.listdir("/proc/self/task"):
-            os.sched_setscheduler(int(thread_id), os.SCHED_FIFO, os.sched_param(priority))
-    except OSError as exc:
-        return (f"realtime_priority {priority} refused ({exc.strerror}): normal scheduling; grant CAP_SYS_NICE "
-                f"or an rtprio limit to keep the rate under load")
-    return None
 
 
 def apply_realtime_priority(node, priority: int) -> None:

@@ -17,7 +17,10 @@ def _output(args, suffix: str) -> Path:
 
 
 def add_record_command(commands) -> None:
-    """``liver-sim record [--topics …] [--storage mcap|sqlite3] [--out DIR] [--duration S] [--marker]``."""
+    """``liver-sim record [--topics …] [--storage mcap|sqlite3] [--out DIR] [--duration S] [--marker]
+    [--realtime-priority N]``."""
+    from liver_sim.sessions.record import REALTIME_PRIORITY
+
     parser = commands.add_parser("record", help="record the product's topics into a rosbag2 bag until Ctrl-C")
     parser.add_argument("--topics", nargs="+", metavar="TOPIC",
                         help="topics to record (default: every topic of docs/contract.md but /liver/marker, and the "
@@ -27,6 +30,10 @@ def add_record_command(commands) -> None:
     parser.add_argument("--out", type=Path, default=None,
                         help="bag folder to create (default: out/sessions/session_<date>_<time>)")
     parser.add_argument("--duration", type=float, default=None, help="stop after S seconds (default: on Ctrl-C)")
+    parser.add_argument("--realtime-priority", type=int, default=REALTIME_PRIORITY, metavar="N",
+                        help="SCHED_FIFO priority 1-99 of the recorder, below the nodes' so it never delays them and "
+                             "above normal processes so they cannot starve it (default: %(default)s; 0: normal "
+                             "scheduling; refused without CAP_SYS_NICE or an rtprio limit: a warning)")
     parser.set_defaults(handler=record)
 
 
@@ -39,7 +46,7 @@ def record(args) -> int:
     topics = args.topics or default_topics(marker=args.marker)
     if args.marker and args.topics and "/liver/marker" not in topics:
         topics.append("/liver/marker")
-    _, failed = run_record(out, topics, args.storage, args.duration, _progress)
+    _, failed = run_record(out, topics, args.storage, args.duration, _progress, args.realtime_priority)
     return EXIT_LOST if failed else 0
 
 

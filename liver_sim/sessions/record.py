@@ -40,6 +40,11 @@ MATCH_TIMEOUT_S = 10.0
 READY = "ready:"
 #: Exit status of `liver-sim record` when messages were lost (the bag is complete and says how many).
 EXIT_LOST = 3
+#: SCHED_FIFO priority of the recorder (`--realtime-priority`): below the nodes' (60-80), so it never delays
+#: a loop, and above every normally scheduled process, so a busy desktop (RViz, a browser, a build) cannot
+#: starve its drain until a subscription's history overflows (seen: 2 s without a drain beside a spinning
+#: process at normal priority).
+REALTIME_PRIORITY = 20
 
 
 def default_topics(marker: bool = False) -> list[str]:
@@ -267,9 +272,10 @@ class Recorder:
 
 
 def run_record(out: Path, topics: list[str], storage: str = "mcap", duration_s: float | None = None,
-               progress=print) -> tuple[dict[str, int], int]:
+               progress=print, realtime_priority: int = REALTIME_PRIORITY) -> tuple[dict[str, int], int]:
     """Record `topics` into a new bag at `out` until SIGINT/SIGTERM (or `duration_s`); return the counts per
-    topic and whether the recording failed (Recorder.failures: it lost what it must not).
+    topic and whether the recording failed (Recorder.failures: it lost what it must not).  The process runs
+    SCHED_FIFO at `realtime_priority` (0: as it is; refused: a warning, normal scheduling).
 
     metadata.yaml's custom_data gets the recorder's CPU and wall time (s), its history depth and deepest
     backlog, and the lost messages (SequenceGaps.custom_data).
@@ -277,6 +283,11 @@ def run_record(out: Path, topics: list[str], storage: str = "mcap", duration_s: 
     import rclpy
     from rclpy.signals import SignalHandlerOptions
 
+    from liver_sim.processes import set_realtime_priority
+
+    refused = set_realtime_priority(realtime_priority)  # before rclpy starts its threads: they inherit it
+    if refused:
+        progress(f"warning: {refused}")
     stop = threading.Event()
     previous = {sig: signal.signal(sig, lambda *_: stop.set()) for sig in (signal.SIGINT, signal.SIGTERM)}
     context = rclpy.Context()
