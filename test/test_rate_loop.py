@@ -59,35 +59,6 @@ def test_a_long_stall_skips_to_the_newest_deadline():
     assert len(starts) == 6
 
 
-def test_an_attached_executor_runs_between_ticks_at_its_rate_and_its_failures_are_not_the_loops():
-    """attach_executor: spin_once(timeout 0) after every EXECUTOR_RATE_HZ-th of a second of ticks; a raising
-    callback is counted in executor_errors, the step's own errors stay 0 and the loop keeps its deadlines."""
-    from liver_sim.nodes.rate_loop import EXECUTOR_RATE_HZ
-
-    time = SimulatedTime()
-    origin = time.now
-    starts, spins = [], []
-
-    class Executor:
-        def spin_once(self, timeout_sec):
-            spins.append((len(starts), timeout_sec))
-            if len(spins) == 2:
-                raise RuntimeError("a callback failed")
-
-    def step(now: float) -> None:
-        starts.append(now - origin)
-        if len(starts) == 50:
-            loop.stop()
-
-    loop = RateLoop(1.0 / PERIOD_S, step, "test", clock=time.clock, sleep=time.sleep)
-    loop.attach_executor(Executor())
-    loop.run()
-    every = round(1.0 / PERIOD_S / EXECUTOR_RATE_HZ)
-    assert every > 1 and [tick for tick, _ in spins] == list(range(every, 51, every))
-    assert all(timeout == 0.0 for _, timeout in spins)
-    assert loop.executor_errors == 1 and loop.errors == 0
-    assert starts == pytest.approx([k * PERIOD_S for k in range(50)], abs=5e-6)
-
 def test_realtime_priority_zero_leaves_the_process_alone_and_a_refusal_is_explained():
     import os
 

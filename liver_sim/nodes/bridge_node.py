@@ -129,7 +129,7 @@ class BridgeShell:
         self.node.destroy_publisher(self._publisher)
         self.node.destroy_publisher(self._diagnostics)
 
-    # -- run-time parameters (executor callbacks: the loop thread runs them between ticks, or, managed, the main one)
+    # -- run-time parameters (executor thread)
     def apply(self, changes: dict) -> str | None:
         """Check `changes` as at start; the loop takes them at its next tick. Refusal: ValueError with the reason."""
         self.p = checked_change(self.p, changes, self.scale)
@@ -231,7 +231,7 @@ class BridgeShell:
         return force_message_bytes(self.p["force_output"], np.zeros(3), self.node.get_clock().now().to_msg(),
                                    self.p["device_frame_id"])
 
-    # -- diagnostics (executor callbacks, as above)
+    # -- diagnostics (executor thread)
     def _publish_diagnostics(self) -> None:
         now = time.monotonic()
         logger = self.node.get_logger()
@@ -301,11 +301,6 @@ class HapticBridge(Node):
         on_parameter_changes(self, PARAMETERS, self.shell.apply)
         self.get_logger().info(self.shell.describe())
         self.shell.start()
-
-    @property
-    def rate_loop(self):
-        """The running RateLoop that runs this node's executor between its ticks (run_node), or None."""
-        return self.shell._loop
 
     def close(self) -> None:
         """Zero force on the wire, then stop the loop."""

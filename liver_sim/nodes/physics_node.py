@@ -70,11 +70,6 @@ class PhysicsNode(Node):
         apply_realtime_priority(self, p["realtime_priority"])  # before the loop starts: it inherits it
         self._loop.start()
 
-    @property
-    def rate_loop(self):
-        """The running RateLoop that runs this node's executor between its ticks (run_node), or None."""
-        return self._loop
-
     def close(self) -> None:
         self._loop.stop()
         self._inputs.destroy()

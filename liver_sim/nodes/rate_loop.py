@@ -2,8 +2,7 @@
 real-time scheduling that keeps it on time.
 
 Loops with a rate to keep run in their own thread (rclpy timers jitter by milliseconds on a
-2-core machine), and run their node's executor callbacks between ticks (RateLoop.attach_executor), so
-the node's Python runs in one thread.  A loop's tick does no
+2-core machine); the executor only delivers messages and 1 Hz diagnostics.  A loop's tick does no
 avoidable work: its statistics go into preallocated rings without a lock (one writer; a reader
 copies), percentiles are computed by the diagnostics, and after start-up the garbage collector
 never runs a full collection on its own (:func:`freeze_garbage`).
@@ -18,7 +17,6 @@ import traceback
 
 import numpy as np
 import rclpy
-from rclpy.executors import ExternalShutdownException
 
 from liver_sim.nodes.gap_causes import GAP_CAUSE_S, SCHEDSTAT_EVERY_TICKS, GapCauses
 from liver_sim.nodes.garbage import freeze_garbage
@@ -28,9 +26,6 @@ from liver_sim.processes import set_realtime_priority
 SPIN_MARGIN_S = 0.0001
 #: A rate loop at most this many periods behind runs its missed ticks at once; further behind, it skips them.
 CATCH_UP_PERIODS = 2
-#: How often (Hz, at most the loop's rate) a rate loop that runs its node's executor (RateLoop.attach_executor)
-#: runs its ready callbacks: parameters, services, diagnostics timers, low-rate subscriptions.
-EXECUTOR_RATE_HZ = 100.0
 
 
 class LoopStats:
@@ -83,11 +78,6 @@ class RateLoop(threading.Thread):
     it skips to the newest deadline rather than run a burst. An exception in a step is counted
     (`errors`) and handed to `on_error(now, exc)` (default: printed); the loop goes on. `clock` and
     `sleep` are time.monotonic and time.sleep unless a test gives its own.
-
-    With an executor attached (:meth:`attach_executor`, run_node does it), the loop also runs the executor's
-    ready callbacks after a tick, at EXECUTOR_RATE_HZ: the node's Python then runs in this one thread, and no
-    tick waits for the GIL of an executor thread (measured: pose-to-command p99 2.3 → 1.1 ms, `bench loop`).
-    A failing callback is printed and counted (`executor_errors`), not taken for a failing step.
     """
 
     def __init__(self, rate_hz: float, step, name: str, clock=time.monotonic, sleep=time.sleep, on_error=None,
@@ -103,22 +93,6 @@ class RateLoop(threading.Thread):
         self._on_error = on_error
         self._freeze = freeze
         self._stopping = threading.Event()
-        self._executor = None
-        self.executor_every_ticks = max(1, round(rate_hz / EXECUTOR_RATE_HZ))
-        self.executor_errors = 0
-
-    def attach_executor(self, executor) -> None:
-        """Run `executor`'s ready callbacks from this loop's thread from now on (see the class docstring)."""
-        self._executor = executor
-
-    def _run_executor(self) -> None:
-        try:
-            self._executor.spin_once(timeout_sec=0.0)
-        except ExternalShutdownException:
-            self._executor = None
-        except Exception:  # noqa: BLE001 — a callback's failure is not the loop's
-            self.executor_errors += 1
-            traceback.print_exc()
 
     def report(self) -> dict:
         """For diagnostics: LoopStats.summary(), GapCauses.summary(), `gap_bound_s` and `new_gaps`, the gaps over
@@ -151,7 +125,7 @@ class RateLoop(threading.Thread):
             if remaining > margin:
                 sleep(remaining - margin)
             while clock() < deadline:
-                sleep(0)  # spin, but let another thread (the supervisor, a managed node's executor) take the GIL
+                sleep(0)  # spin, but let the executor thread take the GIL
             now = clock()
             if previous is not None:
                 gap = now - previous
@@ -172,8 +146,6 @@ class RateLoop(threading.Thread):
                 else:
                     self._on_error(now, exc)
             tick += 1
-            if self._executor is not None and tick % self.executor_every_ticks == 0:
-                self._run_executor()
             due = int((clock() - start) / self.period_s)
             if due - tick > CATCH_UP_PERIODS:
                 tick = due

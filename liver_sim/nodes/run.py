@@ -44,8 +44,7 @@ def run_node(make_node, args=None) -> int:
     the process with status 2 and a message naming it.  The interpreter hands the GIL over every GIL_SWITCH_INTERVAL_S so
     that a rate loop and the executor thread do not hold each other up for Python's default 5 ms.  Once the node
     is built, the garbage collector is frozen (:func:`freeze_garbage`) and the executor runs the full collection
-    every FULL_COLLECTION_PERIOD_S.  A node whose `rate_loop` (a running RateLoop) is given has its executor run
-    by that loop between ticks (RateLoop.attach_executor); the others are spun by this thread.
+    every FULL_COLLECTION_PERIOD_S.
     """
     sys.setswitchinterval(GIL_SWITCH_INTERVAL_S)
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
@@ -59,15 +58,7 @@ def run_node(make_node, args=None) -> int:
         node.create_timer(FULL_COLLECTION_PERIOD_S, collect_garbage)
         executor = EventsExecutor()
         executor.add_node(node)
-        loop = getattr(node, "rate_loop", None)
-        if loop is not None and loop.is_alive():  # the loop runs the executor: this thread only waits
-            loop.attach_executor(executor)
-            while not stop.wait(0.1) and rclpy.ok() and loop.is_alive():
-                pass
-            if not stop.is_set() and rclpy.ok():  # the loop ended on its own: the executor goes on here
-                spin(executor, stop=stop)
-        else:
-            spin(executor, stop=stop)
+        spin(executor, stop=stop)
     except ValueError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

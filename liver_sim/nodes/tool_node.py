@@ -83,11 +83,6 @@ class ToolNode(Node):
         if self._loop is not None:
             self._loop.start()
 
-    @property
-    def rate_loop(self):
-        """The running RateLoop that runs this node's executor between its ticks (run_node), or None."""
-        return self._loop
-
     def close(self) -> None:
         if self._loop is not None:
             self._loop.stop()
