@@ -286,8 +286,6 @@ def run_record(out: Path, topics: list[str], storage: str = "mcap", duration_s: 
     from liver_sim.processes import set_realtime_priority
 
     refused = set_realtime_priority(realtime_priority)  # before rclpy starts its threads: they inherit it
-    if refused:
-        progress(f"warning: {refused}")
     stop = threading.Event()
     previous = {sig: signal.signal(sig, lambda *_: stop.set()) for sig in (signal.SIGINT, signal.SIGTERM)}
     context = rclpy.Context()
@@ -297,6 +295,8 @@ def run_record(out: Path, topics: list[str], storage: str = "mcap", duration_s: 
         with BagWriter(out, storage) as writer:
             recorder = Recorder(writer, topics, context, progress)
             progress(f"recording to {out} ({storage}): {', '.join(topics)}; stop with Ctrl-C")
+            if refused:
+                progress(f"warning: {refused}")
             try:
                 matched = recorder.wait_until_matched()
                 progress(f"{READY} {len(recorder.subscribed)} topics subscribed, {matched} publishers matched")
