@@ -1,14 +1,17 @@
-"""The local model (liver_sim.local_model.LocalModel) as the /liver/contact_plane Marker, and back."""
+"""The local model (liver_sim.local_model.LocalModel) as the /liver/contact_plane Marker, and back (from the
+message or from its bytes)."""
 from __future__ import annotations
 
+import numpy as np
 from geometry_msgs.msg import Vector3
 from visualization_msgs.msg import Marker
 
 from liver_sim.checks import positive
 from liver_sim.geometry.rotations import quaternion_from_z_axis, quaternion_to_matrix
 from liver_sim.local_model import LocalModel
-from msg_defs.finite import colour_msg
-from msg_defs.poses import pose_arrays, pose_msg
+from msg_defs import cdr
+from msg_defs.finite import colour_msg, finite_floats, unit_quaternion
+from msg_defs.poses import pose_msg
 from msg_defs.stamps import duration_msg, header_msg, seconds_from_stamp
 
 PLANE_COLOUR = (0.2, 0.8, 0.3, 0.5)
@@ -71,16 +74,33 @@ def marker_to_local_model(msg: Marker) -> tuple[LocalModel | None, float]:
     LocalModel.sphere(pose.position, radius = scale.x / 2); K from `text` (local_model_marker). A lifetime
     of 0 means "forever" to RViz: the caller decides what it trusts.
     """
-    lifetime_s = seconds_from_stamp(msg.lifetime)
-    if msg.action in (Marker.DELETE, Marker.DELETEALL):
+    p, o = msg.pose.position, msg.pose.orientation
+    return _local_model(msg.action, msg.type, (p.x, p.y, p.z), (o.x, o.y, o.z, o.w), msg.scale.x, msg.text,
+                        seconds_from_stamp(msg.lifetime))
+
+
+def local_model_from_bytes(data: bytes) -> tuple[LocalModel | None, float]:
+    """:func:`marker_to_local_model` of a serialized Marker (a raw subscription), without a message object;
+    malformed bytes are refused like bad fields, with a ValueError naming the field."""
+    fields = cdr.marker_fields(data)
+    sec, nanosec = fields["lifetime"]
+    pose = fields["pose"]
+    return _local_model(fields["action"], fields["type"], pose[:3], pose[3:], fields["scale"][0], fields["text"],
+                        sec + nanosec * 1e-9)
+
+
+def _local_model(action: int, kind: int, position, orientation, scale_x: float, text: str,
+                 lifetime_s: float) -> tuple[LocalModel | None, float]:
+    if action in (Marker.DELETE, Marker.DELETEALL):
         return None, lifetime_s
-    if msg.action != Marker.ADD:
-        raise ValueError(f"Marker.action is {msg.action}, expected ADD ({Marker.ADD}), DELETE ({Marker.DELETE}) "
+    if action != Marker.ADD:
+        raise ValueError(f"Marker.action is {action}, expected ADD ({Marker.ADD}), DELETE ({Marker.DELETE}) "
                          f"or DELETEALL ({Marker.DELETEALL})")
-    if msg.type not in (Marker.CUBE, Marker.SPHERE):
-        raise ValueError(f"Marker.type is {msg.type}, expected CUBE ({Marker.CUBE}) or SPHERE ({Marker.SPHERE})")
-    position, orientation = pose_arrays(msg.pose, "Marker.pose")
-    stiffness = _marker_stiffness(msg.text)
-    if msg.type == Marker.CUBE:
+    if kind not in (Marker.CUBE, Marker.SPHERE):
+        raise ValueError(f"Marker.type is {kind}, expected CUBE ({Marker.CUBE}) or SPHERE ({Marker.SPHERE})")
+    position = np.array(finite_floats(tuple(position), (3,), "Marker.pose.position"))
+    orientation = unit_quaternion(tuple(orientation), "Marker.pose.orientation")
+    stiffness = _marker_stiffness(text)
+    if kind == Marker.CUBE:
         return LocalModel.plane(position, quaternion_to_matrix(orientation)[:, 2], stiffness), lifetime_s
-    return LocalModel.sphere(position, positive(msg.scale.x, "Marker.scale.x") / 2.0, stiffness), lifetime_s
+    return LocalModel.sphere(position, positive(scale_x, "Marker.scale.x") / 2.0, stiffness), lifetime_s

@@ -41,7 +41,7 @@ from liver_sim.nodes.rate_loop import RateLoop, apply_realtime_priority
 from liver_sim.nodes.run import run_node
 from msg_defs.device_map import device_map_from_message
 from msg_defs.forces import force_from_message, force_message_bytes, force_message_type
-from msg_defs.local_model import marker_to_local_model
+from msg_defs.local_model import local_model_from_bytes
 from msg_defs.poses import pose_from_bytes
 from msg_defs.topics import TOPICS
 
@@ -97,7 +97,8 @@ class BridgeShell:
         else:
             self.source_topic = p["local_model_topic"]
             self._source_input = self._inputs.subscribe(TOPICS["contact_plane"].type, self.source_topic,
-                                                        TOPICS["contact_plane"].qos, self._on_marker, received=True)
+                                                        TOPICS["contact_plane"].qos, self._on_marker, raw=True,
+                                                        received=True)
         self._timer = node.create_timer(1.0, self._publish_diagnostics)
 
     # -- life cycle
@@ -166,9 +167,9 @@ class BridgeShell:
             return
         self._pose.set((position, stamp), received)
 
-    def _on_marker(self, message, received: float) -> None:
+    def _on_marker(self, data: bytes, received: float) -> None:
         try:
-            model, lifetime = marker_to_local_model(message)
+            model, lifetime = local_model_from_bytes(data)
         except ValueError as exc:
             self._refuse("local_model", str(exc))
             return
