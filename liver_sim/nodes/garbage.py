@@ -9,7 +9,9 @@ from collections import deque
 
 class GarbageLog:
     """When the garbage collector ran in this process (gc.callbacks): the last COLLECTIONS_KEPT passes as
-    (monotonic start s, end s, generation), the number and longest duration of full (generation 2) ones."""
+    (monotonic start s, end s, generation), the number and longest duration of full (generation 2) ones, and
+    how many objects the last :func:`freeze_garbage` froze (counted then: gc.get_freeze_count() walks them
+    all, milliseconds with the GIL held, too long for a diagnostics call beside a 1 kHz loop)."""
 
     COLLECTIONS_KEPT = 64
 
@@ -17,6 +19,7 @@ class GarbageLog:
         self.passes = deque(maxlen=self.COLLECTIONS_KEPT)
         self.full_collections = 0
         self.full_collection_max_s = 0.0
+        self.frozen_objects = 0
         self._started = 0.0
         gc.callbacks.append(self._callback)
 
@@ -49,6 +52,7 @@ def freeze_garbage() -> None:
     a loop thread then only ever pays for young generations; :func:`collect_garbage` does the full one."""
     gc.collect()
     gc.freeze()
+    GARBAGE.frozen_objects = gc.get_freeze_count()
     young, middle, _ = gc.get_threshold()
     gc.set_threshold(young, middle, NO_AUTOMATIC_FULL_COLLECTION)
 
@@ -61,6 +65,6 @@ def collect_garbage() -> None:
 def garbage_fields() -> dict:
     """Diagnostics of the collector policy: frozen objects, automatic full collection on or off, full
     collections run and the longest (s)."""
-    return {"gc_frozen_objects": gc.get_freeze_count(),
+    return {"gc_frozen_objects": GARBAGE.frozen_objects,
             "gc_automatic_full_collection": gc.get_threshold()[2] < NO_AUTOMATIC_FULL_COLLECTION,
             "gc_full_collections": GARBAGE.full_collections, "gc_full_collection_max_s": GARBAGE.full_collection_max_s}
