@@ -69,11 +69,6 @@ TOPICS = {
     "diagnostics": Topic("/diagnostics", DiagnosticArray, catch_up_depth(1.0), transient_local=True),
 }
 
-#: Topics whose every message is the whole state and supersedes the one before (the deformed nodes, the skin
-#: marker): a recorder counts what it misses of them but does not fail on it (liver_sim.sessions.record), as it
-#: does for the event topics (commands, wrenches, local models, the surface, diagnostics).
-SNAPSHOT_TOPICS = frozenset({TOPICS["nodes"].name, TOPICS["marker"].name})
-
 #: Force topic of a baseline bridge (`local_model: none`) beside the normal one: the Fig. 8 comparison
 #: in `liver-sim bench loop`; it drives nothing.
 BASELINE_FORCE_TOPIC = "/phantom/servo_cf_without_local_model"

@@ -287,9 +287,8 @@ def test_demo_records_its_run_and_the_report_reads_it(ros_domain_id, tmp_path):
     assert "/liver/marker" not in read  # only with --marker
     # the recorder starts before the nodes and stops after them: it holds every frame the demo saw
     writers = json.loads(bag_info(bag).custom_data["writers"])
-    # a snapshot topic: what the recorder missed (before discovering the writer, or in a gap) is counted
-    missed = sum(w["before_match"] + w["gaps"] for w in writers if w["topic"] == "/liver/nodes")
-    assert len(read["/liver/nodes"]) + missed >= summary["physics"]["samples"]
+    assert all(w["before_match"] + w["gaps"] == 0 for w in writers if w["topic"] == "/liver/nodes"), writers
+    assert len(read["/liver/nodes"]) >= summary["physics"]["samples"]
     domain_line, recording_line = (tmp_path / "logs" / "recorder.log").read_text().splitlines()[:2]
     assert domain_line.startswith("liver-sim: ROS_DOMAIN_ID=") and recording_line.startswith("recording to")
     report = write_report(bag, tmp_path / "report", progress=lambda line: None)

@@ -246,21 +246,21 @@ class Recorder:
         self.drain()
 
     def failures(self) -> str:
-        """What this recording lost that it must not: messages of reliable topics between two it received (the
-        publishers keep enough history for a reader that fell behind), or a subscription's history filled up
-        between two drains.  Snapshot topics (msg_defs.topics.SNAPSHOT_TOPICS: each message supersedes the
-        last), best-effort messages dropped on the way, and messages a writer published before
-        this recorder discovered it (`before_match`: seen at start-up under load, when its transient-local
-        history did not reach the recorder), are counted in the metadata and the report, not a failure.
+        """What this recording lost that it must not: any message of a reliable topic published after `ready` —
+        between two it received (the publishers keep history for a reader that fell behind) or, of a writer
+        that appeared after `ready`, before the first it received (`before_match`: its transient-local history
+        covers the time discovery takes) — or a subscription's history filled up between two drains.
+        Best-effort messages dropped on the way are counted in the metadata and the report, not a failure.
         '' when none."""
-        from msg_defs.topics import SNAPSHOT_TOPICS
-
-        reliable = {topic for topic, _, spec, _, _ in self._subscriptions if spec.reliable} - SNAPSHOT_TOPICS
-        gaps: dict[str, int] = {}
+        reliable = {topic for topic, _, spec, _, _ in self._subscriptions if spec.reliable}
+        lost: dict[str, list[int]] = {}
         for writer in self.gaps.writers.values():
-            if writer.topic in reliable and writer.gaps:
-                gaps[writer.topic] = gaps.get(writer.topic, 0) + writer.gaps
-        reasons = [f"{n} message(s) of reliable {t} lost" for t, n in sorted(gaps.items())]
+            if writer.topic in reliable and writer.lost:
+                counts = lost.setdefault(writer.topic, [0, 0])
+                counts[0] += writer.lost
+                counts[1] += writer.before_match
+        reasons = [f"{n} message(s) of reliable {t} lost" + (f" ({early} before its writer matched)" if early else "")
+                   for t, (n, early) in sorted(lost.items())]
         if self.overflowed:
             reasons.append(f"the history of {', '.join(self.overflowed)} filled up between two drains")
         return "; ".join(reasons)
