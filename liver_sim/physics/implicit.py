@@ -193,12 +193,13 @@ class ImplicitEuler:
         return float(np.einsum("ij,ij->", b, guess))
 
     def equilibrium(self, x: np.ndarray, inv_mass: np.ndarray, external_force: np.ndarray, tolerance_n: float,
-                    max_iterations: int = 60) -> np.ndarray:
+                    max_iterations: int = 500) -> np.ndarray:
         """Static equilibrium of the network and its support under `external_force` (N, 3) N, no gravity:
         x (N, 3) m moves in place until |f(x)| ≤ `tolerance_n` on every free node, held nodes (inv_mass 0)
         staying where x has them.  Newton's iterations (M + H·C + H²·K)·δx = H²·f(x), x ← x + δx, K the
         tangent stiffness at x: backward-Euler steps of H = STATIC_HORIZON_S from rest, whose mass and
-        damping terms only regularise K.  Returns f(x) (N, 3): ≈ 0 on free nodes; on held nodes the pull
+        damping terms only regularise K.  K leaves out compressed springs' negative geometric stiffness
+        (physics.implicit_kernels), so where springs are compressed the iterations converge linearly.  Returns f(x) (N, 3): ≈ 0 on free nodes; on held nodes the pull
         of the network (and loads) that holding them resists.  Raises RuntimeError when not converged."""
         h = STATIC_HORIZON_S
         free = (inv_mass > 0.0)[:, None]
