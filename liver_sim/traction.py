@@ -1,27 +1,42 @@
 """The virtual traction test of §3.2 (R1 of docs/paper.md, Figs. 4–5).
 
-A cylinder of tets, top fixed, equal axial forces on all bottom nodes, relaxed to static
-equilibrium at several force levels; its global force–elongation curve is set beside the
-connector law (Eq. 1) scaled to the same small-strain stiffness.
+A cylinder of tets, top fixed, equal axial forces on all bottom nodes (or both ends clamped, the
+bottom clamp pulled), solved for static equilibrium at several levels; its global force–elongation
+curve is set beside the connector law (Eq. 1) scaled to the same small-strain stiffness.
 """
 from __future__ import annotations
 
 import csv
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from liver_sim.mesh.stuffing import tetrahedralize_implicit
 from liver_sim.mesh.tetmesh import TetMesh
-from liver_sim.physics.model import LiverModel
+from liver_sim.physics.implicit import ImplicitEuler
+from liver_sim.physics.materials import network_young_modulus_pa
 from liver_sim.physics.params import FIG2_LAW, ModelParams, SpringLaw, TissueProperties
+from liver_sim.physics.springs import build_springs
 
 CYLINDER_RADIUS_M = 0.02
 CYLINDER_LENGTH_M = 0.10
 #: Target strains (relative elongation) the force levels are chosen to span.
 TARGET_STRAINS = (0.005, 0.01, 0.02, 0.04, 0.06, 0.08, 0.10, 0.12, 0.15, 0.18, 0.22, 0.26)
+#: The probe giving the small-strain stiffness: a total force (N, paper's set-up) or a strain (clamped).
+PROBE_FORCE_N = 1e-3
+PROBE_STRAIN = 1e-4
+#: Equilibrium: residual force on every free node below this share of the load per loaded node
+#: (paper's set-up) or of the stiffest spring's λ2 × strain (clamped).
+RESIDUAL_FRACTION = 1e-5
+#: The clamped set-up's extensometer spans this middle share of the gauge length.
+EXTENSOMETER_SHARE = 0.5
+#: The clamped set-up for the liver's materials (R1 in `liver-sim validate`): clamp length (m) and the
+#: cylinder's node spacing (m).
+CLAMP_LENGTH_M = 0.005
+CLAMPED_SPACING_M = 0.00625
+MAX_CG_ITERATIONS = 5000
 
 
 @dataclass(frozen=True)
@@ -33,11 +48,23 @@ class TractionResult:
     law: SpringLaw
     small_strain_stiffness_n: float
     mesh: TetMesh
+    clamp_length_m: float = 0.0
 
     def law_force_n(self, elongation):
         """Eq. 1 (without viscosity) scaled to the cylinder's small-strain stiffness: K·(d + λ1/λ2·d³)."""
         d = np.asarray(elongation)
         return self.small_strain_stiffness_n * (d + self.law.lambda1_n / self.law.lambda2_n * d ** 3)
+
+    def shape_deviation(self) -> float:
+        """The largest |F − law_force_n(d)| / F over the levels: how far the curve is from Eq. 1's shape."""
+        return float((np.abs(self.force_n - self.law_force_n(self.elongation)) / self.force_n).max())
+
+
+def section_stiffness_n(tissue: TissueProperties) -> float:
+    """The cylinder section's axial stiffness F/d (N) for the tissue: E·πR² + Y·2πR, E the network's
+    (materials.network_young_modulus_pa), Y the capsule's E·t."""
+    return (network_young_modulus_pa(tissue) * math.pi * CYLINDER_RADIUS_M ** 2
+            + tissue.capsule_stiffness_n_per_m * 2.0 * math.pi * CYLINDER_RADIUS_M)
 
 
 def cylinder_mesh(spacing_m: float = 0.0125) -> TetMesh:
@@ -52,69 +79,66 @@ def cylinder_mesh(spacing_m: float = 0.0125) -> TetMesh:
     return tetrahedralize_implicit(signed_distance, lower, upper, spacing_m, source="traction cylinder")
 
 
-def relax(model: LiverModel, rate_tolerance_per_s: float = 1e-3, max_frames: int = 50_000) -> int:
-    """Step until no node moves faster than `rate_tolerance_per_s` × the largest displacement
-    (static equilibrium); returns the frames used."""
-    for frame in range(1, max_frames + 1):
-        result = model.step_frame(None)
-        if result.divergence:
-            raise RuntimeError(result.divergence)
-        speed = np.sqrt((model.velocities ** 2).sum(axis=1)).max()
-        if frame >= 10 and speed < rate_tolerance_per_s * model.displacement_m().max():
-            return frame
-    raise RuntimeError(f"no static equilibrium within {max_frames} frames")
-
-
 def run_traction(law: SpringLaw = FIG2_LAW, mesh: TetMesh | None = None, progress=None,
-                 tissue: TissueProperties | None = None) -> TractionResult:
-    """Pull the cylinder at force levels spanning TARGET_STRAINS and measure the elongation at rest.
+                 tissue: TissueProperties | None = None, clamp_length_m: float = 0.0) -> TractionResult:
+    """Pull the cylinder to levels spanning TARGET_STRAINS and measure force and elongation at static equilibrium
+    (ImplicitEuler.equilibrium, each level from the last), after a probe at a tiny load that gives the
+    small-strain stiffness K.
 
-    Every spring follows `law` (Fig. 2's by default: the paper's per-spring constants, symplectic Euler);
-    with `tissue`, the springs get the liver's materials instead (physics.materials: parenchyma on the tet
-    edges, capsule on the skin), whose law has Fig. 2's shape with the tissue's cubic_ratio (`law` is
-    then that shape, scaled).  Only the equilibrium is measured, which
-    neither mass nor damping change, so a heavy density and strong environmental damping make
-    the relaxation quick, and the substeps are set from the model's stability bound.
+    Every spring follows `law` (Fig. 2's by default: the paper's per-spring constants); with `tissue`, the
+    springs get the liver's materials instead (physics.materials: parenchyma on the tet edges, capsule on the
+    skin), whose law has Fig. 2's shape with the tissue's cubic_ratio (`law` is then that shape, scaled).
+    Set-up with `clamp_length_m` 0, the paper's (Fig. 4): top face fixed, equal axial forces on the bottom
+    face's nodes, chosen as K·(d + λ1/λ2·d³) for the target strains d; elongation: their mean displacement over
+    the length.  Else a materials lab's: the nodes within `clamp_length_m` of each end move with their clamp,
+    the top one fixed, the bottom one pulled along the axis by d × the gauge length (between the clamps);
+    force: the bottom clamp's reaction; elongation: an extensometer's, the mean axial strain of the middle
+    EXTENSOMETER_SHARE of the gauge length (least-squares slope of the axial displacement against z).
     """
     mesh = mesh or cylinder_mesh()
-    z = mesh.points[:, 2]
-    top = np.flatnonzero(z > z.max() - 1e-6)
-    bottom = np.flatnonzero(z < z.min() + 1e-6)
-    length = z.max() - z.min()
-    viscous = SpringLaw(law.lambda1_n, law.lambda2_n, mu_ns_per_m=0.02)
-    params = ModelParams(spring_constants="paper", capsule=SpringLaw(0.0, 0.0, 0.0), parenchyma=viscous,
-                         integrator="symplectic_euler", fixed_nodes=tuple(top.tolist()), support="paper",
-                         environment_damping_per_s=30.0, density_kg_m3=1e5, substeps=1).validate()
-    # the stability bound at rest, for springs stiffened as they are at the largest strain
-    strain = 1.5 * TARGET_STRAINS[-1]
-    stiffening = 1.0 + 3 * law.lambda1_n / law.lambda2_n * strain ** 2
-    if tissue is not None:
-        law = SpringLaw(tissue.cubic_ratio, 1.0, 0.0)
-        params = params.with_changes(spring_constants="material", tissue=tissue)
-        stiffened = replace(tissue, parenchyma_young_modulus_kpa=tissue.parenchyma_young_modulus_kpa * stiffening,
-                            capsule_stiffness_n_per_m=tissue.capsule_stiffness_n_per_m * stiffening)
-        stable = LiverModel(mesh, params.with_changes(tissue=stiffened)).stable_dt_s
+    if tissue is None:
+        params = ModelParams(spring_constants="paper", parenchyma=law, capsule=SpringLaw(0.0, 0.0, 0.0))
     else:
-        stiffened = SpringLaw(law.lambda1_n, law.lambda2_n * stiffening, viscous.mu_ns_per_m)
-        stable = LiverModel(mesh, params.with_changes(parenchyma=stiffened)).stable_dt_s
-    model = LiverModel(mesh, params.with_changes(substeps=math.ceil(1.0 / (params.frame_rate_hz * 0.8 * stable))))
+        params = ModelParams(spring_constants="material", tissue=tissue)
+        law = SpringLaw(tissue.cubic_ratio, 1.0, 0.0)
+    springs = build_springs(mesh, params)
+    solver = ImplicitEuler(springs, len(mesh.points), max_cg_iterations=MAX_CG_ITERATIONS)
+    rest = mesh.points
+    z = rest[:, 2]
+    length = z.max() - z.min()
+    end = max(clamp_length_m, 1e-6)
+    top, bottom = np.flatnonzero(z > z.max() - end), np.flatnonzero(z < z.min() + end)
+    inv_mass = 1.0 / mesh.lumped_masses(params.density_kg_m3)
+    inv_mass[top] = 0.0
+    x = rest.copy()
+    external = np.zeros_like(x)
+    if clamp_length_m > 0.0:
+        inv_mass[bottom] = 0.0
+        gauge = length - 2.0 * clamp_length_m
+        middle = np.flatnonzero(np.abs(z - (z.max() + z.min()) / 2) <= EXTENSOMETER_SHARE * gauge / 2)
+        node_force = float(springs.lambda2_n.max())
 
-    def elongation_at(total_force_n: float) -> float:
-        model.external_forces_n[:] = 0.0
-        model.external_forces_n[bottom, 2] = -total_force_n / len(bottom)
-        relax(model)
-        return float(-(model.positions[bottom, 2] - mesh.points[bottom, 2]).mean() / length)
+        def pull(strain: float) -> tuple[float, float]:
+            x[bottom, 2] = rest[bottom, 2] - strain * gauge
+            f = solver.equilibrium(x, inv_mass, external, RESIDUAL_FRACTION * node_force * strain)
+            return float(f[bottom, 2].sum()), float(np.polyfit(z[middle], x[middle, 2] - z[middle], 1)[0])
+    else:
+        def pull(force: float) -> tuple[float, float]:
+            external[bottom, 2] = -force / len(bottom)
+            solver.equilibrium(x, inv_mass, external, RESIDUAL_FRACTION * force / len(bottom))
+            return force, float(-(x[bottom, 2] - rest[bottom, 2]).mean() / length)
 
-    probe_force = 1e-3
-    stiffness = probe_force / elongation_at(probe_force)
+    probe_force, probe_elongation = pull(PROBE_FORCE_N if clamp_length_m == 0.0 else PROBE_STRAIN)
+    stiffness = probe_force / probe_elongation
     forces, elongations = [], []
     for index, strain in enumerate(TARGET_STRAINS):
-        force = stiffness * (strain + law.lambda1_n / law.lambda2_n * strain ** 3)
+        force, elongation = pull(stiffness * (strain + law.lambda1_n / law.lambda2_n * strain ** 3)
+                                 if clamp_length_m == 0.0 else strain)
         forces.append(force)
-        elongations.append(elongation_at(force))
+        elongations.append(elongation)
         if progress:
-            progress(index + 1, len(TARGET_STRAINS), force, elongations[-1])
-    return TractionResult(np.array(forces), np.array(elongations), law, stiffness, mesh)
+            progress(index + 1, len(TARGET_STRAINS), force, elongation)
+    return TractionResult(np.array(forces), np.array(elongations), law, stiffness, mesh, clamp_length_m)
 
 
 def write_traction(result: TractionResult, out_dir: Path) -> tuple[Path, Path]:
@@ -139,7 +163,8 @@ def write_traction(result: TractionResult, out_dir: Path) -> tuple[Path, Path]:
             label="traction test on the cylinder model")
     ax.set_xlabel("relative elongation (%)")
     ax.set_ylabel("applied force (N)")
-    ax.set_title(f"Traction test (Figs. 4–5): {len(result.mesh.tets)}-tet cylinder, top fixed")
+    set_up = f"{result.clamp_length_m * 1e3:g} mm clamps" if result.clamp_length_m else "top fixed"
+    ax.set_title(f"Traction test (Figs. 4–5): {len(result.mesh.tets)}-tet cylinder, {set_up}")
     ax.grid(alpha=0.3)
     ax.legend(loc="upper left", fontsize=8)
     fig.tight_layout()

@@ -1,10 +1,14 @@
-"""R1 of docs/paper.md (Figs. 4–5): the cylinder's global force–elongation curve has the connector law's shape."""
+"""R1 of docs/paper.md (Figs. 4–5): the cylinder's global force–elongation curve has the connector law's shape,
+with Fig. 2's law (the paper's set-up) and with the liver's materials (clamped)."""
 import csv
 
 import numpy as np
 import pytest
 
-from liver_sim.traction import run_traction, write_traction
+from liver_sim.physics.params import TissueProperties
+from liver_sim.traction import (CLAMP_LENGTH_M, CLAMPED_SPACING_M, TARGET_STRAINS, cylinder_mesh, run_traction,
+                                section_stiffness_n, write_traction)
+from liver_sim.validate import TRACTION_SHAPE_TOLERANCE, TRACTION_STIFFNESS_TOLERANCE
 
 
 @pytest.fixture(scope="module")
@@ -42,3 +46,29 @@ def test_csv_and_png_are_written(traction, tmp_path):
     assert {"force_N", "elongation"} <= set(rows[0])
     assert float(rows[-1]["force_N"]) == pytest.approx(traction.force_n[-1])
     assert png_path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+@pytest.fixture(scope="module")
+def clamped_cylinder():
+    return cylinder_mesh(CLAMPED_SPACING_M)
+
+
+@pytest.mark.parametrize("capsule", [False, True], ids=["parenchyma", "capsule+parenchyma"])
+def test_clamped_cylinder_of_the_liver_materials_meets_r1(clamped_cylinder, capsule):
+    # validate's R1: small-strain stiffness within 30 % of the section's E·πR² (+ Y·2πR), shape within 25 %
+    tissue = TissueProperties() if capsule else TissueProperties(capsule_stiffness_n_per_m=0.0)
+    result = run_traction(mesh=clamped_cylinder, tissue=tissue, clamp_length_m=CLAMP_LENGTH_M)
+    assert result.small_strain_stiffness_n / section_stiffness_n(tissue) == pytest.approx(
+        1.0, abs=TRACTION_STIFFNESS_TOLERANCE)
+    assert result.shape_deviation() <= TRACTION_SHAPE_TOLERANCE
+    # the extensometer reads the gauge's middle: near, not at, the strain the clamps impose
+    assert np.all(np.diff(result.elongation) > 0)
+    np.testing.assert_allclose(result.elongation, TARGET_STRAINS, rtol=0.1)
+    assert np.abs(result.elongation / np.array(TARGET_STRAINS) - 1.0).max() > 1e-3
+
+
+def test_paper_set_up_misses_the_capsule(clamped_cylinder):
+    # forces on the bottom face load the parenchyma only: the capsule is barely pulled (docs/paper.md, R1)
+    tissue = TissueProperties()
+    result = run_traction(mesh=clamped_cylinder, tissue=tissue)
+    assert result.small_strain_stiffness_n / section_stiffness_n(tissue) < 1.0 - TRACTION_STIFFNESS_TOLERANCE

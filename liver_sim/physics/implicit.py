@@ -79,6 +79,9 @@ def node_contacts(nodes, normal, offset_m, normal_speed_m_s, stiffness_n_per_m, 
 #: leaves the compliance within ~3 % of a 1e-3 solve at a tenth of the iterations, measured on the press).
 COMPLIANCE_HORIZON_S = 30.0
 COMPLIANCE_TOLERANCE = 3e-2
+#: The step length (s) of ImplicitEuler.equilibrium's backward-Euler iterations and their CG tolerance.
+STATIC_HORIZON_S = 1e3
+STATIC_CG_TOLERANCE = 1e-6
 
 
 class ImplicitEuler:
@@ -182,23 +185,57 @@ class ImplicitEuler:
         and damping terms weigh ≲ 1 % against K; `guess` (N, 3), the previous solution ·H², starts the
         solve and is overwritten by this one."""
         h = COMPLIANCE_HORIZON_S
+        self._assemble_at_rest(x, inv_mass, np.zeros_like(x), environment_damping, h)
+        b = np.where((inv_mass > 0.0)[:, None], load, 0.0)
+        solution = np.where((inv_mass > 0.0)[:, None], guess / (h * h), 0.0)
+        self._solve(inv_mass, b, solution, COMPLIANCE_TOLERANCE)
+        guess[:] = solution * (h * h)
+        return float(np.einsum("ij,ij->", b, guess))
+
+    def equilibrium(self, x: np.ndarray, inv_mass: np.ndarray, external_force: np.ndarray, tolerance_n: float,
+                    max_iterations: int = 500) -> np.ndarray:
+        """Static equilibrium of the network and its support under `external_force` (N, 3) N, no gravity:
+        x (N, 3) m moves in place until |f(x)| ≤ `tolerance_n` on every free node, held nodes (inv_mass 0)
+        staying where x has them.  Newton's iterations (M + H·C + H²·K)·δx = H²·f(x), x ← x + δx, K the
+        tangent stiffness at x: backward-Euler steps of H = STATIC_HORIZON_S from rest, whose mass and
+        damping terms only regularise K.  K leaves out compressed springs' negative geometric stiffness
+        (physics.implicit_kernels), so where springs are compressed the iterations converge linearly.  Returns f(x) (N, 3): ≈ 0 on free nodes; on held nodes the pull
+        of the network (and loads) that holding them resists.  Raises RuntimeError when not converged."""
+        h = STATIC_HORIZON_S
+        free = (inv_mass > 0.0)[:, None]
+        for _ in range(max_iterations + 1):
+            f = self._assemble_at_rest(x, inv_mass, external_force, 0.0, h)
+            residual = float(np.sqrt((np.where(free, f, 0.0) ** 2).sum(axis=1)).max(initial=0.0))
+            if residual <= tolerance_n:
+                return f
+            step = np.zeros_like(x)
+            self._solve(inv_mass, np.where(free, f * (h * h), 0.0), step, STATIC_CG_TOLERANCE)
+            x += step
+        raise RuntimeError(f"no static equilibrium within {max_iterations} Newton iterations "
+                           f"(largest residual force {residual:.3g} N)")
+
+    def _assemble_at_rest(self, x: np.ndarray, inv_mass: np.ndarray, external_force: np.ndarray,
+                          environment_damping: float, h: float) -> np.ndarray:
+        """Assemble the step's system at x, v = 0 (springs and support) and its preconditioner; returns the
+        forces f(x) (N, 3)."""
         zero = np.zeros_like(x)
-        f, ky, r, z, p, q = (np.zeros_like(x) for _ in range(6))
+        f, ky = np.zeros_like(x), np.zeros_like(x)
         s = self.springs
         no = Contacts.none()
-        assemble(x, zero, zero, inv_mass, zero, np.zeros(3), float(environment_damping), h, self._node_i,
+        assemble(x, zero, zero, inv_mass, external_force, np.zeros(3), float(environment_damping), h, self._node_i,
                  self._node_j, self._inv_rest, s.lambda1_n, s.lambda2_n, s.mu_ns_per_m, self._unit, self._iso,
                  self._axial, self._shift, self._diagonal, f, ky, True)
         support_terms(x, zero, zero, inv_mass, h, *self.support, f, ky, self._shift, self._diagonal, True)
-        coefficient = np.zeros(0)
-        block_jacobi(self._diagonal, inv_mass, no.nodes, no.weights, no.normal, coefficient, self._preconditioner)
-        b = np.where((inv_mass > 0.0)[:, None], load, 0.0)
-        solution = np.where((inv_mass > 0.0)[:, None], guess / (h * h), 0.0)
+        block_jacobi(self._diagonal, inv_mass, no.nodes, no.weights, no.normal, np.zeros(0), self._preconditioner)
+        return f
+
+    def _solve(self, inv_mass: np.ndarray, b: np.ndarray, solution: np.ndarray, tolerance: float) -> None:
+        """solution ← A⁻¹·b by PCG from `solution` (the last assembled system, no contacts)."""
+        r, z, p, q = (np.zeros_like(b) for _ in range(4))
+        no = Contacts.none()
         pcg(self._node_i, self._node_j, self._unit, self._iso, self._axial, self._shift, inv_mass, no.nodes,
-            no.weights, no.normal, coefficient, self._preconditioner, b, solution, COMPLIANCE_TOLERANCE,
+            no.weights, no.normal, np.zeros(0), self._preconditioner, b, solution, tolerance,
             self.max_cg_iterations, r, z, p, q)
-        guess[:] = solution * (h * h)
-        return float(np.einsum("ij,ij->", b, guess))
 
     def warm_up(self) -> None:
         """Compile the kernels (numba, cached on disk) before a timed loop starts."""
