@@ -286,8 +286,8 @@ def loop_run(duration_s: float, log_dir, progress=None, observers: dict | None =
     network (NetworkPlan.observers), e.g. a recorder; `extra_load` core-bound processes at normal priority
     beside it (network.run_network).
     """
-    from liver_sim.analysis import contact_fraction, fig8_figures, held_wrench_baseline, rate_figures
-    from liver_sim.network import closed_loop_plan, run_network
+    from liver_sim.analysis import contact_fraction, fig8_figures, held_wrench_baseline
+    from liver_sim.network import closed_loop_plan, run_network, wire_rates
     from liver_sim.sessions.parameters import node_parameters
 
     plan = closed_loop_plan(extra={"phantom_sim": {"loop_script": True, "script": "explore"}})
@@ -304,11 +304,11 @@ def loop_run(duration_s: float, log_dir, progress=None, observers: dict | None =
     latency = latency[np.isfinite(latency)]
     baseline = held_wrench_baseline(sent_local, snapshot["wrench_arrival_s"], snapshot["wrench_n"],
                                     snapshot["tool_arrival_s"], node_parameters(())["haptic_bridge"])
-    nodes_sent = snapshot["nodes_published_s"]
     fig8 = fig8_figures(force, baseline, sent_local, FIG8_MAX_PERIOD_S)
+    on_wire = wire_rates(snapshot)
     figures = {
-        "physics_on_wire": rate_figures(nodes_sent[(nodes_sent >= start) & (nodes_sent <= end)], 150.0),
-        "haptic_on_wire": rate_figures(sent_local, 1000.0),
+        "physics_on_wire": on_wire["physics"],
+        "haptic_on_wire": on_wire["haptic"],
         "node_loops": snapshot["diagnostics"],
         "pose_to_force_p50_s": float(np.percentile(latency, 50)) if latency.size else None,
         "pose_to_force_p99_s": float(np.percentile(latency, 99)) if latency.size else None,

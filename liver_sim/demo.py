@@ -233,8 +233,8 @@ def run_demo(out_dir: Path, duration_s: float | None = None, progress=print, rec
     cut), and the nodes' logs in logs/. With `record_storage` (mcap or sqlite3), `liver-sim record`
     records the run into out_dir/session.
     """
-    from liver_sim.analysis import largest_force_jump_n, rate_figures
-    from liver_sim.network import closed_loop_plan, run_network
+    from liver_sim.analysis import largest_force_jump_n
+    from liver_sim.network import closed_loop_plan, run_network, wire_rates
     from liver_sim.sessions.record import recorder_command
 
     if scenario not in SCENARIOS:
@@ -250,7 +250,7 @@ def run_demo(out_dir: Path, duration_s: float | None = None, progress=print, rec
         plan.observers["recorder"] = recorder_command(out_dir / "session", record_storage)
     progress(f"{spec.title}: starting the node network (the same command lines work in four terminals):")
     snapshot = run_network(plan, duration_s, out_dir / "logs", progress)
-    arrival, haptic_force = snapshot["forces"]["local_model"]
+    _, haptic_force = snapshot["forces"]["local_model"]
     wrench = snapshot["wrench_n"]
     peak_nodes = snapshot["peak_nodes"] if snapshot["peak_nodes"] is not None else mesh.points
     last_nodes = snapshot["last_nodes"] if snapshot["last_nodes"] is not None else mesh.points
@@ -259,8 +259,7 @@ def run_demo(out_dir: Path, duration_s: float | None = None, progress=print, rec
         "scenario": scenario,
         "mesh": {"source": mesh.source, "scale": liver.scale, "sha256": mesh.sha256},
         "duration_s": duration_s,
-        "physics": rate_figures(snapshot["nodes_arrival_s"], 150.0),
-        "haptic": rate_figures(arrival, 1000.0),
+        **wire_rates(snapshot),
         "peak_haptic_force_n": float(haptic_norm.max()) if haptic_norm.size else 0.0,
         "peak_physics_force_n": float(np.linalg.norm(wrench, axis=1).max()) if len(wrench) else 0.0,
         "largest_force_jump_n": largest_force_jump_n(haptic_force),
@@ -331,6 +330,8 @@ def _network_markdown(summary: dict, title: str) -> str:
                      f"{summary['final_displacement_m'] * 1e3:.2f} mm"] if "final_displacement_m" in summary else [])
     return "\n".join([
         f"# Closed-loop demo: {title}",
+        "",
+        f"Rates as published on the wire over the {summary['duration_s']:g} s in which every node ran:",
         "",
         f"- physics: {physics['rate_hz']:.1f} Hz ({physics['samples']} frames), period error p99 "
         f"{ms(physics['period_error_p99_s'])}",

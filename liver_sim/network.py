@@ -176,6 +176,19 @@ def run_network(plan: NetworkPlan, duration_s: float, log_dir: Path, progress=pr
     return {**snapshot, "window_s": window, "process_costs": costs}
 
 
+def wire_rates(snapshot: dict, label: str = "local_model") -> dict:
+    """The network's rates as its messages went on the wire (DDS publication times) within the snapshot's
+    `window_s`, the `duration_s` in which every node ran: {'physics': rate_figures of /liver/nodes at 150 Hz,
+    'haptic': of the `label` force commands at 1 kHz}. Start-up, shutdown and a listener's batched arrivals
+    do not count."""
+    from liver_sim.analysis import rate_figures
+
+    start, end = snapshot["window_s"]
+    nodes, forces = snapshot["nodes_published_s"], snapshot["force_published_s"][label]
+    return {"physics": rate_figures(nodes[(nodes >= start) & (nodes <= end)], 150.0),
+            "haptic": rate_figures(forces[(forces >= start) & (forces <= end)], 1000.0)}
+
+
 def _recorder_ready(listener, log: Path) -> bool:
     """Whether the recorder logging to `log` said READY and the graph shows its subscriptions to the
     contract's topics."""
