@@ -40,12 +40,12 @@ class Topic:
 
 
 #: Seconds of messages a reliable publisher keeps, transient local, for a reader that fell behind (a
-#: recorder starved for a moment, a viewer) or matched it late (discovery of a new process took seconds
-#: under load): its history depth is this at the topic's rate. Best-effort topics resend nothing, so their
-#: depth stays 1. Memory: depth × message size per publisher (docs/contract.md).
+#: recorder starved for a moment, a viewer) or matched it late: Fast DDS re-announces a participant every
+#: 3 s, so a process whose first announcements were missed at a busy start-up is matched 2-3 s late (a
+#: recorder lost the first 20 mesh frames of a demo with 2 s of them kept). Its history depth is this at the
+#: topic's rate. Best-effort topics resend nothing, so their depth stays 1. Memory: depth × message size per
+#: publisher (docs/contract.md).
 CATCH_UP_S = 5.0
-#: ... and for messages the size of the mesh, which cost memory in proportion.
-MESH_CATCH_UP_S = 2.0
 
 
 def catch_up_depth(rate_hz: float, seconds: float = CATCH_UP_S) -> int:
@@ -54,10 +54,10 @@ def catch_up_depth(rate_hz: float, seconds: float = CATCH_UP_S) -> int:
 
 
 TOPICS = {
-    "nodes": Topic("/liver/nodes", PointCloud2, catch_up_depth(150.0, MESH_CATCH_UP_S), transient_local=True),
+    "nodes": Topic("/liver/nodes", PointCloud2, catch_up_depth(150.0), transient_local=True),
     # at start and after a tear or cut, at most one per 150 Hz frame
-    "surface": Topic("/liver/surface", Mesh, catch_up_depth(150.0, MESH_CATCH_UP_S), transient_local=True),
-    "marker": Topic("/liver/marker", Marker, catch_up_depth(30.0, MESH_CATCH_UP_S), transient_local=True),
+    "surface": Topic("/liver/surface", Mesh, catch_up_depth(150.0), transient_local=True),
+    "marker": Topic("/liver/marker", Marker, catch_up_depth(30.0), transient_local=True),
     "contact_plane": Topic("/liver/contact_plane", Marker, catch_up_depth(150.0), transient_local=True),
     "tool_wrench": Topic("/liver/tool_wrench", WrenchStamped, catch_up_depth(150.0), transient_local=True),
     "tool_pose": Topic("/tool/pose", PoseStamped, 1, reliable=False),

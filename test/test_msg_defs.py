@@ -432,9 +432,9 @@ def test_force_output_refusals():
 
 def test_topics_follow_the_design_table():
     expected = {
-        "nodes": ("/liver/nodes", ReliabilityPolicy.RELIABLE, DurabilityPolicy.TRANSIENT_LOCAL, 300),
-        "surface": ("/liver/surface", ReliabilityPolicy.RELIABLE, DurabilityPolicy.TRANSIENT_LOCAL, 300),
-        "marker": ("/liver/marker", ReliabilityPolicy.RELIABLE, DurabilityPolicy.TRANSIENT_LOCAL, 60),
+        "nodes": ("/liver/nodes", ReliabilityPolicy.RELIABLE, DurabilityPolicy.TRANSIENT_LOCAL, 750),
+        "surface": ("/liver/surface", ReliabilityPolicy.RELIABLE, DurabilityPolicy.TRANSIENT_LOCAL, 750),
+        "marker": ("/liver/marker", ReliabilityPolicy.RELIABLE, DurabilityPolicy.TRANSIENT_LOCAL, 150),
         "contact_plane": ("/liver/contact_plane", ReliabilityPolicy.RELIABLE, DurabilityPolicy.TRANSIENT_LOCAL, 750),
         "tool_wrench": ("/liver/tool_wrench", ReliabilityPolicy.RELIABLE, DurabilityPolicy.TRANSIENT_LOCAL, 750),
         "tool_pose": ("/tool/pose", ReliabilityPolicy.BEST_EFFORT, DurabilityPolicy.VOLATILE, 1),
