@@ -238,7 +238,8 @@ def test_report_plots_the_session_and_the_fig8_comparison(tmp_path):
     assert summary["penetration_max_m"] == pytest.approx(0.004, abs=1e-5)
     assert summary["topics"]["/phantom/servo_cf"]["messages"] == 3000
     assert json.loads((tmp_path / "report" / "summary.json").read_text())["fig8"] == fig8
-    assert "Fig. 8" in (tmp_path / "report" / "summary.md").read_text()
+    markdown = (tmp_path / "report" / "summary.md").read_text()
+    assert "Fig. 8" in markdown and "- lost: not counted" in markdown  # not written by `liver-sim record`
 
 
 def damage(kind, bag):
@@ -293,6 +294,7 @@ def test_demo_records_its_run_and_the_report_reads_it(ros_domain_id, tmp_path):
     assert domain_line.startswith("liver-sim: ROS_DOMAIN_ID=") and recording_line.startswith("recording to")
     report = write_report(bag, tmp_path / "report", progress=lambda line: None)
     assert report["topics"]["/liver/nodes"]["messages"] == len(read["/liver/nodes"])
+    assert f"- lost: {bag_info(bag).custom_data['lost_messages']}" in (tmp_path / "report" / "summary.md").read_text()
     assert {"force.png", "tool_path.png", "loop_rates.png"} <= set(report["figures"])
     assert report["diagnostics_last"]["haptic_bridge: loop"]["rate_hz"]
 

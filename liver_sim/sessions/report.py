@@ -250,7 +250,7 @@ def write_report(bag: Path, out: Path, progress=print) -> dict:
                TOPICS["measured_cp"].name: bridge["rate_hz"], physics["nodes_topic"]: physics["rate_hz"],
                physics["contact_plane_topic"]: physics["rate_hz"], physics["tool_wrench_topic"]: physics["rate_hz"]}
     rate_topics = [t for t in nominal if t in data["times"]]
-    summary["rates_on_wire"] = {t: rate_figures(data["times"][t], nominal[t]) for t in rate_topics}
+    summary["rates_received"] = {t: rate_figures(data["times"][t], nominal[t]) for t in rate_topics}
     latest = {}
     for _, name, kv in data["diagnostics"]:
         latest[name] = kv
@@ -293,6 +293,15 @@ def write_report(bag: Path, out: Path, progress=print) -> dict:
     return summary
 
 
+def _lost_line(custom_data: dict) -> str:
+    """'lost: N' of a bag's recorder (metadata custom_data, liver_sim.sessions.gaps), by topic where any."""
+    if "lost_messages" not in custom_data:
+        return "- lost: not counted (the bag was not written by `liver-sim record`)"
+    by_topic = {t: n for t, n in json.loads(custom_data.get("lost_messages_by_topic", "{}")).items() if n}
+    return (f"- lost: {custom_data['lost_messages']}" + "".join(f", `{t}` {n}" for t, n in sorted(by_topic.items()))
+            + " (publication sequence numbers of every writer after `ready`; per writer: metadata.yaml `writers`)")
+
+
 def _markdown(s: dict) -> str:
     from liver_sim.analysis import fig8_line
 
@@ -314,8 +323,11 @@ def _markdown(s: dict) -> str:
     if s["fig8"]:
         f8 = s["fig8"]
         lines += ["", "## Fig. 8: with and without the local model", "", "- " + fig8_line(f8)]
-    lines += ["", "## Rates", "", "| topic | rate | period error p50 | p99 | largest gap |", "|---|---|---|---|---|"]
-    for t, r in s["rates_on_wire"].items():
+    lines += ["", "## Recording", "", _lost_line(s["recorder"])]
+    lines += ["", "## Rates", "", "As the recorder received the messages (its log times, start-up and shutdown "
+              "included: batched deliveries read as bursts; `liver-sim bench loop` gives the rates as published):", "",
+              "| topic | rate | period error p50 | p99 | largest gap |", "|---|---|---|---|---|"]
+    for t, r in s["rates_received"].items():
         lines.append(f"| `{t}` | {r['rate_hz']:.1f} Hz | {ms(r['period_error_p50_s'])} | "
                      f"{ms(r['period_error_p99_s'])} | {ms(r['max_gap_s'])} |")
     if s["diagnostics_last"]:
