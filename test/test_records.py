@@ -30,6 +30,14 @@ def test_gaps_are_counted_per_writer_from_sequence_numbers():
     assert (b.received, b.gaps, b.before_match) == (3, 0, 2)
     gaps.add("/t", GID_A, 7)                  # a late arrival fills its gap
     assert gaps.writers["/t", GID_A].gaps == 1
+    gaps.began_ns = 5_000
+    gaps.add("/v", GID_A, 40, "c", source_ns=4_000)  # published before the recording began: not wanted
+    gaps.add("/v", GID_B, 3, "d", source_ns=6_000)   # after it: 1 and 2 lost before the match
+    assert (gaps.writers["/v", GID_A].before_match, gaps.writers["/v", GID_B].before_match) == (0, 2)
+    gaps.add("/v", GID_A, 45, source_ns=4_500)     # a gap between two messages from before the recording
+    gaps.add("/v", GID_A, 48, source_ns=5_500)     # and one after it began: 46 and 47 lost
+    assert gaps.writers["/v", GID_A].gaps == 2
+    del gaps.writers["/v", GID_A], gaps.writers["/v", GID_B]
     data = gaps.custom_data()
     assert data["lost_messages"] == "3" and json.loads(data["lost_messages_by_topic"]) == {"/t": 3, "/u": 0}
     assert {w["node"] for w in json.loads(data["writers"])} == {"a", "b", ""}

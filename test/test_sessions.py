@@ -316,6 +316,43 @@ def test_recorder_follows_the_published_type_and_records_other_topics(ros_env, t
     assert [m.data for _, _, m in read["/custom/topic"]] == [str(k) for k in range(300)]
 
 
+RUNNING_PUBLISHER = """
+import sys, time, rclpy
+from msg_defs.forces import wrench_stamped
+from msg_defs.topics import TOPICS
+rclpy.init()
+node = rclpy.create_node("running_publisher")
+publisher = node.create_publisher(TOPICS["tool_wrench"].type, TOPICS["tool_wrench"].name, TOPICS["tool_wrench"].qos)
+print("publishing", flush=True)
+end = time.monotonic() + float(sys.argv[1])
+while time.monotonic() < end:
+    publisher.publish(wrench_stamped([0.0, 0.0, 0.1], time.time(), "liver"))
+    time.sleep(0.005)
+"""
+
+
+def test_a_recorder_started_mid_run_counts_nothing_lost_of_a_running_publisher(ros_env, tmp_path):
+    publisher = subprocess.Popen([sys.executable, "-c", RUNNING_PUBLISHER, "60"], env=ros_env,
+                                 stdout=subprocess.PIPE, text=True)
+    try:
+        assert publisher.stdout.readline().strip() == "publishing"
+        time.sleep(5.0)  # ~1000 messages published before the recorder starts: more than its history holds
+        recorder = subprocess.Popen(cli_command_line("record", "--out", str(tmp_path / "session"), "--topics",
+                                                     "/liver/tool_wrench"),
+                                    env=ros_env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        time.sleep(4.0)
+        status, output = stop(recorder, signal.SIGINT)
+    finally:
+        publisher.kill()
+        publisher.wait()
+    # what the running writer published before the recording began is not wanted, whether the graph showed
+    # the writer by `ready` or its transient-local history reached the recorder later
+    assert status == 0 and "lost: 0" in output, output
+    (writer,) = json.loads(bag_info(tmp_path / "session").custom_data["writers"])
+    assert writer["first"] > 1 and writer["before_match"] == 0 and writer["gaps"] == 0, writer
+    assert writer["received"] == writer["last"] - writer["first"] + 1 > 300, writer
+
+
 def test_replay_leaves_out_device_commands_unless_remapped():
     from liver_sim.sessions.replay import output_topics
 

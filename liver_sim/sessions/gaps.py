@@ -1,10 +1,11 @@
 """Counting lost messages from publication sequence numbers (no ROS here).
 
 DDS numbers every publication of a writer 1, 2, 3, …; a reader that receives k and then k + n from the
-same writer missed n − 1 messages. Writers already publishing when a recording began lost nothing
-before their first received message as far as the recording is concerned; a writer that appeared
-later lost its first (first received − 1) messages to the recording (published before the recorder's
-subscription matched it).
+same writer missed n − 1 messages. Writers already publishing when a recording began (shown in the graph
+then, or whose first received message was published before it: a transient-local history that reached a
+recorder started mid-run) lost nothing before their first received message as far as the recording is
+concerned; a writer that appeared later lost its first (first received − 1) messages to the recording
+(published before the recorder's subscription matched it).
 """
 from __future__ import annotations
 
@@ -38,22 +39,27 @@ class SequenceGaps:
     def __init__(self):
         self.writers: dict[tuple[str, bytes], WriterCount] = {}
         self._present: set[tuple[str, bytes]] = set()
+        #: When the recording began (system clock ns; None: not said), for writers not in the graph then.
+        self.began_ns: int | None = None
 
     def already_publishing(self, topic: str, gids) -> None:
         """Writers of `topic` that published before the recording began: their earlier messages are not lost."""
         self._present.update((topic, bytes(gid)) for gid in gids)
 
-    def add(self, topic: str, gid: bytes, sequence: int, node: str = "") -> None:
-        """One received message: `sequence` of the writer `gid` (16 bytes) on `topic`."""
+    def add(self, topic: str, gid: bytes, sequence: int, node: str = "", source_ns: int | None = None) -> None:
+        """One received message: `sequence` of the writer `gid` (16 bytes) on `topic`, published at `source_ns`
+        (system clock ns, when DDS says)."""
         key = (topic, gid)
         writer = self.writers.get(key)
         if writer is None:
+            present = key in self._present or (None not in (source_ns, self.began_ns) and source_ns < self.began_ns)
             self.writers[key] = WriterCount(topic, node, gid.hex(), sequence, sequence,
-                                            before_match=0 if key in self._present else sequence - 1)
+                                            before_match=0 if present else sequence - 1)
             return
         writer.received += 1
         if sequence > writer.last:
-            writer.gaps += sequence - writer.last - 1
+            if source_ns is None or self.began_ns is None or source_ns >= self.began_ns:
+                writer.gaps += sequence - writer.last - 1  # else the whole gap went before the recording began
             writer.last = sequence
         elif sequence < writer.first:  # older than anything received (out of order): it was counted missing
             writer.before_match = max(0, writer.before_match - 1)

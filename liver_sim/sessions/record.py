@@ -214,7 +214,8 @@ class Recorder:
         for topic, name, spec, _, take in self._subscriptions:
             count = 0
             while (message := take()) is not None:
-                self.gaps.add(topic, message.gid, message.sequence, self._writer_node(topic, message.gid))
+                self.gaps.add(topic, message.gid, message.sequence, self._writer_node(topic, message.gid),
+                              message.source_ns)
                 taken.append((message.received_ns or time.time_ns(), topic, name, spec, message.data))
                 count += 1
             self.max_backlog = max(self.max_backlog, count)
@@ -299,6 +300,7 @@ def run_record(out: Path, topics: list[str], storage: str = "mcap", duration_s: 
                 progress(f"warning: {refused}")
             try:
                 matched = recorder.wait_until_matched()
+                recorder.gaps.began_ns = time.time_ns()
                 progress(f"{READY} {len(recorder.subscribed)} topics subscribed, {matched} publishers matched")
                 recorder.run(stop, duration_s)
             finally:
