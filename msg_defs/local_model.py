@@ -89,18 +89,19 @@ def local_model_from_bytes(data: bytes) -> tuple[LocalModel | None, float]:
                         sec + nanosec * 1e-9)
 
 
-def _local_model(action: int, kind: int, position, orientation, scale_x: float, text: str,
+def _local_model(action: int, marker_type: int, position, orientation, scale_x: float, text: str,
                  lifetime_s: float) -> tuple[LocalModel | None, float]:
+    """The checks and the model shared by both readers: the Marker's fields as plain values."""
     if action in (Marker.DELETE, Marker.DELETEALL):
         return None, lifetime_s
     if action != Marker.ADD:
         raise ValueError(f"Marker.action is {action}, expected ADD ({Marker.ADD}), DELETE ({Marker.DELETE}) "
                          f"or DELETEALL ({Marker.DELETEALL})")
-    if kind not in (Marker.CUBE, Marker.SPHERE):
-        raise ValueError(f"Marker.type is {kind}, expected CUBE ({Marker.CUBE}) or SPHERE ({Marker.SPHERE})")
+    if marker_type not in (Marker.CUBE, Marker.SPHERE):
+        raise ValueError(f"Marker.type is {marker_type}, expected CUBE ({Marker.CUBE}) or SPHERE ({Marker.SPHERE})")
     position = np.array(finite_floats(tuple(position), (3,), "Marker.pose.position"))
     orientation = unit_quaternion(tuple(orientation), "Marker.pose.orientation")
     stiffness = _marker_stiffness(text)
-    if kind == Marker.CUBE:
+    if marker_type == Marker.CUBE:
         return LocalModel.plane(position, quaternion_to_matrix(orientation)[:, 2], stiffness), lifetime_s
     return LocalModel.sphere(position, positive(scale_x, "Marker.scale.x") / 2.0, stiffness), lifetime_s
