@@ -4,7 +4,8 @@ fields of a local-model Marker.
 Building a rosidl Python message and converting it costs tens of microseconds per message; the
 1 kHz loops instead publish and take these two fixed-layout messages as bytes (`Publisher.publish(bytes)`,
 raw subscriptions). The bridge's loop reads the 150 Hz /liver/contact_plane Marker from its bytes too
-(:func:`marker_fields`): taking it as a message object cost about 0.2 ms, a fifth of a 1 kHz tick. Layout (XCDR1, as rmw_fastrtps writes it): a 4-byte encapsulation header
+(:func:`marker_fields`): taking it as a message object cost about 0.2 ms, a fifth of a 1 kHz tick.
+Layout (XCDR1, as rmw_fastrtps writes it): a 4-byte encapsulation header
 (0x00 0x01 = little-endian, 0x00 0x00 = big-endian, then 2 option bytes), then, aligned relative to
 the byte after the header: stamp.sec int32, stamp.nanosec uint32, frame_id as uint32 length
 (with its NUL) + characters + NUL, padding to 8, then the float64 payload

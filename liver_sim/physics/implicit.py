@@ -199,8 +199,9 @@ class ImplicitEuler:
         staying where x has them.  Newton's iterations (M + H·C + H²·K)·δx = H²·f(x), x ← x + δx, K the
         tangent stiffness at x: backward-Euler steps of H = STATIC_HORIZON_S from rest, whose mass and
         damping terms only regularise K.  K leaves out compressed springs' negative geometric stiffness
-        (physics.implicit_kernels), so where springs are compressed the iterations converge linearly.  Returns f(x) (N, 3): ≈ 0 on free nodes; on held nodes the pull
-        of the network (and loads) that holding them resists.  Raises RuntimeError when not converged."""
+        (physics.implicit_kernels), so where springs are compressed the iterations converge linearly.  Returns
+        f(x) (N, 3): ≈ 0 on free nodes; on held nodes the pull of the network (and loads) that holding them
+        resists.  Raises RuntimeError when not converged."""
         h = STATIC_HORIZON_S
         free = (inv_mass > 0.0)[:, None]
         for _ in range(max_iterations + 1):
