@@ -29,6 +29,7 @@ import math
 import numba
 import numpy as np
 
+from liver_sim.physics.pairs import add_pair
 from liver_sim.physics.pcg import block_jacobi, pcg
 
 
@@ -132,18 +133,8 @@ def assemble(x, v, y, inv_mass, external, gravity, c_env, h, node_i, node_j, inv
         kx = geometric * dx + along * ux
         ky_ = geometric * dy + along * uy
         kz = geometric * dz + along * uz
-        f[i, 0] += tension * ux
-        f[i, 1] += tension * uy
-        f[i, 2] += tension * uz
-        f[j, 0] -= tension * ux
-        f[j, 1] -= tension * uy
-        f[j, 2] -= tension * uz
-        ky[i, 0] += kx
-        ky[i, 1] += ky_
-        ky[i, 2] += kz
-        ky[j, 0] -= kx
-        ky[j, 1] -= ky_
-        ky[j, 2] -= kz
+        add_pair(f, i, j, tension * ux, tension * uy, tension * uz)
+        add_pair(ky, i, j, kx, ky_, kz)
         if not assemble_matrix:
             continue
         unit[s, 0], unit[s, 1], unit[s, 2] = ux, uy, uz

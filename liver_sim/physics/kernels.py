@@ -20,6 +20,7 @@ import numba
 import numpy as np
 
 from liver_sim.geometry.closest_point import closest_point_on_triangle
+from liver_sim.physics.pairs import add_pair
 
 TOOL_NONE = 0
 TOOL_SPHERE = 1
@@ -108,12 +109,7 @@ def _accumulate_springs(x, v, node_i, node_j, rest, lambda1, lambda2, mu, first,
         i = node_i[s]
         j = node_j[s]
         t, ux, uy, uz = _spring_tension(x, v, i, j, rest[s], lambda1[s], lambda2[s], mu[s])
-        f[i, 0] += t * ux
-        f[i, 1] += t * uy
-        f[i, 2] += t * uz
-        f[j, 0] -= t * ux
-        f[j, 1] -= t * uy
-        f[j, 2] -= t * uz
+        add_pair(f, i, j, t * ux, t * uy, t * uz)
 
 
 @numba.njit(cache=True)

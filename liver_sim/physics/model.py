@@ -16,7 +16,8 @@ import numpy as np
 from liver_sim.local_model import LocalModel
 from liver_sim.mesh.tetmesh import TetMesh
 from liver_sim.physics import kernels
-from liver_sim.physics.contact import (ToolPose, ToolShape, force_local_model, probe_contacts, pull_local_model, surface_contacts, tool_state)
+from liver_sim.physics.contact import (ToolPose, ToolShape, force_local_model, probe_contacts, pull_local_model,
+                                      surface_contacts, tool_state)
 from liver_sim.physics.implicit import ImplicitEuler
 from liver_sim.physics.local_stiffness import LocalStiffness
 from liver_sim.physics.params import ModelParams

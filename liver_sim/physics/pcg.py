@@ -23,6 +23,8 @@ from __future__ import annotations
 
 import numba
 
+from liver_sim.physics.pairs import add_pair
+
 
 @numba.njit(cache=True)
 def apply(node_i, node_j, unit, iso, axial, shift, inv_mass, nodes, weights, normal, coefficient, p, out):
@@ -40,12 +42,7 @@ def apply(node_i, node_j, unit, iso, axial, shift, inv_mass, nodes, weights, nor
         g = iso[s]
         t = axial[s] * (ux * dx + uy * dy + uz * dz)
         bx, by, bz = g * dx + t * ux, g * dy + t * uy, g * dz + t * uz
-        out[i, 0] += bx
-        out[i, 1] += by
-        out[i, 2] += bz
-        out[j, 0] -= bx
-        out[j, 1] -= by
-        out[j, 2] -= bz
+        add_pair(out, i, j, bx, by, bz)
     for e in range(nodes.shape[0]):
         if coefficient[e] == 0.0:
             continue
