@@ -19,15 +19,20 @@ from liver_sim.physics.implicit import ImplicitEuler
 REFRESH_FRAMES = 10
 
 
+def _rows(tool: kernels.ToolState) -> tuple[np.ndarray, np.ndarray]:
+    """(rows within the candidates: finite depth, rows touching: penetrating with a share) of the tool's probes."""
+    finite = np.isfinite(tool.depth)
+    return finite, finite & (tool.depth > 0.0) & (tool.share > 0.0)
+
+
 def contact_load(tool: kernels.ToolState, n_nodes: int) -> np.ndarray:
     """The pattern of the tool's push on the liver, scaled to a unit total, (N, 3): the touching rows'
     elastic pushes share·λ·δ·n spread by barycentric weights (as the last step left them); out of
     contact, a unit push at the nearest row's surface point (none within the candidates: zeros)."""
     load = np.zeros((n_nodes, 3))
-    finite = np.isfinite(tool.depth)
+    finite, touching = _rows(tool)
     if not finite.any():
         return load
-    touching = finite & (tool.depth > 0.0) & (tool.share > 0.0)
     if touching.any():
         amount = np.where(touching, tool.share * tool.depth, 0.0)
     else:
@@ -42,10 +47,9 @@ def contact_load(tool: kernels.ToolState, n_nodes: int) -> np.ndarray:
 def touching_probes(tool: kernels.ToolState) -> float:
     """How many probes' worth of penalty carry the tool's push: the sum of the touching rows' shares;
     1 when none touches but one is within the candidates (the first touch), 0 when none is."""
-    finite = np.isfinite(tool.depth)
+    finite, touching = _rows(tool)
     if not finite.any():
         return 0.0
-    touching = finite & (tool.depth > 0.0) & (tool.share > 0.0)
     return float(tool.share[touching].sum()) if touching.any() else 1.0
 
 
