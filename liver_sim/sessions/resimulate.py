@@ -69,7 +69,7 @@ class _Session:
         from rclpy.serialization import serialize_message
 
         from msg_defs.forces import force_from_message, wrench_stamped
-        from msg_defs.local_model import local_model_marker, marker_to_local_model
+        from msg_defs.local_model import local_model_from_bytes, local_model_marker
         from msg_defs.point_cloud import nodes_to_pointcloud2
         from msg_defs.skin import skin_marker_serialized, skin_mesh_msg
         from msg_defs.stamps import stamp_from_seconds
@@ -80,9 +80,10 @@ class _Session:
         marker = local_model_marker(frame.result.local_model, stamp, frame_id,
                                     self.p["local_model_lifetime_s"])
         wrench = wrench_stamped(frame.result.tool_force_n, stamp, frame_id)
+        marker_bytes = serialize_message(marker)
         messages = [(self.p["nodes_topic"], "nodes",
                      serialize_message(nodes_to_pointcloud2(self.model.positions, stamp, frame_id))),
-                    (self.p["contact_plane_topic"], "contact_plane", serialize_message(marker)),
+                    (self.p["contact_plane_topic"], "contact_plane", marker_bytes),
                     (self.p["tool_wrench_topic"], "tool_wrench", serialize_message(wrench))]
         if frame.surface_changed:  # the new surface before the node cloud that indexes it
             messages.insert(0, (self.p["surface_topic"], "surface", serialize_message(
@@ -90,7 +91,7 @@ class _Session:
         if frame.marker_due:
             messages.append((self.p["marker_topic"], "marker", skin_marker_serialized(
                 self.model.positions, self.model.mesh.skin, stamp, frame_id)))
-        model, lifetime = marker_to_local_model(marker)
+        model, lifetime = local_model_from_bytes(marker_bytes)  # as the live bridge reads it
         return (t, messages, (model, lifetime if lifetime > 0.0 else self.b["lifetime_s"]),
                 force_from_message("wrench_stamped", wrench))
 
