@@ -27,6 +27,7 @@ import os
 import tempfile
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
@@ -147,3 +148,9 @@ def ros_env(ros_domain_id):
     env.pop("ROS_STATIC_PEERS", None)
     env.pop("ROS_LOCALHOST_ONLY", None)
     return env
+
+
+@pytest.fixture
+def rng():
+    """A seeded random generator: the same draws on every run."""
+    return np.random.default_rng(7)

@@ -6,21 +6,18 @@ import time
 import numpy as np
 import pytest
 from builtin_interfaces.msg import Time
-from geometry_msgs.msg import Point, Pose, PoseStamped, Vector3, Wrench, WrenchStamped
+from geometry_msgs.msg import Pose, PoseStamped, Vector3, Wrench, WrenchStamped
 from rclpy.qos import DurabilityPolicy, ReliabilityPolicy
 from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import PointCloud2, PointField
 from shape_msgs.msg import Mesh
-from std_msgs.msg import ColorRGBA, Float64MultiArray
-from visualization_msgs.msg import Marker, UVCoordinate
+from std_msgs.msg import Float64MultiArray
+from visualization_msgs.msg import Marker
 
 from liver_sim.geometry.rotations import quaternion_from_z_axis, quaternion_to_matrix
-from liver_sim.local_model import LocalModel
 from msg_defs.device_map import device_map_from_message, device_map_message
 from msg_defs.forces import (FORCE_OUTPUT_FORMATS, force_from_bytes, force_from_message, force_message,
                              force_message_bytes, force_message_type, wrench_stamped, wrench_stamped_bytes)
-from msg_defs.local_model import (PLANE_THICKNESS_M, STIFFNESS_KEY, local_model_from_bytes, local_model_marker,
-                                  marker_to_local_model)
 from msg_defs.point_cloud import nodes_to_pointcloud2, pointcloud2_to_nodes
 from msg_defs.poses import pose_from_bytes, pose_stamped, pose_stamped_bytes, pose_to_arrays
 from msg_defs.skin import mesh_msg_to_arrays, skin_marker, skin_marker_serialized, skin_mesh_msg
@@ -29,20 +26,6 @@ from msg_defs.topics import TOPICS
 
 STANDARD_FORCE_FORMATS = [fmt for fmt in FORCE_OUTPUT_FORMATS if fmt != "omni_feedback"]
 AXES = [(0, 0, 1), (0, 0, -1), (1, 0, 0), (-1, 0, 0), (0, 1, 0), (0.3, -0.2, -0.9)]
-
-
-@pytest.fixture
-def rng():
-    return np.random.default_rng(7)
-
-
-def plane_model(point, normal):
-    return LocalModel("plane", True, np.asarray(point, float), np.asarray(normal, float), np.zeros(3), 0.0, 0.001, True)
-
-
-def sphere_model(centre, radius):
-    return LocalModel("sphere", True, np.zeros(3), np.array([0.0, 0.0, 1.0]), np.asarray(centre, float), radius,
-                      0.0, False)
 
 
 # ---------------------------------------------------------------- time
@@ -217,115 +200,6 @@ def test_pose_with_bad_fields_is_refused_by_name():
         pose_to_arrays(zero_orientation)
     with pytest.raises(ValueError, match="orientation_xyzw"):
         pose_stamped((0, 0, 0), (0, 0, 0, 0), 0.0, "liver")
-
-
-# ---------------------------------------------------------------- local model
-
-def _through_the_wire(marker):
-    return deserialize_message(serialize_message(marker), Marker)
-
-
-def _both_ways(marker):
-    """marker_to_local_model of the message through the wire, checked against local_model_from_bytes of its
-    bytes (the bridge's path): the same model, field by field, and the same lifetime."""
-    model, lifetime_s = marker_to_local_model(_through_the_wire(marker))
-    from_bytes, lifetime_from_bytes = local_model_from_bytes(serialize_message(marker))
-    assert lifetime_from_bytes == pytest.approx(lifetime_s, abs=1e-12)
-    assert (model is None) == (from_bytes is None)
-    if model is not None:
-        for name in ("kind", "valid", "radius_m", "stiffness_n_per_m"):
-            assert getattr(from_bytes, name) == getattr(model, name)
-        for name in ("point", "normal", "centre"):
-            np.testing.assert_array_equal(getattr(from_bytes, name), getattr(model, name))
-    return model, lifetime_s
-
-
-@pytest.mark.parametrize("normal", AXES)
-def test_plane_local_model_round_trip(normal):
-    point = (0.01, -0.02, 0.03)
-    marker = local_model_marker(plane_model(point, normal), 4.0, "liver", 0.05, patch_size_m=0.03)
-    assert (marker.ns, marker.id, marker.type, marker.action) == ("local_model", 0, Marker.CUBE, Marker.ADD)
-    assert (marker.scale.x, marker.scale.y, marker.scale.z) == (0.03, 0.03, PLANE_THICKNESS_M)
-    model, lifetime_s = _both_ways(marker)
-    assert model.kind == "plane" and lifetime_s == pytest.approx(0.05)
-    np.testing.assert_array_equal(model.point, point)
-    np.testing.assert_allclose(model.normal, np.asarray(normal) / np.linalg.norm(normal), atol=1e-12)
-
-
-def test_plane_local_model_round_trip_random_normals(rng):
-    for normal in rng.normal(size=(20, 3)):
-        model, _ = marker_to_local_model(local_model_marker(plane_model(np.zeros(3), normal), 0.0, "l", 0.05))
-        np.testing.assert_allclose(model.normal, normal / np.linalg.norm(normal), atol=1e-12)
-
-
-def test_sphere_local_model_round_trip():
-    marker = local_model_marker(sphere_model((0.0, 0.1, -0.2), 0.07), 4.0, "liver", 0.02)
-    assert marker.type == Marker.SPHERE and (marker.scale.x, marker.scale.y, marker.scale.z) == (0.14, 0.14, 0.14)
-    model, lifetime_s = _both_ways(marker)
-    assert model.kind == "sphere" and lifetime_s == pytest.approx(0.02)
-    np.testing.assert_array_equal(model.centre, (0.0, 0.1, -0.2))
-    assert model.radius_m == pytest.approx(0.07)
-
-
-def test_invalid_local_model_is_a_delete_marker_read_as_none():
-    marker = local_model_marker(LocalModel.invalid(), 4.0, "liver", 0.05)
-    assert (marker.ns, marker.id, marker.action, marker.header.frame_id) == ("local_model", 0, Marker.DELETE, "liver")
-    assert _both_ways(marker) == (None, pytest.approx(0.05))
-    assert marker_to_local_model(Marker(action=Marker.DELETEALL)) == (None, 0.0)
-
-
-def test_local_model_marker_refuses_bad_models():
-    with pytest.raises(ValueError, match=r"LocalModel\.point must be finite"):
-        local_model_marker(plane_model((0, np.nan, 0), (0, 0, 1)), 0.0, "liver", 0.05)
-    with pytest.raises(ValueError, match=r"LocalModel\.radius_m must be finite and > 0"):
-        local_model_marker(sphere_model((0, 0, 0), 0.0), 0.0, "liver", 0.05)
-    with pytest.raises(ValueError, match="lifetime_s"):
-        local_model_marker(plane_model((0, 0, 0), (0, 0, 1)), 0.0, "liver", -0.05)
-
-
-def _marker(**changes):
-    marker = local_model_marker(sphere_model((0.0, 0.0, 0.0), 0.05), 0.0, "liver", 0.05)
-    for path, value in changes.items():
-        owner = marker
-        *parents, leaf = path.split("__")
-        for name in parents:
-            owner = getattr(owner, name)
-        setattr(owner, leaf, value)
-    return marker
-
-
-@pytest.mark.parametrize("changes, message", [
-    ({"pose__position__x": float("nan")}, r"Marker\.pose\.position must be finite"),
-    ({"pose__orientation__w": 0.0}, r"Marker\.pose\.orientation must be a non-zero quaternion"),
-    ({"pose__orientation__y": float("inf")}, r"Marker\.pose\.orientation must be finite"),
-    ({"scale__x": 0.0}, r"Marker\.scale\.x must be finite and > 0"),
-    ({"scale__x": float("nan")}, r"Marker\.scale\.x must be finite and > 0"),
-    ({"type": Marker.ARROW}, r"Marker\.type is 0, expected CUBE \(1\) or SPHERE \(2\)"),
-    ({"action": 5}, r"Marker\.action is 5"),
-])
-def test_bad_local_model_marker_is_refused_by_field(changes, message):
-    with pytest.raises(ValueError, match=message):
-        marker_to_local_model(_marker(**changes))
-    with pytest.raises(ValueError, match=message):
-        local_model_from_bytes(serialize_message(_marker(**changes)))
-
-
-def test_local_model_from_bytes_skips_every_field_a_marker_may_fill():
-    marker = _marker(text=f"note=1 {STIFFNESS_KEY}=34.5", frame_locked=True, texture_resource="embedded://x",
-                     mesh_resource="package://m.dae")
-    marker.points = [Point(x=float(k)) for k in range(3)]
-    marker.colors = [ColorRGBA(r=1.0)] * 2
-    marker.texture.header.frame_id, marker.texture.format, marker.texture.data = "camera", "png", [1, 2, 3]
-    marker.uv_coordinates = [UVCoordinate(u=0.5, v=0.25)] * 5
-    model, _ = _both_ways(marker)
-    assert model.stiffness_n_per_m == 34.5
-
-
-@pytest.mark.parametrize("cut", [0, 3, 20, 60, 150])
-def test_truncated_marker_bytes_are_refused_naming_the_field(cut):
-    data = serialize_message(_marker(text=f"{STIFFNESS_KEY}=34.5"))
-    with pytest.raises(ValueError, match=r"^Marker(\.[a-z_.]+|, type, action)?: (not a CDR message|truncated|bad)"):
-        local_model_from_bytes(data[:cut])
 
 
 # ---------------------------------------------------------------- forces
