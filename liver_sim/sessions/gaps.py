@@ -52,20 +52,24 @@ class SequenceGaps:
         key = (topic, gid)
         writer = self.writers.get(key)
         if writer is None:
-            present = key in self._present or (None not in (source_ns, self.began_ns) and source_ns < self.began_ns)
+            present = key in self._present or self._before_recording(source_ns)
             self.writers[key] = WriterCount(topic, node, gid.hex(), sequence, sequence,
                                             before_match=0 if present else sequence - 1)
             return
         writer.received += 1
         if sequence > writer.last:
-            if source_ns is None or self.began_ns is None or source_ns >= self.began_ns:
-                writer.gaps += sequence - writer.last - 1  # else the whole gap went before the recording began
+            if not self._before_recording(source_ns):  # else the whole gap went before the recording began
+                writer.gaps += sequence - writer.last - 1
             writer.last = sequence
         elif sequence < writer.first:  # older than anything received (out of order): it was counted missing
             writer.before_match = max(0, writer.before_match - 1)
             writer.first = sequence
         else:  # late, inside a counted gap
             writer.gaps = max(0, writer.gaps - 1)
+
+    def _before_recording(self, source_ns: int | None) -> bool:
+        """Whether a message published at `source_ns` (system clock ns; None: unknown) predates the recording."""
+        return source_ns is not None and self.began_ns is not None and source_ns < self.began_ns
 
     def lost_by_topic(self) -> dict[str, int]:
         lost: dict[str, int] = {}
