@@ -57,7 +57,8 @@ setup(
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),
-        ('share/' + package_name + '/config', _rel_glob(os.path.join('config', '*.yaml'))),
+        ('share/' + package_name + '/config', _rel_glob(os.path.join('config', '*.yaml'))
+         + _rel_glob(os.path.join('config', '*.xml'))),
     ],
     install_requires=[
         'numpy>=1.24,<2.5',  # numba 0.68 supports numpy < 2.5

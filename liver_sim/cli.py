@@ -20,7 +20,7 @@ from liver_sim.mesh.io import (CAPSULE_REGION, ORGAN_SIZE_RANGE_M, PARENCHYMA_RE
                                checked_output_path, load_mesh, write_mesh)
 from liver_sim.mesh.liver_shape import build_liver, default_liver
 from liver_sim.mesh.tetmesh import TetMesh
-from liver_sim.processes import DISCOVERY_RANGES, NodeFailure, keep_dds_local
+from liver_sim.processes import DISCOVERY_RANGES, NodeFailure, keep_dds_local, use_dds_profile
 from liver_sim.sessions.bag import STORAGES
 from liver_sim.sessions.cli import (add_bag_command, add_fig8_command, add_record_command, add_replay_command,
                                    add_report_command, add_resimulate_command)
@@ -380,7 +380,7 @@ def main(argv=None) -> int:
     try:
         if starts_ros(args):
             # stdout, beside the command's progress; stderr when stdout carries JSON
-            print(f"{PROG}: {keep_dds_local(args.discovery_range)}", flush=True,
+            print(f"{PROG}: {keep_dds_local(args.discovery_range)}; {use_dds_profile()}", flush=True,
                   file=sys.stderr if getattr(args, "json", False) else sys.stdout)
         return args.handler(args)
     except ValueError as exc:  # MeshError, or a refusal of the stuffing; both name the source

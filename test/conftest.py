@@ -30,10 +30,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from liver_sim.processes import use_dds_profile
+
 os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
 os.environ.pop("ROS_STATIC_PEERS", None)
 os.environ.pop("ROS_LOCALHOST_ONLY", None)
 os.environ["MPLBACKEND"] = "Agg"
+use_dds_profile()  # the product's Fast DDS profile, for the in-process participants as for the nodes
 
 # Domain ids whose Fast DDS ports stay clear of the Linux ephemeral range.
 # 0 is left out: it is every ROS installation's default.

@@ -1,0 +1,72 @@
+"""The product's Fast DDS profile (config/fastdds.xml, liver_sim.processes.use_dds_profile): every process loads
+it unless the environment names another, and under it a participant's shared-memory ports make an opener's
+health check wait at most 33 ms instead of Fast DDS's 333 ms (the check holds the opener's send lock)."""
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+from liver_sim.processes import DDS_PROFILE_VARIABLE, config_dir, use_dds_profile
+
+#: A participant that reports, for each shared-memory port it listens on in its domain's port range, the
+#: health-check timeout and the listener's wait period that Fast DDS 2.14 stored in the port
+#: (SharedMemGlobal::PortNode: port_id, num_listeners, healthy_check_timeout_ms, port_wait_timeout_ms).
+PROBE = r"""
+import json, os, struct, sys
+from liver_sim.processes import use_dds_profile
+use_dds_profile()
+import rclpy
+rclpy.init()
+node = rclpy.create_node("dds_profile_probe")
+domain = int(os.environ["ROS_DOMAIN_ID"])
+first = 7400 + 250 * domain
+found = {}
+for task in os.listdir("/proc/self/task"):
+    name = open(f"/proc/self/task/{task}/comm").read().strip()
+    if name.startswith("dds.shm.") and name[8:].isdigit() and first <= int(name[8:]) < first + 250:
+        port = int(name[8:])
+        data = open(f"/dev/shm/fastrtps_port{port}", "rb").read(16384)
+        for offset in range(0, len(data) - 16, 4):
+            port_id, listeners, timeout_ms, wait_ms = struct.unpack_from("<IIII", data, offset)
+            if port_id == port and 0 < listeners < 64 and timeout_ms > 0 and wait_ms == timeout_ms // 3:
+                found[port] = [timeout_ms, wait_ms]
+                break
+print(json.dumps({"profile": os.environ.get("FASTRTPS_DEFAULT_PROFILES_FILE"), "ports": found}))
+node.destroy_node()
+rclpy.shutdown()
+"""
+
+
+def _probe(env: dict) -> dict:
+    done = subprocess.run([sys.executable, "-c", PROBE], env=env, capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0, done.stderr
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def test_every_process_loads_the_product_profile_unless_the_environment_names_one():
+    env = {}
+    line = use_dds_profile(env)
+    assert Path(env[DDS_PROFILE_VARIABLE]) == config_dir() / "fastdds.xml" and Path(env[DDS_PROFILE_VARIABLE]).is_file()
+    assert line.endswith("(liver-sim default)")
+    env = {DDS_PROFILE_VARIABLE: "/etc/rig/dds.xml"}
+    assert use_dds_profile(env) == f"{DDS_PROFILE_VARIABLE}=/etc/rig/dds.xml (environment)"
+    assert env[DDS_PROFILE_VARIABLE] == "/etc/rig/dds.xml"
+
+
+def test_shared_memory_ports_under_the_profile_hold_an_opener_33_ms_not_333(ros_env, tmp_path):
+    """A participant's ports, read back from /dev/shm: 100/33 ms under the product profile; the same probe under
+    Fast DDS's own defaults (a profile file without transports) finds 1000/333 ms, so the reading can fail."""
+    ros_env.pop(DDS_PROFILE_VARIABLE, None)
+    product = _probe(ros_env)
+    assert product["profile"] == str(config_dir() / "fastdds.xml")
+    assert product["ports"] and all(ports == [100, 33] for ports in product["ports"].values()), product
+
+    defaults = tmp_path / "defaults.xml"
+    defaults.write_text('<?xml version="1.0" encoding="UTF-8" ?>\n'
+                        '<profiles xmlns="http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles"/>\n')
+    fast_dds = _probe({**ros_env, DDS_PROFILE_VARIABLE: str(defaults)})
+    assert fast_dds["ports"] and all(ports == [1000, 333] for ports in fast_dds["ports"].values()), fast_dds
+    assert os.environ.get(DDS_PROFILE_VARIABLE) == str(config_dir() / "fastdds.xml")  # conftest's, for the suite
