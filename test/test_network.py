@@ -1,4 +1,5 @@
 """The node network as real processes on loopback, each test in its own ROS_DOMAIN_ID (no timing thresholds)."""
+import os
 import subprocess
 import threading
 import time
@@ -294,4 +295,13 @@ def test_loop_bench_reports_every_figure_against_its_target(ros_domain_id, tmp_p
     for name in ("liver_physics: loop", "haptic_bridge: loop", "liver_tool: loop", "phantom_sim: loop"):
         assert int(loops[name]["gc_frozen_objects"]) > 0, name
         assert loops[name]["gc_automatic_full_collection"] == "False", name
-    assert "largest_gap_cause" in loops["haptic_bridge: loop"]
+    assert "largest_gap_cause" in loops["haptic_bridge: loop"] and "gaps_blocked_in_the_step" in loops["haptic_bridge: loop"]
+    # a sentinel measured the machine's own stalls beside the network, and every long command gap is split
+    stalls = results["machine_stalls"]
+    assert stalls["count"] >= 0 and stalls["total_s"] >= stalls["largest_s"] >= 0.0
+    assert {path.name for path in tmp_path.glob("machine_stalls_cpu*.jsonl")} == \
+        {f"machine_stalls_cpu{cpu}.jsonl" for cpu in os.sched_getaffinity(0)}
+    assert 0.0 < results["haptic_max_gap_outside_machine_stalls_s"] <= results["haptic_on_wire"]["max_gap_s"] + 1e-9
+    for gap in results["haptic_gaps_over_target"]:
+        assert gap["gap_s"] > LOOP_TARGETS["haptic_max_gap_s_max"]
+        assert gap["product_s"] == pytest.approx(gap["gap_s"] - gap["machine_s"])

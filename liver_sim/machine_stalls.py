@@ -1,0 +1,106 @@
+"""Machine stalls: spans in which this machine ran none of its threads that were due, measured by a sentinel,
+so that a gap in a loop can be told from the product's own doing.
+
+On a virtual machine the host may not run a virtual CPU for milliseconds (measured here: 5-10 ms, on both
+CPUs at once, while the guest keeps them busy; a sentinel on an idle machine stays within ~1 ms). The
+guest's clocks go on, so every loop on that CPU misses its deadlines and nothing inside the guest can tell
+why but a thread that should have run there: a sentinel, one process per CPU, pinned to it at SCHED_FIFO 99
+(above every loop), which sleeps to absolute deadlines SENTINEL_PERIOD_S apart and notes each wake-up later
+than STALL_S. A stall is (last wake-up before it, late wake-up) on the time.monotonic() scale; a loop's gap
+overlapping a stall of either CPU was, for that overlap, the machine's.
+
+`python -m liver_sim.machine_stalls OUT CPU` runs the sentinel of CPU until SIGTERM or SIGINT, one JSON line
+[start_s, end_s] per stall in OUT.
+"""
+from __future__ import annotations
+
+import json
+import os
+import signal
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+#: The sentinel wakes every this many seconds.
+SENTINEL_PERIOD_S = 0.001
+#: A wake-up at least this late (s) is a stall.
+STALL_S = 0.002
+#: The sentinel's SCHED_FIFO priority: above every loop of the product.
+SENTINEL_PRIORITY = 99
+
+
+def watch(out, stop, clock=time.monotonic, sleep=time.sleep) -> None:
+    """Sleep to deadlines SENTINEL_PERIOD_S apart until `stop()`; write each stall to `out` as a JSON line
+    [start_s, end_s] (start: the wake-up before the late one; the next deadlines restart from the late one)."""
+    deadline = previous = clock()
+    while not stop():
+        deadline += SENTINEL_PERIOD_S
+        remaining = deadline - clock()
+        if remaining > 0:
+            sleep(remaining)
+        now = clock()
+        if now - deadline >= STALL_S:
+            out.write(json.dumps([previous, now]) + "\n")
+            out.flush()
+            deadline = now
+        previous = now
+
+
+def read_stalls(paths: list[Path], window_s: tuple[float, float] | None = None) -> np.ndarray:
+    """The stalls (K, 2) [start_s, end_s] the sentinels wrote to `paths`, those overlapping `window_s` if given."""
+    rows = [json.loads(line) for path in paths for line in Path(path).read_text().splitlines() if line.strip()]
+    stalls = np.asarray(rows, dtype=float).reshape(-1, 2)
+    if window_s is not None:
+        stalls = stalls[(stalls[:, 1] > window_s[0]) & (stalls[:, 0] < window_s[1])]
+    return stalls
+
+
+def gaps_with_stalls(times_s: np.ndarray, bound_s: float, stalls: np.ndarray) -> list[dict]:
+    """Each gap longer than `bound_s` between consecutive `times_s` (sorted, monotonic s), with the time the
+    machine stalled inside it: {'start_s', 'gap_s', 'machine_s', 'product_s' = gap_s - machine_s}."""
+    times_s = np.asarray(times_s, dtype=float)
+    long = np.flatnonzero(np.diff(times_s) > bound_s)
+    gaps = []
+    for i in long:
+        start, end = times_s[i], times_s[i + 1]
+        overlap = _covered_s(stalls, start, end)
+        gaps.append({"start_s": float(start), "gap_s": float(end - start), "machine_s": float(overlap),
+                     "product_s": float(end - start - overlap)})
+    return gaps
+
+
+def _covered_s(stalls: np.ndarray, start: float, end: float) -> float:
+    """How long (s) within [start, end] at least one of `stalls` lasted (overlapping stalls count once)."""
+    inside = np.clip(stalls, start, end)
+    inside = inside[inside[:, 1] > inside[:, 0]]
+    covered, reached = 0.0, start
+    for begin, finish in inside[np.argsort(inside[:, 0])]:
+        if finish > reached:
+            covered += finish - max(begin, reached)
+            reached = finish
+    return covered
+
+
+def main(argv: list[str] | None = None) -> int:
+    from liver_sim.processes import set_realtime_priority
+
+    args = sys.argv[1:] if argv is None else argv
+    if len(args) != 2 or not args[1].isdigit():
+        print("usage: python -m liver_sim.machine_stalls OUT CPU", file=sys.stderr)
+        return 2
+    os.sched_setaffinity(0, {int(args[1])})
+    refused = set_realtime_priority(SENTINEL_PRIORITY)
+    if refused:
+        print(f"machine_stalls: {refused}", file=sys.stderr)
+    stopping = []
+    for signum in (signal.SIGTERM, signal.SIGINT):
+        signal.signal(signum, lambda *_: stopping.append(True))
+    with open(args[0], "w") as out:
+        watch(out, lambda: bool(stopping))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
