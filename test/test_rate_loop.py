@@ -71,8 +71,9 @@ def test_realtime_priority_zero_leaves_the_process_alone_and_a_refusal_is_explai
 
 
 def test_a_gap_gets_its_cause_named_from_what_the_thread_did_meanwhile():
-    """Sleeping is not runnable (blocked off CPU); spinning beside a busier thread with one core is
-    runnable (waiting for a CPU); a collection that fills the gap is garbage collection."""
+    """Sleeping is not runnable: blocked in the step when the step took most of the gap, else blocked off CPU;
+    spinning beside a busier thread with one core is runnable (waiting for a CPU); a collection that fills the
+    gap is garbage collection."""
     import gc
     import os
     import subprocess
@@ -87,12 +88,17 @@ def test_a_gap_gets_its_cause_named_from_what_the_thread_did_meanwhile():
     causes.sample()
     start = time.monotonic()
     time.sleep(0.02)
-    assert causes.name(start, time.monotonic()).startswith("blocked off CPU")
+    assert causes.name(start, time.monotonic(), step_s=0.001).startswith("blocked off CPU")
+    causes.sample()
+    start = time.monotonic()
+    time.sleep(0.02)
+    assert causes.name(start, time.monotonic(), step_s=0.015).startswith("blocked in the step: the step took 15.0 ms")
 
     GARBAGE.passes.append((start + 1.0, start + 1.018, 2))  # a full collection of 18 ms within a 20 ms gap
     assert causes.name(start + 1.0, start + 1.02).startswith("garbage collection: generation 2")
-    assert causes.counts == {"garbage collection": 1, "waiting for a CPU": 0, "blocked off CPU": 1}
-    assert causes.summary()["gaps_named"] == 2 and causes.largest[1].startswith("blocked off CPU")
+    assert causes.counts == {"garbage collection": 1, "waiting for a CPU": 0, "blocked in the step": 1,
+                             "blocked off CPU": 1}
+    assert causes.summary()["gaps_named"] == 3
     assert [cause for _, _, cause in causes.new_events()][0].startswith("blocked")
     assert causes.new_events() == []
     gc.collect()  # the fake pass leaves the log

@@ -1,5 +1,5 @@
 """The cause of each long gap between two ticks of a loop thread: garbage collection, waiting for a CPU,
-or blocked off CPU (GapCauses)."""
+blocked inside the step, or blocked off CPU between steps (GapCauses)."""
 from __future__ import annotations
 
 import os
@@ -37,9 +37,14 @@ class GapCauses:
       (its run-queue wait in /proc/thread-self/schedstat): other processes held both cores, or — a SCHED_FIFO
       thread stopped for about sched_rt_period_us − sched_rt_runtime_us — the kernel's RT throttling once the
       real-time threads used their share of the second;
-    - ``blocked off CPU``: the thread was not runnable: it waited for the GIL held by another thread of this
-      process (the executor, a DDS callback into Python; or that thread itself waiting for a core) or for a
-      lock inside rmw/DDS.
+    - ``blocked in the step``: the thread was not runnable inside its step, which took at least RUNQUEUE_SHARE
+      of the gap: a DDS call of the step (a publish, a take) waited for a Fast DDS lock, the writer's or the
+      participant's send lock that discovery holds while it opens a newcomer's shared-memory port
+      (config/fastdds.xml), or for the GIL;
+    - ``blocked off CPU``: the thread was not runnable between two steps: it woke late because the GIL was
+      held by another thread of this process (rclpy's publish and take keep it while Fast DDS blocks), or
+      because the machine itself stalled (a virtual CPU the host did not run: every loop of the machine
+      stalls at once; `liver-sim bench loop` measures these with a sentinel, liver_sim.machine_stalls).
 
     Call :meth:`sample` from the loop thread every few ticks and :meth:`name` when a gap ended; both only
     read one small /proc file of the thread.
@@ -51,7 +56,8 @@ class GapCauses:
         self._fd = None
         self._wait_ns = 0
         self.events = deque(maxlen=self.EVENTS_KEPT)  # (monotonic end s, gap s, cause)
-        self.counts = {"garbage collection": 0, "waiting for a CPU": 0, "blocked off CPU": 0}
+        self.counts = {"garbage collection": 0, "waiting for a CPU": 0, "blocked in the step": 0,
+                       "blocked off CPU": 0}
         self.largest = (0.0, "")
         self.reported = 0
         self._fifo = False
@@ -67,8 +73,9 @@ class GapCauses:
     def sample(self) -> None:
         self._wait_ns = self._wait()
 
-    def name(self, start_s: float, end_s: float) -> str:
-        """The cause of the gap from `start_s` to `end_s` (monotonic s); kept in `events`, counted."""
+    def name(self, start_s: float, end_s: float, step_s: float = 0.0) -> str:
+        """The cause of the gap from `start_s` to `end_s` (monotonic s), of which the step that began at
+        `start_s` took `step_s`; kept in `events`, counted."""
         gap = end_s - start_s
         wait_ns = self._wait()
         waited, self._wait_ns = (wait_ns - self._wait_ns) * 1e-9, wait_ns
@@ -85,10 +92,14 @@ class GapCauses:
                      + ("SCHED_FIFO, as long as the kernel's RT throttling: the real-time threads used "
                         "sched_rt_runtime_us of the period" if throttled else "other processes held the cores")
                      + ")")
+        elif step_s >= RUNQUEUE_SHARE * gap:
+            kind = "blocked in the step"
+            cause = (f"{kind}: the step took {step_s * 1e3:.1f} ms, not runnable for {(gap - waited) * 1e3:.1f} ms "
+                     f"(a DDS call waiting for a Fast DDS lock, or the GIL)")
         else:
             kind = "blocked off CPU"
-            cause = (f"{kind}: not runnable for {(gap - waited) * 1e3:.1f} ms (the GIL held by another thread of "
-                     f"this process, or a lock inside rmw/DDS)")
+            cause = (f"{kind}: not runnable for {(gap - waited) * 1e3:.1f} ms between steps (the GIL held by "
+                     f"another thread of this process, or the machine stalled)")
         self.counts[kind] += 1
         self.events.append((end_s, gap, cause))
         if gap > self.largest[0]:

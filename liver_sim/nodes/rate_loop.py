@@ -71,7 +71,7 @@ class RateLoop(threading.Thread):
     Deadline k is start + k·period: the thread sleeps until SPIN_MARGIN_S before it, then spins
     (a SCHED_FIFO thread wakes on time, and sleeps to the deadline itself).
     A step that starts more than a period late is an overrun; a gap over `gap_bound_s` (GAP_CAUSE_S, or two
-    periods of a slower loop) gets its cause named (`gaps`, GapCauses). Starting the loop freezes the garbage
+    periods of a slower loop) gets its cause named (`gaps`, GapCauses), knowing how long the step before it took. Starting the loop freezes the garbage
     collector (:func:`freeze_garbage`; not with `freeze` false): what the node built before is never scanned
     again. A loop at most CATCH_UP_PERIODS
     behind runs its missed ticks at once, so that a short stall costs no ticks; further behind,
@@ -117,6 +117,7 @@ class RateLoop(threading.Thread):
         start = clock()
         tick = 0
         previous = None
+        step_s = 0.0  # how long the previous step took
         gaps = self.gaps
         gaps.sample()
         while not self._stopping.is_set():
@@ -131,7 +132,7 @@ class RateLoop(threading.Thread):
                 gap = now - previous
                 self.stats.record(gap, now > deadline + self.period_s)
                 if gap > self.gap_bound_s:
-                    gaps.name(previous, now)
+                    gaps.name(previous, now, step_s)
                 elif tick % SCHEDSTAT_EVERY_TICKS == 0:
                     gaps.sample()
             previous = now
@@ -145,8 +146,10 @@ class RateLoop(threading.Thread):
                     traceback.print_exc()
                 else:
                     self._on_error(now, exc)
+            after = clock()
+            step_s = after - now
             tick += 1
-            due = int((clock() - start) / self.period_s)
+            due = int((after - start) / self.period_s)
             if due - tick > CATCH_UP_PERIODS:
                 tick = due
 
