@@ -183,7 +183,7 @@ def _cpu_ticks(pid: int) -> int:
     return int(fields[11]) + int(fields[12])
 
 
-def _die_with_parent(parent_pid: int):
+def die_with_parent(parent_pid: int):
     """preexec_fn: SIGTERM this child when the thread that started it dies (prctl PR_SET_PDEATHSIG), and at
     once if the parent is already gone."""
     prctl = ctypes.CDLL(None, use_errno=True).prctl  # looked up before the fork
@@ -288,7 +288,7 @@ class NodeProcesses:
         self.log_dir.mkdir(parents=True, exist_ok=True)
         with open(self.log_dir / f"{label}.log", "w") as log:
             process = subprocess.Popen(args, stdout=log, stderr=subprocess.STDOUT, env=dict(os.environ),
-                                       start_new_session=True, preexec_fn=_die_with_parent(os.getpid()))
+                                       start_new_session=True, preexec_fn=die_with_parent(os.getpid()))
         self.processes[label] = process
         self.exit_codes.pop(label, None)
         with self._run_file.edit() as runs:

@@ -302,6 +302,9 @@ def test_loop_bench_reports_every_figure_against_its_target(ros_domain_id, tmp_p
     assert {path.name for path in tmp_path.glob("machine_stalls_cpu*.jsonl")} == \
         {f"machine_stalls_cpu{cpu}.jsonl" for cpu in os.sched_getaffinity(0)}
     assert 0.0 < results["haptic_max_gap_outside_machine_stalls_s"] <= results["haptic_on_wire"]["max_gap_s"] + 1e-9
+    assert 0.0 < results["commands_outside_machine_stalls"] <= 1.0
+    assert results["pose_to_force_p99_outside_machine_stalls_s"] > 0.0
+    assert "fig8_smoothness_ratio_outside_machine_stalls" in results
     for gap in results["haptic_gaps_over_target"]:
         assert gap["gap_s"] > LOOP_TARGETS["haptic_max_gap_s_max"]
         assert gap["product_s"] == pytest.approx(gap["gap_s"] - gap["machine_s"])

@@ -40,7 +40,7 @@ class GapCauses:
     - ``blocked in the step``: the thread was not runnable inside its step, which took at least RUNQUEUE_SHARE
       of the gap: a DDS call of the step (a publish, a take) waited for a Fast DDS lock, the writer's or the
       participant's send lock that discovery holds while it opens a newcomer's shared-memory port
-      (config/fastdds.xml), or for the GIL;
+      (config/fastdds.xml), or for the GIL; or the machine stalled while the step ran;
     - ``blocked off CPU``: the thread was not runnable between two steps: it woke late because the GIL was
       held by another thread of this process (rclpy's publish and take keep it while Fast DDS blocks), or
       because the machine itself stalled (a virtual CPU the host did not run: every loop of the machine
@@ -95,7 +95,7 @@ class GapCauses:
         elif step_s >= RUNQUEUE_SHARE * gap:
             kind = "blocked in the step"
             cause = (f"{kind}: the step took {step_s * 1e3:.1f} ms, not runnable for {(gap - waited) * 1e3:.1f} ms "
-                     f"(a DDS call waiting for a Fast DDS lock, or the GIL)")
+                     f"(a DDS call waiting for a Fast DDS lock or the GIL, or the machine stalled)")
         else:
             kind = "blocked off CPU"
             cause = (f"{kind}: not runnable for {(gap - waited) * 1e3:.1f} ms between steps (the GIL held by "
