@@ -291,43 +291,29 @@ def loop_run(duration_s: float, log_dir, progress=None, observers: dict | None =
     network (NetworkPlan.observers), e.g. a recorder; `extra_load` core-bound processes at normal priority
     beside it (network.run_network).
 
-    A sentinel (liver_sim.machine_stalls) runs beside the network and notes when the machine itself ran
-    nothing that was due; each command gap over the target is listed with the part of it the machine
+    Sentinels (liver_sim.machine_stalls, started by run_network) note when the machine itself ran nothing that
+    was due; each command gap over the target is listed with the part of it the machine
     stalled (`haptic_gaps_over_target`), and the largest gap without those parts is a figure of its own, as
     are the latency and Fig. 8 over the commands away from the stalls (from a stall's start to
     MACHINE_STALL_SETTLE_S after its end: the simulated hand moved on meanwhile).
     """
-    import subprocess
-    from pathlib import Path
-
     from liver_sim.analysis import contact_fraction, fig8_figures, held_wrench_baseline
-    from liver_sim.machine_stalls import gaps_with_stalls, read_stalls
-    from liver_sim.network import closed_loop_plan, run_network, wire_rates
-    from liver_sim.processes import die_with_parent
+    from liver_sim.machine_stalls import stall_summary
+    from liver_sim.network import closed_loop_plan, run_network, wire_gaps, wire_rates
     from liver_sim.sessions.parameters import node_parameters
 
     plan = closed_loop_plan(extra={"phantom_sim": {"loop_script": True, "script": "explore"}})
     plan.observers.update(observers or {})
-    Path(log_dir).mkdir(parents=True, exist_ok=True)
-    stall_files = {cpu: Path(log_dir) / f"machine_stalls_cpu{cpu}.jsonl" for cpu in sorted(os.sched_getaffinity(0))}
-    sentinels = [subprocess.Popen([sys.executable, "-m", "liver_sim.machine_stalls", str(path), str(cpu)],
-                                  preexec_fn=die_with_parent(os.getpid()))  # never outlives the benchmark
-                 for cpu, path in stall_files.items()]
-    try:
-        load_before = os.getloadavg()
-        snapshot = run_network(plan, duration_s, log_dir, progress or (lambda line: None), extra_load=extra_load)
-        load_after = os.getloadavg()
-    finally:
-        for sentinel in sentinels:
-            sentinel.terminate()
-            sentinel.wait(timeout=10)
+    load_before = os.getloadavg()
+    snapshot = run_network(plan, duration_s, log_dir, progress or (lambda line: None), extra_load=extra_load)
+    load_after = os.getloadavg()
     start, end = snapshot["window_s"]
     sent = snapshot["force_published_s"]["local_model"]
     inside = (sent >= start) & (sent <= end)
     sent_local = sent[inside]
     force = snapshot["forces"]["local_model"][1][inside]
     latency = snapshot["pose_to_force_s"]["local_model"][inside]
-    stalls = read_stalls(list(stall_files.values()), (start, end))
+    stalls = snapshot["machine_stalls"]
     calm = np.ones(sent_local.size, dtype=bool)  # commands away from every machine stall
     for stall_start, stall_end in stalls:
         calm &= (sent_local < stall_start) | (sent_local > stall_end + MACHINE_STALL_SETTLE_S)
@@ -338,7 +324,7 @@ def loop_run(duration_s: float, log_dir, progress=None, observers: dict | None =
     fig8 = fig8_figures(force, baseline, sent_local, FIG8_MAX_PERIOD_S)
     fig8_calm = fig8_figures(force[calm], baseline[calm], sent_local[calm], FIG8_MAX_PERIOD_S)
     on_wire = wire_rates(snapshot)
-    gaps = gaps_with_stalls(sent_local, LOOP_TARGETS["haptic_max_gap_s_max"], stalls)
+    gaps = wire_gaps(snapshot, LOOP_TARGETS["haptic_max_gap_s_max"])
     short = np.diff(sent_local)
     short = short[short <= LOOP_TARGETS["haptic_max_gap_s_max"]]
     figures = {
@@ -357,11 +343,8 @@ def loop_run(duration_s: float, log_dir, progress=None, observers: dict | None =
         "fig8_smoothness_ratio_steady": fig8["smoothness_ratio_steady"],
         "fig8_smoothness_ratio_outside_machine_stalls": fig8_calm["smoothness_ratio"],
         "commands_outside_machine_stalls": float(calm.mean()) if calm.size else 1.0,
-        "machine_stalls": {"count": len(stalls), "largest_s": float((stalls[:, 1] - stalls[:, 0]).max(initial=0.0)),
-                           "total_s": float((stalls[:, 1] - stalls[:, 0]).sum()),
-                           "sentinel": "per CPU, a process pinned to it at SCHED_FIFO 99 waking every 1 ms; a stall is "
-                                       "a wake-up 2 ms late or more"},
-        "haptic_gaps_over_target": [{**gap, "start_s": gap["start_s"] - start} for gap in gaps],
+        "machine_stalls": stall_summary(stalls),
+        "haptic_gaps_over_target": gaps,
         "haptic_max_gap_outside_machine_stalls_s": max([float(short.max(initial=0.0))]
                                                        + [gap["product_s"] for gap in gaps]),
     }

@@ -234,7 +234,8 @@ def run_demo(out_dir: Path, duration_s: float | None = None, progress=print, rec
     records the run into out_dir/session.
     """
     from liver_sim.analysis import largest_force_jump_n
-    from liver_sim.network import closed_loop_plan, run_network, wire_rates
+    from liver_sim.machine_stalls import stall_summary
+    from liver_sim.network import closed_loop_plan, run_network, wire_gaps, wire_rates
     from liver_sim.sessions.record import recorder_command
 
     if scenario not in SCENARIOS:
@@ -260,6 +261,8 @@ def run_demo(out_dir: Path, duration_s: float | None = None, progress=print, rec
         "mesh": {"source": mesh.source, "scale": liver.scale, "sha256": mesh.sha256},
         "duration_s": duration_s,
         **wire_rates(snapshot),
+        "machine_stalls": stall_summary(snapshot["machine_stalls"]),
+        "haptic_gaps_over_5ms": wire_gaps(snapshot, GAP_S),
         "peak_haptic_force_n": float(haptic_norm.max()) if haptic_norm.size else 0.0,
         "peak_physics_force_n": float(np.linalg.norm(wrench, axis=1).max()) if len(wrench) else 0.0,
         "largest_force_jump_n": largest_force_jump_n(haptic_force),
@@ -287,7 +290,8 @@ def run_demo(out_dir: Path, duration_s: float | None = None, progress=print, rec
         figures = TOPOLOGY_FIGURES
         _plot_topology(snapshot, spec.title, mesh, out_dir)
     progress(f"physics {summary['physics']['rate_hz']:.1f} Hz, haptic {summary['haptic']['rate_hz']:.1f} Hz "
-             f"(period error p99 {1e3 * (summary['haptic']['period_error_p99_s'] or 0):.2f} ms), peak force "
+             f"(period error p99 {1e3 * (summary['haptic']['period_error_p99_s'] or 0):.2f} ms; {_gaps_line(summary)}), "
+             f"peak force "
              f"{summary['peak_haptic_force_n']:.2f} N"
              + (f", residual displacement {summary['final_displacement_m'] * 1e3:.2f} mm"
                 if "final_displacement_m" in summary else "")
@@ -323,6 +327,18 @@ def opened_triangles(rest_m: np.ndarray, skin: np.ndarray) -> np.ndarray:
     return np.array([counts[key] > 1 for key in keys], dtype=bool)
 
 
+#: Command gaps longer than this (s) are listed with the machine's share in them.
+GAP_S = 0.005
+
+
+def _gaps_line(summary: dict) -> str:
+    """How many command gaps over GAP_S there were, how many held a stall of the machine itself, and those stalls."""
+    gaps, stalls = summary["haptic_gaps_over_5ms"], summary["machine_stalls"]
+    machine = sum(gap["machine_s"] > 0.0 for gap in gaps)
+    return (f"{len(gaps)} command gap(s) over {GAP_S * 1e3:g} ms, {machine} of them during a stall of the machine "
+            f"itself ({stalls['count']} stall(s), largest {stalls['largest_s'] * 1e3:.1f} ms)")
+
+
 def _network_markdown(summary: dict, title: str) -> str:
     physics, haptic = summary["physics"], summary["haptic"]
     ms = lambda value: f"{value * 1e3:.2f} ms" if value is not None else "n/a"  # noqa: E731
@@ -338,6 +354,8 @@ def _network_markdown(summary: dict, title: str) -> str:
         f"- haptic commands: {haptic['rate_hz']:.1f} Hz ({haptic['samples']} commands), period error p50 "
         f"{ms(haptic['period_error_p50_s'])}, p99 {ms(haptic['period_error_p99_s'])}, largest gap "
         f"{ms(haptic['max_gap_s'])}",
+        f"- {_gaps_line(summary)}: the machine stalls when it runs none of its threads that are due (a virtual "
+        f"CPU its host did not run), measured by a sentinel per CPU at SCHED_FIFO 99 (liver_sim/machine_stalls.py)",
         f"- peak force sent to the device: {summary['peak_haptic_force_n']:.3f} N; physics contact force peak "
         f"{summary['peak_physics_force_n']:.3f} N",
         f"- largest force change between consecutive 1 ms commands in contact: "

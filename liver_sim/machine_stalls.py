@@ -17,6 +17,7 @@ from __future__ import annotations
 import json
 import os
 import signal
+import subprocess
 import sys
 import time
 from pathlib import Path
@@ -29,6 +30,9 @@ SENTINEL_PERIOD_S = 0.001
 STALL_S = 0.002
 #: The sentinel's SCHED_FIFO priority: above every loop of the product.
 SENTINEL_PRIORITY = 99
+#: What a report says the stalls are.
+SENTINEL_DESCRIPTION = ("per CPU, a process pinned to it at SCHED_FIFO 99 waking every 1 ms; a stall is a wake-up "
+                        "2 ms late or more")
 
 
 def watch(out, stop, clock=time.monotonic, sleep=time.sleep) -> None:
@@ -55,6 +59,39 @@ def read_stalls(paths: list[Path], window_s: tuple[float, float] | None = None) 
     if window_s is not None:
         stalls = stalls[(stalls[:, 1] > window_s[0]) & (stalls[:, 0] < window_s[1])]
     return stalls
+
+
+class Sentinels:
+    """A sentinel process per CPU this process may run on: :meth:`start` starts them, each writing
+    `log_dir`/machine_stalls_cpu<N>.jsonl and dying with the thread that started it (processes.die_with_parent),
+    :meth:`stop` stops them, :meth:`stalls` reads what they noted."""
+
+    def __init__(self, log_dir: Path):
+        self.files = {cpu: Path(log_dir) / f"machine_stalls_cpu{cpu}.jsonl" for cpu in sorted(os.sched_getaffinity(0))}
+        self._processes = []
+
+    def start(self) -> None:
+        from liver_sim.processes import die_with_parent
+
+        for cpu, path in self.files.items():
+            path.parent.mkdir(parents=True, exist_ok=True)
+            self._processes.append(subprocess.Popen([sys.executable, "-m", "liver_sim.machine_stalls", str(path),
+                                                     str(cpu)], preexec_fn=die_with_parent(os.getpid())))
+
+    def stop(self) -> None:
+        for process in self._processes:
+            process.terminate()
+            process.wait(timeout=10)
+
+    def stalls(self, window_s: tuple[float, float] | None = None) -> np.ndarray:
+        return read_stalls([path for path in self.files.values() if path.exists()], window_s)
+
+
+def stall_summary(stalls: np.ndarray) -> dict:
+    """count, largest_s, total_s of `stalls` (K, 2), and how they were measured."""
+    lengths = stalls[:, 1] - stalls[:, 0]
+    return {"count": int(len(stalls)), "largest_s": float(lengths.max(initial=0.0)), "total_s": float(lengths.sum()),
+            "sentinel": SENTINEL_DESCRIPTION}
 
 
 def gaps_with_stalls(times_s: np.ndarray, bound_s: float, stalls: np.ndarray) -> list[dict]:

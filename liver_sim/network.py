@@ -100,9 +100,10 @@ def process_costs(before: dict, after: dict, wall_s: float) -> dict:
 def run_network(plan: NetworkPlan, duration_s: float, log_dir: Path, progress=print,
                 settle_s: float = 1.0, extra_load: int = 0) -> dict:
     """Start the plan's processes, listen for `duration_s` after they are up, stop them; return the snapshot
-    (NetworkListener.snapshot) with `window_s`, the (start, end) of those `duration_s` (monotonic s), and
+    (NetworkListener.snapshot) with `window_s`, the (start, end) of those `duration_s` (monotonic s),
     `process_costs` over them (:func:`process_costs`: each node, observer, `listener` — this process — and
-    each of the `extra_load` CORE_BOUND_PROCESSes started at normal priority once the network is up).
+    each of the `extra_load` CORE_BOUND_PROCESSes started at normal priority once the network is up), and
+    `machine_stalls` (K, 2) within them, measured by a sentinel per CPU (liver_sim.machine_stalls).
 
     Raises NodeFailure naming any process that exited early or with a non-zero status at stop, with the tail
     of its log (in log_dir); RuntimeError if the network does not come up.
@@ -110,6 +111,7 @@ def run_network(plan: NetworkPlan, duration_s: float, log_dir: Path, progress=pr
     import rclpy
     from rclpy.experimental import EventsExecutor
 
+    from liver_sim.machine_stalls import Sentinels
     from liver_sim.nodes.run import spin
     from liver_sim.nodes.listener import NetworkListener
 
@@ -126,6 +128,8 @@ def run_network(plan: NetworkPlan, duration_s: float, log_dir: Path, progress=pr
     spinner.start()
     processes = None
     loads = []
+    sentinels = Sentinels(log_dir)
+    sentinels.start()
     try:
         processes = NodeProcesses(log_dir, progress)
         for label, args in plan.observers.items():
@@ -160,6 +164,7 @@ def run_network(plan: NetworkPlan, duration_s: float, log_dir: Path, progress=pr
         costs = process_costs(before, {label: process_counters(pid) for label, pid in pids.items()},
                               window[1] - window[0])
     finally:
+        sentinels.stop()
         for load in loads:
             load.kill()
             load.wait()
@@ -173,7 +178,7 @@ def run_network(plan: NetworkPlan, duration_s: float, log_dir: Path, progress=pr
         spinner.join(timeout=2.0)
         listener.destroy_node()
     processes.check_exit_codes()
-    return {**snapshot, "window_s": window, "process_costs": costs}
+    return {**snapshot, "window_s": window, "process_costs": costs, "machine_stalls": sentinels.stalls(window)}
 
 
 def wire_rates(snapshot: dict, label: str = "local_model") -> dict:
@@ -187,6 +192,18 @@ def wire_rates(snapshot: dict, label: str = "local_model") -> dict:
     nodes, forces = snapshot["nodes_published_s"], snapshot["force_published_s"][label]
     return {"physics": rate_figures(nodes[(nodes >= start) & (nodes <= end)], 150.0),
             "haptic": rate_figures(forces[(forces >= start) & (forces <= end)], 1000.0)}
+
+
+def wire_gaps(snapshot: dict, bound_s: float, label: str = "local_model") -> list[dict]:
+    """The gaps longer than `bound_s` between the `label` force commands published within the snapshot's
+    `window_s`, each with the part of it the machine stalled (machine_stalls.gaps_with_stalls; `start_s` from
+    the window's start)."""
+    from liver_sim.machine_stalls import gaps_with_stalls
+
+    start, end = snapshot["window_s"]
+    sent = snapshot["force_published_s"][label]
+    gaps = gaps_with_stalls(sent[(sent >= start) & (sent <= end)], bound_s, snapshot["machine_stalls"])
+    return [{**gap, "start_s": gap["start_s"] - start} for gap in gaps]
 
 
 def _recorder_ready(listener, log: Path) -> bool:

@@ -159,6 +159,11 @@ def test_demo_runs_the_network_and_writes_its_report(ros_domain_id, tmp_path):
         summary["diagnostics"])
     logs = {p.name for p in (tmp_path / "logs").iterdir()}
     assert {"liver_physics.log", "haptic_bridge.log", "liver_tool.log", "phantom_sim.log"} <= logs
+    # the machine's own stalls, measured beside the network, and every command gap over 5 ms with its share of them
+    assert {f"machine_stalls_cpu{cpu}.jsonl" for cpu in os.sched_getaffinity(0)} <= logs
+    assert summary["machine_stalls"]["count"] >= 0 and summary["machine_stalls"]["sentinel"]
+    assert all(gap["gap_s"] > 0.005 and 0.0 <= gap["machine_s"] <= gap["gap_s"] for gap in summary["haptic_gaps_over_5ms"])
+    assert "during a stall of the machine itself" in (tmp_path / "summary.md").read_text()
 
 
 def test_demo_on_a_users_mesh_in_centimetres_presses_it_where_it_lies(ros_env, tmp_path):
