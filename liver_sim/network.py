@@ -129,7 +129,6 @@ def run_network(plan: NetworkPlan, duration_s: float, log_dir: Path, progress=pr
     processes = None
     loads = []
     sentinels = Sentinels(log_dir)
-    sentinels.start()
     try:
         processes = NodeProcesses(log_dir, progress)
         for label, args in plan.observers.items():
@@ -151,6 +150,7 @@ def run_network(plan: NetworkPlan, duration_s: float, log_dir: Path, progress=pr
         for k in range(extra_load):
             loads.append(subprocess.Popen(CORE_BOUND_PROCESS))
             progress(f"  extra load {k + 1}: pid {loads[-1].pid}, one core busy at normal priority")
+        sentinels.start()  # once the network is up: they watch the window
         time.sleep(settle_s)
         pids = {label: process.pid for label, process in processes.processes.items()}
         pids.update({"listener": os.getpid(), **{f"extra_load_{k + 1}": p.pid for k, p in enumerate(loads)}})

@@ -274,9 +274,10 @@ def test_watchdog_zeroes_the_force_on_a_stale_model_and_recovers(rig_factory, ro
         rig.wait_for_force(EXPECTED_INSIDE, bridge)
         rig.model = LocalModel.invalid()  # DELETE markers: fresh news of no surface near the tool
         rig.wait_for_force(np.zeros(3), bridge)
+        # fresh news keeps the watchdog from going stale: it is ok, once a soft start after a loop gap (the
+        # machine's own stalls restart the output) has ramped up
         del rig.diagnostics[:]
-        rig.wait_until(lambda: rig.loop_status() is not None, "diagnostics", bridge)
-        assert rig.loop_status()["watchdog"] == "ok"
+        rig.wait_until(lambda: (rig.loop_status() or {}).get("watchdog") == "ok", "diagnostics: watchdog ok", bridge)
     finally:
         stop(bridge)
     assert_safe(rig.forces)
