@@ -1,8 +1,8 @@
 """Machine stalls: spans in which this machine ran none of its threads that were due, measured by a sentinel,
 so that a gap in a loop can be told from the product's own doing.
 
-On a virtual machine the host may not run a virtual CPU for milliseconds (measured here: 5-10 ms, on both
-CPUs at once, while the guest keeps them busy; a sentinel on an idle machine stays within ~1 ms). The
+On a virtual machine the host may not run a virtual CPU for milliseconds (measured here: 5-14 ms, often on both
+CPUs at once, on the idle VM as beside busy loops, some hours dozens of times in 10 s). The
 guest's clocks go on, so every loop on that CPU misses its deadlines and nothing inside the guest can tell
 why but a thread that should have run there: a sentinel, one process per CPU, pinned to it at SCHED_FIFO 99
 (above every loop), which sleeps to absolute deadlines SENTINEL_PERIOD_S apart and notes each wake-up later
@@ -10,7 +10,8 @@ than STALL_S. A stall is (last wake-up before it, late wake-up) on the time.mono
 overlapping a stall of either CPU was, for that overlap, the machine's.
 
 `python -m liver_sim.machine_stalls OUT CPU` runs the sentinel of CPU until SIGTERM or SIGINT, one JSON line
-[start_s, end_s] per stall in OUT.
+[start_s, end_s] per stall in OUT. Refused SCHED_FIFO, it would take the loops' own use of the CPU for the
+machine's stalls, so it says why and exits without writing OUT: no gap is then put down to the machine.
 """
 from __future__ import annotations
 
@@ -130,7 +131,8 @@ def main(argv: list[str] | None = None) -> int:
     os.sched_setaffinity(0, {int(args[1])})
     refused = set_realtime_priority(SENTINEL_PRIORITY)
     if refused:
-        print(f"machine_stalls: {refused}", file=sys.stderr)
+        print(f"machine_stalls: not watching CPU {args[1]}: {refused}", file=sys.stderr)
+        return 1
     stopping = []
     for signum in (signal.SIGTERM, signal.SIGINT):
         signal.signal(signum, lambda *_: stopping.append(True))
