@@ -17,7 +17,7 @@ package_name = 'liver_sim'
 
 # Executables (docs/contract.md, "Executables"): the command line and the four nodes.
 CONSOLE_SCRIPTS = [
-    'liver-sim = liver_sim.cli:main',
+    'liver-sim = liver_sim.cli.main:main',
     'liver_physics = liver_sim.nodes.physics_node:main',
     'haptic_bridge = liver_sim.nodes.bridge_node:main',
     'liver_tool = liver_sim.nodes.tool_node:main',

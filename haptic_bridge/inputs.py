@@ -11,8 +11,8 @@ import math
 
 import numpy as np
 
-from liver_sim.checks import positive, vector3
-from liver_sim.local_model import LocalModel
+from liver_sim.base.checks import positive, vector3
+from liver_sim.base.local_model import LocalModel
 
 #: A physics contact force above this (N) is not a contact force: refused, not clamped.
 IMPLAUSIBLE_FORCE_N = 100.0

@@ -4,9 +4,8 @@ the offline sessions (liver_sim.sessions), so both refuse the same values.
 The device map is not among them: the bridge takes the one `liver_tool` publishes on device_map_topic
 (latched), so the map that places the tool and the map that turns the force can never differ."""
 from haptic_bridge.safety import DEFAULT_MAX_FORCE_N, PHANTOM_MAX_FORCE_N
-from liver_sim.parameters import Param, realtime_priority_parameter
-from msg_defs.forces import FORCE_OUTPUT_FORMATS
-from msg_defs.topics import TOPICS
+from liver_sim.base.parameters import Param, realtime_priority_parameter
+from liver_sim.base.topic_names import FORCE_OUTPUT_FORMATS, TOPIC_NAMES
 
 MODES = ("plane", "sphere", "none")
 PARAMETERS = {
@@ -21,7 +20,10 @@ PARAMETERS = {
     "model_glide_s": Param(round(1.0 / 150.0, 4), "time over which a new local model replaces the rendered one "
                            "(s): the surface glides to its new place instead of jumping at each physics update; "
                            "about one physics period; 0: at once", 0.0, 0.1),
-    "damping_ns_per_m": Param(0.0, "local-model damping B on the penetration rate (N·s/m), added to the local model's force; 0 by default: the physics force the local model carries already holds Eq. 3's damping, so any B makes the rendered force differ from it at each update", 0.0, 10.0),
+    "damping_ns_per_m": Param(0.0, "local-model damping B on the penetration rate (N·s/m), added to the local "
+                              "model's force; 0 by default: the physics force the local model carries already "
+                              "holds Eq. 3's damping, so any B makes the rendered force differ from it at each "
+                              "update", 0.0, 10.0),
     "device_damping_ns_per_m": Param(0.5, "physical damping b of the device at the stylus (N·s/m), for the "
                                      "passivity check b > K·T/2 + B; PHANToM-like default, identify yours",
                                      0.0, 100.0),
@@ -51,13 +53,13 @@ PARAMETERS = {
                              "physics period, the T of its passivity check", 1.0, 5000.0),
     "drives_device": Param(True, "false: force_topic drives no device (a comparison bridge); a rendering that "
                            "is not passive is then reported, not refused"),
-    "device_map_topic": Param(TOPICS["device_map"].name, "the device map liver_tool publishes (latched); no "
+    "device_map_topic": Param(TOPIC_NAMES["device_map"], "the device map liver_tool publishes (latched); no "
                               "force is rendered before it arrives"),
     "force_output": Param("wrench_stamped", "message type of the force command", choices=FORCE_OUTPUT_FORMATS),
-    "force_topic": Param(TOPICS["servo_cf"].name, "force command to the device driver"),
-    "tool_pose_topic": Param(TOPICS["tool_pose"].name, "tool tip pose in the liver frame (PoseStamped)"),
-    "local_model_topic": Param(TOPICS["contact_plane"].name, "local model from the physics (Marker)"),
-    "tool_wrench_topic": Param(TOPICS["tool_wrench"].name, "physics contact force on the tool, liver frame "
+    "force_topic": Param(TOPIC_NAMES["servo_cf"], "force command to the device driver"),
+    "tool_pose_topic": Param(TOPIC_NAMES["tool_pose"], "tool tip pose in the liver frame (PoseStamped)"),
+    "local_model_topic": Param(TOPIC_NAMES["contact_plane"], "local model from the physics (Marker)"),
+    "tool_wrench_topic": Param(TOPIC_NAMES["tool_wrench"], "physics contact force on the tool, liver frame "
                                "(WrenchStamped); rendered with local_model: none"),
     "device_frame_id": Param("phantom_base", "frame_id of the force command"),
 }

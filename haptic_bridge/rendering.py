@@ -2,7 +2,7 @@
 passivity bounds.
 
 The physics (150 Hz) approximates the surface near the tool by a plane or a sphere
-(liver_sim.local_model); between its updates the haptic loop renders that primitive analytically.
+(liver_sim.base.local_model); between its updates the haptic loop renders that primitive analytically.
 Everything here works on 3-vectors in metres and newtons, without ROS.
 """
 from __future__ import annotations
@@ -11,16 +11,16 @@ from dataclasses import replace
 
 import numpy as np
 
-from liver_sim.checks import non_negative, positive
-from liver_sim.local_model import LocalModel
+from liver_sim.base.checks import non_negative, positive
+from liver_sim.base.local_model import LocalModel
 
 
 def blend(start: LocalModel | None, target: LocalModel, fraction: float) -> LocalModel:
     """The model `fraction` (clipped to 0..1) of the way from `start` to `target`.
 
     Plane: point and normal interpolated linearly (the normal renormalised); sphere: centre and
-    radius; the stiffness K when both carry one; the other fields are the target's. No `start`, an invalid model, models of different
-    kinds, or opposite normals give `target`.
+    radius; the stiffness K when both carry one; the other fields are the target's. No `start`, an invalid
+    model, models of different kinds, or opposite normals give `target`.
     """
     f = min(max(float(fraction), 0.0), 1.0)
     if f >= 1.0 or start is None or start.kind != target.kind or not (start.valid and target.valid):

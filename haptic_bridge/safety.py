@@ -13,7 +13,7 @@ import math
 
 import numpy as np
 
-from liver_sim.checks import positive
+from liver_sim.base.checks import positive
 
 #: The PHANToM's peak force (N); no configuration may exceed it.
 PHANTOM_MAX_FORCE_N = 3.3

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from liver_sim.checks import positive
+from liver_sim.base.checks import positive
 
 #: How many stall/error/stop events the supervisor keeps for diagnostics.
 EVENT_HISTORY = 32
@@ -128,7 +128,8 @@ class Supervisor:
 
     # -- the supervisor's side
     def check(self, now_s: float) -> None:
-        """Trip when the loop has ended or not ticked within `bound_s`; while tripped, repeat the zero every `bound_s`."""
+        """Trip when the loop has ended or not ticked within `bound_s`; while tripped, repeat the zero every
+        `bound_s`."""
         with self._lock:
             if self._closed:
                 return

@@ -12,8 +12,8 @@ import numpy as np
 
 from haptic_bridge.rendering import ModelGlide, contact_force, max_passive_stiffness
 from haptic_bridge.safety import SafeForceOutput
-from liver_sim.geometry.device_map import DeviceMap
-from liver_sim.local_model import LocalModel, penetration
+from liver_sim.base.geometry.device_map import DeviceMap
+from liver_sim.base.local_model import LocalModel, penetration
 
 _ZERO = np.zeros(3)
 _ZERO.setflags(write=False)

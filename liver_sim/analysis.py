@@ -1,7 +1,10 @@
-"""Figures of a run from what arrived when: loop rates, period errors, force smoothness (R4 of docs/paper.md, Fig. 8)."""
+"""Figures of a run from what arrived when: loop rates, period errors, force smoothness (R4 of docs/paper.md,
+Fig. 8)."""
 from __future__ import annotations
 
 import numpy as np
+
+from haptic_bridge.tick import BridgeTick
 
 #: A force at least this large (N) counts as contact.
 CONTACT_FORCE_N = 0.05
@@ -52,7 +55,6 @@ def held_wrench_baseline(tick_s: np.ndarray, wrench_arrival_s: np.ndarray, wrenc
     the wrenches and tool poses as they arrived (`wrench_arrival_s`, `pose_arrival_s`, s, ascending, on the
     same clock): the node's own BridgeTick with `bridge_parameters`, ages counted from those arrivals. No
     second live bridge needed, hence no second 1 kHz process competing for the cores."""
-    from haptic_bridge.tick import BridgeTick
 
     tick = BridgeTick({**bridge_parameters, "local_model": "none"})
     newest_wrench = np.searchsorted(wrench_arrival_s, tick_s, side="right") - 1

@@ -1,11 +1,12 @@
-"""The device → liver map (liver_sim.geometry.device_map.DeviceMap) as a labelled Float64MultiArray
+"""The device → liver map (liver_sim.base.geometry.device_map.DeviceMap) as a labelled Float64MultiArray
 (/tool/device_map), and back."""
 from __future__ import annotations
 
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
-from liver_sim.checks import positive
-from liver_sim.geometry.device_map import DeviceMap
+from liver_sim.base.checks import positive
+from liver_sim.base.geometry.device_map import DeviceMap
+from liver_sim.base.geometry.rotations import matrix_to_quaternion
 from msg_defs.finite import finite_array, unit_quaternion
 
 #: Labels and lengths of the device map's fields in its Float64MultiArray (layout.dim, in this order).
@@ -15,7 +16,6 @@ DEVICE_MAP_LAYOUT = (("rotation_xyzw", 4), ("translation_m", 3), ("scale", 1))
 def device_map_message(device_map: DeviceMap) -> Float64MultiArray:
     """The map p_liver = scale·R·p_device + t as [qx, qy, qz, qw, tx, ty, tz, scale], its fields labelled in
     layout.dim (TransformStamped has no scale; one message keeps the three consistent)."""
-    from liver_sim.geometry.rotations import matrix_to_quaternion
 
     data = [*matrix_to_quaternion(device_map.rotation).tolist(), *device_map.translation.tolist(), device_map.scale]
     dims = [MultiArrayDimension(label=label, size=size, stride=size) for label, size in DEVICE_MAP_LAYOUT]

@@ -6,13 +6,14 @@ import array
 
 import numpy as np
 from geometry_msgs.msg import Vector3, Wrench, WrenchStamped
+from rclpy.serialization import deserialize_message, serialize_message
 from std_msgs.msg import Float64MultiArray
 
+from liver_sim.base.topic_names import FORCE_OUTPUT_FORMATS
 from msg_defs import cdr
 from msg_defs.finite import finite_array, finite_floats
 from msg_defs.stamps import header_msg, stamp_parts
 
-FORCE_OUTPUT_FORMATS = ("wrench_stamped", "wrench", "vector3", "float64_array", "omni_feedback")
 _FORCE_TYPES = {"wrench_stamped": WrenchStamped, "wrench": Wrench, "vector3": Vector3,
                 "float64_array": Float64MultiArray}
 
@@ -72,7 +73,6 @@ def force_message_bytes(fmt: str, force, stamp, frame_id: str) -> bytes:
     """Serialized :func:`force_message`: WrenchStamped without a message object, other formats via rclpy."""
     if fmt == "wrench_stamped":
         return wrench_stamped_bytes(force, stamp, frame_id)
-    from rclpy.serialization import serialize_message
 
     return serialize_message(force_message(fmt, force, stamp, frame_id))
 
@@ -82,7 +82,6 @@ def force_from_bytes(fmt: str, data: bytes) -> np.ndarray:
     if fmt == "wrench_stamped":
         return np.array(finite_floats(cdr.decode(data, cdr.WRENCH_FIELDS, "WrenchStamped")[3][:3], (3,),
                                        "WrenchStamped force"))
-    from rclpy.serialization import deserialize_message
 
     return force_from_message(fmt, deserialize_message(data, force_message_type(fmt)))
 

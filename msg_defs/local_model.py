@@ -1,4 +1,4 @@
-"""The local model (liver_sim.local_model.LocalModel) as the /liver/contact_plane Marker, and back (from the
+"""The local model (liver_sim.base.local_model.LocalModel) as the /liver/contact_plane Marker, and back (from the
 message or from its bytes)."""
 from __future__ import annotations
 
@@ -6,9 +6,9 @@ import numpy as np
 from geometry_msgs.msg import Vector3
 from visualization_msgs.msg import Marker
 
-from liver_sim.checks import positive
-from liver_sim.geometry.rotations import quaternion_from_z_axis, quaternion_to_matrix
-from liver_sim.local_model import LocalModel
+from liver_sim.base.checks import positive
+from liver_sim.base.geometry.rotations import quaternion_from_z_axis, quaternion_to_matrix
+from liver_sim.base.local_model import LocalModel
 from msg_defs import cdr
 from msg_defs.finite import colour_msg, finite_floats, unit_quaternion
 from msg_defs.poses import pose_msg

@@ -6,6 +6,7 @@ import struct
 
 import numpy as np
 from geometry_msgs.msg import Point, Pose, Quaternion, Vector3
+from rclpy.serialization import serialize_message
 from shape_msgs.msg import Mesh, MeshTriangle
 from visualization_msgs.msg import Marker
 
@@ -77,7 +78,6 @@ def skin_marker_serialized(positions, skin, stamp, frame_id: str, colour=SKIN_CO
     written over it as one numpy block (a sequence of Point is a uint32 count, padding to 8 bytes,
     then x, y, z doubles). Loads rclpy's serializer (no node, no context needed).
     """
-    from rclpy.serialization import serialize_message
 
     corners = _corners(positions, skin)
     marker = _skin_marker_without_points(stamp, frame_id, colour)

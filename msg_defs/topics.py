@@ -10,10 +10,13 @@ from functools import cached_property
 
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, WrenchStamped
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import PointCloud2
 from shape_msgs.msg import Mesh
 from std_msgs.msg import Float64MultiArray
 from visualization_msgs.msg import Marker
+
+from liver_sim.base.topic_names import TOPIC_NAMES
 
 
 @dataclass(frozen=True)
@@ -31,7 +34,6 @@ class Topic:
     @cached_property
     def qos(self):
         """The rclpy QoSProfile (rclpy is imported here, so that the names and types need no rclpy)."""
-        from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
         return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=self.depth,
                           reliability=ReliabilityPolicy.RELIABLE if self.reliable else ReliabilityPolicy.BEST_EFFORT,
@@ -54,25 +56,20 @@ def catch_up_depth(rate_hz: float, seconds: float = CATCH_UP_S) -> int:
 
 
 TOPICS = {
-    "nodes": Topic("/liver/nodes", PointCloud2, catch_up_depth(150.0), transient_local=True),
+    "nodes": Topic(TOPIC_NAMES["nodes"], PointCloud2, catch_up_depth(150.0), transient_local=True),
     # at start and after a tear or cut, at most one per 150 Hz frame
-    "surface": Topic("/liver/surface", Mesh, catch_up_depth(150.0), transient_local=True),
-    "marker": Topic("/liver/marker", Marker, catch_up_depth(30.0), transient_local=True),
-    "contact_plane": Topic("/liver/contact_plane", Marker, catch_up_depth(150.0), transient_local=True),
-    "tool_wrench": Topic("/liver/tool_wrench", WrenchStamped, catch_up_depth(150.0), transient_local=True),
-    "tool_pose": Topic("/tool/pose", PoseStamped, 1, reliable=False),
-    "measured_cp": Topic("/phantom/measured_cp", PoseStamped, 1, reliable=False),
-    "servo_cf": Topic("/phantom/servo_cf", None, catch_up_depth(1000.0), transient_local=True),
+    "surface": Topic(TOPIC_NAMES["surface"], Mesh, catch_up_depth(150.0), transient_local=True),
+    "marker": Topic(TOPIC_NAMES["marker"], Marker, catch_up_depth(30.0), transient_local=True),
+    "contact_plane": Topic(TOPIC_NAMES["contact_plane"], Marker, catch_up_depth(150.0), transient_local=True),
+    "tool_wrench": Topic(TOPIC_NAMES["tool_wrench"], WrenchStamped, catch_up_depth(150.0), transient_local=True),
+    "tool_pose": Topic(TOPIC_NAMES["tool_pose"], PoseStamped, 1, reliable=False),
+    "measured_cp": Topic(TOPIC_NAMES["measured_cp"], PoseStamped, 1, reliable=False),
+    "servo_cf": Topic(TOPIC_NAMES["servo_cf"], None, catch_up_depth(1000.0), transient_local=True),
     # the device map liver_tool uses, for the bridge (msg_defs.device_map.device_map_message): published once
-    "device_map": Topic("/tool/device_map", Float64MultiArray, 1, transient_local=True),
+    "device_map": Topic(TOPIC_NAMES["device_map"], Float64MultiArray, 1, transient_local=True),
     # 1 Hz per node
-    "diagnostics": Topic("/diagnostics", DiagnosticArray, catch_up_depth(1.0), transient_local=True),
+    "diagnostics": Topic(TOPIC_NAMES["diagnostics"], DiagnosticArray, catch_up_depth(1.0), transient_local=True),
 }
-
-#: Force topic of a baseline bridge (`local_model: none`) beside the normal one: the Fig. 8 comparison
-#: in `liver-sim bench loop`; it drives nothing.
-BASELINE_FORCE_TOPIC = "/phantom/servo_cf_without_local_model"
-
 
 def batch_qos(topic: Topic, depth: int = 1000):
     """`topic`'s reliability and durability with a keep-last `depth` history (a QoSProfile): for a subscriber

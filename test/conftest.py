@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from liver_sim.processes import use_dds_profile
+from liver_sim.base.process_settings import use_dds_profile
 
 os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
 os.environ.pop("ROS_STATIC_PEERS", None)

@@ -56,7 +56,7 @@ def test_the_offline_baseline_holds_the_newest_physics_force_between_frames():
 def test_process_costs_are_shares_of_a_core_and_switches_per_second():
     import os
 
-    from liver_sim.network import process_costs, process_counters
+    from liver_sim.running.network import process_costs, process_counters
 
     now = process_counters(os.getpid())
     assert set(now) == {"cpu_s", "voluntary", "involuntary"} and now["cpu_s"] > 0.0

@@ -2,11 +2,13 @@
 import json
 
 import pytest
-
-from liver_sim.bench import TOPOLOGY_TARGETS, run_physics_bench, run_topology_bench
-from liver_sim.demo import PLOTTED_FIGURES, DemoMesh, run_offline_demo
-from liver_sim.mesh.tetmesh import MeshError
 from meshes import write_sphere_surface
+
+from liver_sim.bench.physics import run_physics_bench
+from liver_sim.bench.topology import TOPOLOGY_TARGETS, run_topology_bench
+from liver_sim.mesh.tetmesh import MeshError
+from liver_sim.studies.demo_liver import DemoMesh
+from liver_sim.studies.demo_offline import PLOTTED_FIGURES, run_offline_demo
 
 PNG = b"\x89PNG\r\n\x1a\n"
 

@@ -19,9 +19,9 @@ from geometry_msgs.msg import PoseStamped
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.signals import SignalHandlerOptions
 
-from liver_sim.geometry.device_map import DeviceMap
-from liver_sim.geometry.rotations import quaternion_to_matrix
-from liver_sim.local_model import LocalModel
+from liver_sim.base.geometry.device_map import DeviceMap
+from liver_sim.base.geometry.rotations import quaternion_to_matrix
+from liver_sim.base.local_model import LocalModel
 from msg_defs.device_map import device_map_message
 from msg_defs.forces import force_from_message, force_message_type, wrench_stamped
 from msg_defs.local_model import local_model_marker

@@ -9,7 +9,7 @@ import meshio
 import numpy as np
 import pytest
 
-from liver_sim.cli import main
+from liver_sim.cli.main import main
 from liver_sim.mesh.io import load_mesh
 from liver_sim.mesh.liver_shape import default_liver
 
@@ -166,7 +166,7 @@ def test_module_entry_point_in_a_subprocess(prism, garbage):
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [str(REPO), os.environ.get("PYTHONPATH")]))}
 
     def run(*args):
-        return subprocess.run([sys.executable, "-m", "liver_sim.cli", "mesh", "info", *map(str, args)],
+        return subprocess.run([sys.executable, "-m", "liver_sim.cli.main", "mesh", "info", *map(str, args)],
                               capture_output=True, text=True, env=env, cwd=REPO, timeout=120)
 
     good = run(prism, "--json")

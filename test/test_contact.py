@@ -5,10 +5,10 @@ import numpy as np
 import pytest
 from meshes import box_mesh
 
+from liver_sim.base.local_model import penetration
 from liver_sim.physics.contact import ToolPose, ToolShape, candidate_nodes, candidate_triangles, fit_sphere
-from liver_sim.local_model import penetration
 from liver_sim.physics.model import LiverModel
-from liver_sim.physics.params import ModelParams
+from liver_sim.physics.model_params import ModelParams
 
 STIFFNESS = 250.0
 DEPTH = 0.002
@@ -145,10 +145,10 @@ def test_bad_tool_shapes_are_refused_by_name(kwargs, name):
 def test_the_local_stiffness_refreshed_every_few_frames_stays_near_a_fresh_solve():
     """K is solved every REFRESH_FRAMES frames and reused in between: over a press and slide on the
     default liver it stays within 10 % of K solved afresh at each frame (a twin model)."""
+    from liver_sim.mesh.landmarks import press_anchor
     from liver_sim.mesh.liver_shape import default_liver
     from liver_sim.physics.local_stiffness import REFRESH_FRAMES
-    from liver_sim.scenarios import press_anchor
-    from liver_sim.tool_scripts import ScriptSettings, make_script
+    from liver_sim.tool.scripts import ScriptSettings, make_script
 
     mesh = default_liver()
     cached, fresh = LiverModel(mesh, ModelParams()), LiverModel(mesh, ModelParams())

@@ -1,18 +1,19 @@
-"""Cutting along the tool path (paper §3.5; P14, R5 of docs/paper.md): the cut follows the path, the mesh stays sound."""
+"""Cutting along the tool path (paper §3.5; P14, R5 of docs/paper.md): the cut follows the path, the mesh stays
+sound."""
 import numpy as np
 import pytest
 from meshes import assert_sound, box_mesh, components, kinetic_energy_j
 
-from liver_sim.local_model import LocalModel
+from liver_sim.base.local_model import LocalModel
 from liver_sim.mesh import TetMesh
+from liver_sim.mesh.landmarks import upper_skin_path
 from liver_sim.mesh.liver_shape import default_liver
 from liver_sim.mesh.tetmesh import signed_volumes
 from liver_sim.physics.cutting import SNAP_FRACTION, Ribbon, cut_along_path, default_blade_direction
 from liver_sim.physics.model import LiverModel
-from liver_sim.physics.params import ModelParams
+from liver_sim.physics.model_params import ModelParams
 from liver_sim.physics.springs import stable_time_step
 from liver_sim.physics.tool_use import ToolUse
-from liver_sim.scenarios import upper_skin_path
 
 DOWN = np.array([0.0, 0.0, -1.0])
 SLAB_SPACING_M = 0.01

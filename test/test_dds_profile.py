@@ -1,4 +1,4 @@
-"""The product's Fast DDS profile (config/fastdds.xml, liver_sim.processes.use_dds_profile): every process loads
+"""The product's Fast DDS profile (config/fastdds.xml, liver_sim.running.launcher.use_dds_profile): every process loads
 it unless the environment names another, and under it a participant's shared-memory ports make an opener's
 health check wait at most 33 ms instead of Fast DDS's 333 ms (the check holds the opener's send lock)."""
 from __future__ import annotations
@@ -9,14 +9,14 @@ import subprocess
 import sys
 from pathlib import Path
 
-from liver_sim.processes import DDS_PROFILE_VARIABLE, config_dir, use_dds_profile
+from liver_sim.base.process_settings import DDS_PROFILE_VARIABLE, config_dir, use_dds_profile
 
 #: A participant that reports, for each shared-memory port it listens on in its domain's port range, the
 #: health-check timeout and the listener's wait period that Fast DDS 2.14 stored in the port
 #: (SharedMemGlobal::PortNode: port_id, num_listeners, healthy_check_timeout_ms, port_wait_timeout_ms).
 PROBE = r"""
 import json, os, struct, sys
-from liver_sim.processes import use_dds_profile
+from liver_sim.base.process_settings import use_dds_profile
 use_dds_profile()
 import rclpy
 rclpy.init()

@@ -1,4 +1,5 @@
-"""The embedded default liver (paper P1 of docs/paper.md: 1151 tets, 370 skin triangles): size, quality, reproducibility."""
+"""The embedded default liver (paper P1 of docs/paper.md: 1151 tets, 370 skin triangles): size, quality,
+reproducibility."""
 import os
 import subprocess
 import sys

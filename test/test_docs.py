@@ -12,11 +12,11 @@ import yaml
 
 from haptic_bridge.parameters import PARAMETERS as BRIDGE
 from haptic_bridge.tick import RUNTIME_PARAMETERS
-from liver_sim.geometry.device_map import DEVICE_MAP_PARAMETERS
-from liver_sim.phantom import PARAMETERS as PHANTOM
-from liver_sim.physics.pipeline import PARAMETERS as PHYSICS
-from liver_sim.tool_parameters import PARAMETERS as TOOL
-from liver_sim.tool_scripts import SCRIPT_PARAMETERS
+from liver_sim.base.geometry.device_map import DEVICE_MAP_PARAMETERS
+from liver_sim.phantom.parameters import PARAMETERS as PHANTOM
+from liver_sim.physics.parameters import PARAMETERS as PHYSICS
+from liver_sim.tool.parameters import PARAMETERS as TOOL
+from liver_sim.tool.scripts import SCRIPT_PARAMETERS
 from msg_defs.topics import TOPICS
 
 ROOT = Path(__file__).resolve().parent.parent

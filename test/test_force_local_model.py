@@ -7,13 +7,13 @@ import pytest
 
 from haptic_bridge.parameters import PARAMETERS as BRIDGE_PARAMETERS
 from haptic_bridge.tick import BridgeTick, rendered_stiffness
-from liver_sim.local_model import penetration
+from liver_sim.base.local_model import penetration
+from liver_sim.mesh.landmarks import press_anchor
 from liver_sim.mesh.liver_shape import default_liver
 from liver_sim.physics.contact import ToolPose
 from liver_sim.physics.model import LiverModel
-from liver_sim.physics.params import ModelParams
-from liver_sim.scenarios import press_anchor
-from liver_sim.tool_scripts import ScriptSettings, make_script
+from liver_sim.physics.model_params import ModelParams
+from liver_sim.tool.scripts import ScriptSettings, make_script
 from msg_defs.local_model import local_model_marker, marker_to_local_model
 from msg_defs.stamps import stamp_from_seconds
 
@@ -102,7 +102,7 @@ def test_between_updates_the_command_follows_the_physics_force(demo_run):
 
 
 def test_the_stiffness_travels_in_the_markers_text_and_bad_values_are_refused_by_name():
-    from liver_sim.local_model import LocalModel
+    from liver_sim.base.local_model import LocalModel
 
     plane = LocalModel("plane", True, [0.0, 0.0, 0.1], [0.0, 0.0, 1.0], [0.0, 0.0, 0.1], 0.0, 0.002, True, 34.5)
     marker = local_model_marker(plane, stamp_from_seconds(0.0), "liver", 0.05)
@@ -118,7 +118,7 @@ def test_the_stiffness_travels_in_the_markers_text_and_bad_values_are_refused_by
 
 
 def test_the_bridge_renders_the_models_stiffness_capped_at_its_own():
-    from liver_sim.local_model import LocalModel
+    from liver_sim.base.local_model import LocalModel
 
     bridge = {name: spec.default for name, spec in BRIDGE_PARAMETERS.items()}
     tip = np.array([0.0, 0.0, bridge["tool_radius_m"] - 0.002])  # 2 mm into the plane z = 0

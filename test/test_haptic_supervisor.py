@@ -1,7 +1,6 @@
 """The haptic core's guards without ROS: the supervisor and its gap log, soft start, run-time limits,
 input plausibility, the no-latch depth rate and passivity in every mode."""
 import math
-import threading
 import time
 
 import numpy as np
@@ -12,8 +11,8 @@ from haptic_bridge.parameters import PARAMETERS
 from haptic_bridge.safety import SafeForceOutput
 from haptic_bridge.supervisor import GapLog, Supervisor
 from haptic_bridge.tick import BridgeTick, DepthRate, check_passivity, checked_change, passivity_problem
-from liver_sim.geometry.device_map import DeviceMap
-from liver_sim.local_model import LocalModel
+from liver_sim.base.geometry.device_map import DeviceMap
+from liver_sim.base.local_model import LocalModel
 
 DEFAULTS = {name: spec.default for name, spec in PARAMETERS.items()}
 ZERO = "zero"

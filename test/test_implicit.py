@@ -4,15 +4,15 @@ import numpy as np
 import pytest
 from meshes import box_mesh
 
+from liver_sim.mesh.landmarks import press_anchor
 from liver_sim.mesh.liver_shape import default_liver
 from liver_sim.physics import implicit_kernels, kernels, pcg, reference
 from liver_sim.physics.contact import ToolPose, ToolShape, surface_contacts, tool_state
 from liver_sim.physics.implicit import Contacts, ImplicitEuler
 from liver_sim.physics.model import LiverModel
-from liver_sim.physics.params import ModelParams
+from liver_sim.physics.model_params import ModelParams
 from liver_sim.physics.springs import build_springs
-from liver_sim.scenarios import press_anchor
-from liver_sim.tool_scripts import ScriptSettings, make_script
+from liver_sim.tool.scripts import ScriptSettings, make_script
 
 FRAME_S = 1.0 / 150.0
 
@@ -134,7 +134,6 @@ def test_stable_at_one_step_per_frame_where_symplectic_euler_diverges(liver):
     assert np.isfinite(x).all() and np.abs(x - liver.mesh.points).max() < 0.002
     assert np.abs(v).max() < 1e-3
     xe, ve = perturbed(liver)
-    springs = liver.springs
     settings = kernels.StepSettings(FRAME_S, 30, p.environment_damping_per_s, np.zeros(3), True)
     no_tool = tool_state(liver.tool, None, None, p, 0.0, xe, liver.mesh.skin)
     work = kernels.WorkArrays(np.zeros_like(xe), np.zeros((1, len(xe), 3)), False)

@@ -5,9 +5,9 @@ import numpy as np
 import pytest
 
 from haptic_bridge.rendering import ModelGlide, blend, contact_force, max_passive_stiffness, passivity_damping_min
-from liver_sim.geometry.device_map import DeviceMap
-from liver_sim.geometry.rotations import quaternion_to_matrix
-from liver_sim.local_model import LocalModel, penetration
+from liver_sim.base.geometry.device_map import DeviceMap
+from liver_sim.base.geometry.rotations import quaternion_to_matrix
+from liver_sim.base.local_model import LocalModel, penetration
 
 PLANE = LocalModel.plane(point=[0.0, 0.0, 0.1], normal=[0.0, 0.0, 2.0])  # surface z = 0.1 m, outward +z
 SPHERE = LocalModel.sphere(centre=[0.1, 0.0, 0.0], radius_m=0.05)

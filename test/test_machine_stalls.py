@@ -1,4 +1,4 @@
-"""The machine-stall sentinel (liver_sim.machine_stalls): what it notes, and how a loop's gap is split between
+"""The machine-stall sentinel (liver_sim.running.machine_stalls): what it notes, and how a loop's gap is split between
 the machine and the product."""
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import json
 import numpy as np
 import pytest
 
-from liver_sim.machine_stalls import SENTINEL_PERIOD_S, STALL_S, gaps_with_stalls, read_stalls, watch
+from liver_sim.running.machine_stalls import SENTINEL_PERIOD_S, STALL_S, gaps_with_stalls, read_stalls, watch
 
 
 def test_the_sentinel_notes_a_late_wake_up_from_its_last_one_and_nothing_else():

@@ -10,9 +10,9 @@ from liver_sim.mesh.liver_shape import build_liver, default_liver
 from liver_sim.physics import reference
 from liver_sim.physics.implicit import ImplicitEuler
 from liver_sim.physics.materials import edge_measures, equivalent_properties, network_young_modulus_pa
-from liver_sim.physics.params import CUBIC_RATIO, ModelParams, TissueProperties
+from liver_sim.physics.model_params import CUBIC_RATIO, ModelParams, TissueProperties
 from liver_sim.physics.springs import build_springs
-from liver_sim.traction import cylinder_mesh
+from liver_sim.studies.traction import cylinder_mesh
 
 
 def material_springs(mesh, tissue=TissueProperties()):
@@ -133,7 +133,8 @@ def test_stretch_is_mesh_independent_with_material_springs(fine_liver):
 
 def test_membrane_patch_has_capsule_modulus_and_poisson_third():
     # a flat equilateral triangle network with k·l0² = Y·A_tri per triangle edge (the capsule's rule), pulled
-    # by 1 N over its width in two lattice directions 90° apart: Y and ν = 1/3 in the middle (2-D derivation of the docstring)
+    # by 1 N over its width in two lattice directions 90° apart: Y and ν = 1/3 in the middle (2-D derivation of the
+    # docstring)
     from scipy.sparse import coo_matrix
     from scipy.sparse.linalg import spsolve
     from scipy.spatial import Delaunay

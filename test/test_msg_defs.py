@@ -14,10 +14,18 @@ from shape_msgs.msg import Mesh
 from std_msgs.msg import Float64MultiArray
 from visualization_msgs.msg import Marker
 
-from liver_sim.geometry.rotations import quaternion_from_z_axis, quaternion_to_matrix
+from liver_sim.base.geometry.rotations import quaternion_from_z_axis, quaternion_to_matrix
 from msg_defs.device_map import device_map_from_message, device_map_message
-from msg_defs.forces import (FORCE_OUTPUT_FORMATS, force_from_bytes, force_from_message, force_message,
-                             force_message_bytes, force_message_type, wrench_stamped, wrench_stamped_bytes)
+from msg_defs.forces import (
+    FORCE_OUTPUT_FORMATS,
+    force_from_bytes,
+    force_from_message,
+    force_message,
+    force_message_bytes,
+    force_message_type,
+    wrench_stamped,
+    wrench_stamped_bytes,
+)
 from msg_defs.point_cloud import nodes_to_pointcloud2, pointcloud2_to_nodes
 from msg_defs.poses import pose_from_bytes, pose_stamped, pose_stamped_bytes, pose_to_arrays
 from msg_defs.skin import mesh_msg_to_arrays, skin_marker, skin_marker_serialized, skin_mesh_msg
@@ -371,7 +379,7 @@ def test_pointcloud_and_serialized_marker_cross_loopback_dds(ros_domain_id, rng)
 # ---------------------------------------------------------------- the device map, quaternions at the limits
 
 def test_device_map_round_trips_and_refuses_a_bad_message():
-    from liver_sim.geometry.device_map import DeviceMap
+    from liver_sim.base.geometry.device_map import DeviceMap
 
     original = DeviceMap([0.0, math.sin(0.4), 0.0, math.cos(0.4)], [0.1, -0.2, 0.3], 0.5)
     message = device_map_message(original)

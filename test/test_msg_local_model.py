@@ -7,9 +7,14 @@ from rclpy.serialization import deserialize_message, serialize_message
 from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import Marker, UVCoordinate
 
-from liver_sim.local_model import LocalModel
-from msg_defs.local_model import (PLANE_THICKNESS_M, STIFFNESS_KEY, local_model_from_bytes, local_model_marker,
-                                  marker_to_local_model)
+from liver_sim.base.local_model import LocalModel
+from msg_defs.local_model import (
+    PLANE_THICKNESS_M,
+    STIFFNESS_KEY,
+    local_model_from_bytes,
+    local_model_marker,
+    marker_to_local_model,
+)
 
 AXES = [(0, 0, 1), (0, 0, -1), (1, 0, 0), (-1, 0, 0), (0, 1, 0), (0.3, -0.2, -0.9)]
 

@@ -10,11 +10,12 @@ import rclpy
 from rclpy.experimental import EventsExecutor
 from sensor_msgs.msg import PointCloud2
 
+from liver_sim.base.process_settings import command_line
 from liver_sim.mesh.liver_shape import default_liver
-from liver_sim.network import closed_loop_plan, default_anchor, run_network
 from liver_sim.nodes.run import spin
-from liver_sim.nodes.listener import NetworkListener
-from liver_sim.processes import NodeProcesses, command_line
+from liver_sim.running.launcher import NodeProcesses
+from liver_sim.running.listener import NetworkListener
+from liver_sim.running.network import closed_loop_plan, default_anchor, run_network
 from msg_defs.point_cloud import nodes_to_pointcloud2
 from msg_defs.poses import pose_stamped
 from msg_defs.topics import TOPICS
@@ -148,7 +149,8 @@ def test_out_of_range_parameter_is_refused_by_name(ros_env, executable, paramete
 
 
 def test_demo_runs_the_network_and_writes_its_report(ros_domain_id, tmp_path):
-    from liver_sim.demo import PLOTTED_FIGURES, run_demo
+    from liver_sim.studies.demo import run_demo
+    from liver_sim.studies.demo_offline import PLOTTED_FIGURES
 
     summary = run_demo(tmp_path, duration_s=3.0, progress=lambda line: None)
     for name in PLOTTED_FIGURES + ("summary.json", "summary.md"):
@@ -162,7 +164,8 @@ def test_demo_runs_the_network_and_writes_its_report(ros_domain_id, tmp_path):
     # the machine's own stalls, measured beside the network, and every command gap over 5 ms with its share of them
     assert {f"machine_stalls_cpu{cpu}.jsonl" for cpu in os.sched_getaffinity(0)} <= logs
     assert summary["machine_stalls"]["count"] >= 0 and summary["machine_stalls"]["sentinel"]
-    assert all(gap["gap_s"] > 0.005 and 0.0 <= gap["machine_s"] <= gap["gap_s"] for gap in summary["haptic_gaps_over_5ms"])
+    assert all(gap["gap_s"] > 0.005 and 0.0 <= gap["machine_s"] <= gap["gap_s"]
+               for gap in summary["haptic_gaps_over_5ms"])
     assert "during a stall of the machine itself" in (tmp_path / "summary.md").read_text()
 
 
@@ -170,13 +173,14 @@ def test_demo_on_a_users_mesh_in_centimetres_presses_it_where_it_lies(ros_env, t
     import json
     import sys
 
-    from liver_sim.demo import PLOTTED_FIGURES
     from meshes import write_sphere_surface
+
+    from liver_sim.studies.demo_offline import PLOTTED_FIGURES
 
     # 12 cm across, 0.37 m from the liver frame's origin: the default liver's press point misses it
     mesh = write_sphere_surface(tmp_path / "organ_cm.stl", 6.0, centre=(30.0, -20.0, 10.0), subdivisions=2)
     out = tmp_path / "demo"
-    result = subprocess.run([sys.executable, "-m", "liver_sim.cli", "demo", "--mesh", str(mesh), "--scale", "0.01",
+    result = subprocess.run([sys.executable, "-m", "liver_sim.cli.main", "demo", "--mesh", str(mesh), "--scale", "0.01",
                              "--duration", "5", "--out", str(out)], env=ros_env, capture_output=True, text=True,
                             timeout=300)
     assert result.returncode == 0, result.stdout[-2000:] + result.stderr[-2000:]
@@ -206,7 +210,7 @@ def test_the_physics_node_refuses_a_unitless_mesh_at_start_with_the_scale_to_use
 
 @pytest.mark.parametrize("scenario", ["tear", "cut"])
 def test_tearing_and_cutting_change_the_mesh_and_every_subscriber_follows(ros_domain_id, tmp_path, scenario):
-    from liver_sim.demo import TOPOLOGY_FIGURES, run_demo
+    from liver_sim.studies.demo import TOPOLOGY_FIGURES, run_demo
 
     summary = run_demo(tmp_path, progress=lambda line: None, scenario=scenario)
     assert summary["topology_changes"] >= 1
@@ -258,7 +262,8 @@ def test_sigterm_to_the_demo_stops_the_nodes_it_started(ros_env, tmp_path):
     import sys
     from pathlib import Path
 
-    demo = subprocess.Popen([sys.executable, "-m", "liver_sim.cli", "demo", "--duration", "60", "--out", str(tmp_path)],
+    demo = subprocess.Popen([sys.executable, "-m", "liver_sim.cli.main", "demo", "--duration", "60",
+                             "--out", str(tmp_path)],
                             env=ros_env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     children_file = Path(f"/proc/{demo.pid}/task/{demo.pid}/children")
     deadline = time.monotonic() + 60.0
@@ -277,7 +282,7 @@ def test_sigterm_to_the_demo_stops_the_nodes_it_started(ros_env, tmp_path):
 def test_loop_bench_reports_every_figure_against_its_target(ros_domain_id, tmp_path):
     import json
 
-    from liver_sim.bench import LOOP_TARGETS, run_loop_bench
+    from liver_sim.bench.loop import LOOP_TARGETS, run_loop_bench
 
     report = json.loads(json.dumps(run_loop_bench(duration_s=3.0, log_dir=tmp_path)))
     assert set(report["met"]) == set(LOOP_TARGETS) and report["machine"]
@@ -300,7 +305,8 @@ def test_loop_bench_reports_every_figure_against_its_target(ros_domain_id, tmp_p
     for name in ("liver_physics: loop", "haptic_bridge: loop", "liver_tool: loop", "phantom_sim: loop"):
         assert int(loops[name]["gc_frozen_objects"]) > 0, name
         assert loops[name]["gc_automatic_full_collection"] == "False", name
-    assert "largest_gap_cause" in loops["haptic_bridge: loop"] and "gaps_blocked_in_the_step" in loops["haptic_bridge: loop"]
+    bridge_loop = loops["haptic_bridge: loop"]
+    assert "largest_gap_cause" in bridge_loop and "gaps_blocked_in_the_step" in bridge_loop
     # a sentinel measured the machine's own stalls beside the network, and every long command gap is split
     stalls = results["machine_stalls"]
     assert stalls["count"] >= 0 and stalls["total_s"] >= stalls["largest_s"] >= 0.0

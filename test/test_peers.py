@@ -1,4 +1,4 @@
-"""The MuJoCo peer (liver_sim.peers): the flex it builds from our mesh, its stability check, and the clear
+"""The MuJoCo peer (liver_sim.studies.peers): the flex it builds from our mesh, its stability check, and the clear
 error when the optional extra is not installed."""
 import sys
 
@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 from meshes import box_mesh
 
-from liver_sim import cli, peers
+from liver_sim.cli import main as cli
+from liver_sim.studies import peers
 
 E_PA, NU, RHO, DAMPING_S = 5000.0, 0.25, 1060.0, 0.1
 
@@ -74,7 +75,7 @@ def test_an_explicit_step_of_a_whole_frame_is_reported_unstable(box):
 
 def test_bench_hook_reports_the_peer_and_the_ratio(box):
     pytest.importorskip("mujoco")
-    from liver_sim.bench import peer_figures
+    from liver_sim.bench.physics import peer_figures
 
     mesh, _ = box
     figures = peer_figures(mesh, liver_sim_ms_per_frame=2.0)

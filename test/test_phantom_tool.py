@@ -5,11 +5,11 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from liver_sim.geometry.device_map import DeviceMap
-from liver_sim.geometry.rotations import matrix_to_quaternion, quaternion_to_matrix
+from liver_sim.base.geometry.device_map import DeviceMap
+from liver_sim.base.geometry.rotations import matrix_to_quaternion, quaternion_to_matrix
 from liver_sim.mesh.liver_shape import default_liver
-from liver_sim.phantom import PhantomSim, StylusParams
-from liver_sim.tool_scripts import SCRIPT_NAMES, ScriptSettings, make_script
+from liver_sim.phantom.device import PhantomSim, StylusParams
+from liver_sim.tool.scripts import SCRIPT_NAMES, ScriptSettings, make_script
 
 SETTINGS = ScriptSettings(anchor_m=(0.01, -0.02, 0.05), tool_radius_m=0.015, depth_m=0.012, clearance_m=0.008,
                           slide_m=0.03, approach_s=0.4, press_s=0.6, hold_s=0.3, slide_s=0.5, withdraw_s=0.2,

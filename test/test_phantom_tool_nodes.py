@@ -295,8 +295,8 @@ def test_bad_parameters_end_the_node_with_status_2(ros_env, executable, params, 
 
 def set_parameter(ros: Ros, node: str, name: str, v, process: subprocess.Popen):
     """The SetParametersResult of setting `name` on `node` through its parameter service."""
-    from rclpy.parameter import Parameter
     from rcl_interfaces.srv import SetParameters
+    from rclpy.parameter import Parameter
 
     client = ros.node.create_client(SetParameters, f"/{node}/set_parameters")
     assert client.wait_for_service(timeout_sec=WAIT_S)

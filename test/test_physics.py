@@ -8,7 +8,7 @@ from meshes import box_mesh, kinetic_energy_j
 from liver_sim.physics import kernels, reference
 from liver_sim.physics.contact import ToolPose
 from liver_sim.physics.model import LiverModel, default_fixed_nodes
-from liver_sim.physics.params import FIG2_LAW, ModelParams, SpringLaw
+from liver_sim.physics.model_params import FIG2_LAW, ModelParams, SpringLaw
 from liver_sim.physics.springs import build_springs
 
 

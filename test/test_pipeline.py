@@ -4,16 +4,16 @@ import sys
 
 import numpy as np
 import pytest
-
 from meshes import assert_same_state, model_state
 
 from liver_sim.mesh.io import load_mesh
+from liver_sim.mesh.landmarks import press_anchor
 from liver_sim.mesh.tetmesh import MeshError
 from liver_sim.physics import model as model_module
 from liver_sim.physics.model import LiverModel
-from liver_sim.physics.pipeline import PARAMETERS, FramePipeline, build_model
-from liver_sim.scenarios import press_anchor
-from liver_sim.tool_scripts import ScriptSettings, make_script
+from liver_sim.physics.parameters import PARAMETERS, build_model
+from liver_sim.physics.pipeline import FramePipeline
+from liver_sim.tool.scripts import ScriptSettings, make_script
 
 
 def values(**changes):

@@ -1,8 +1,8 @@
 """RateLoop's schedule, on a simulated clock: absolute deadlines, catching up a short stall, skipping a long one."""
 import pytest
 
+from liver_sim.base.process_settings import set_realtime_priority
 from liver_sim.nodes.rate_loop import CATCH_UP_PERIODS, RateLoop
-from liver_sim.processes import set_realtime_priority
 
 PERIOD_S = 0.001
 
@@ -119,7 +119,8 @@ def test_a_gap_gets_its_cause_named_from_what_the_thread_did_meanwhile():
     # processes spinning on the same core make the thread wait for them (another thread would only hold the
     # GIL); two of them, so that the thread waits for about two thirds of the gap, well past RUNQUEUE_SHARE
     core = min(os.sched_getaffinity(0))
-    hogs = [subprocess.Popen([sys.executable, "-c", f"import os; os.sched_setaffinity(0, {{{core}}})\nwhile True: pass"])
+    hogs = [subprocess.Popen([sys.executable, "-c",
+                              f"import os; os.sched_setaffinity(0, {{{core}}})\nwhile True: pass"])
             for _ in range(2)]
     try:
         time.sleep(0.2)

@@ -9,8 +9,9 @@ import time
 
 import pytest
 
-from liver_sim.processes import RunFile, _process_start, cli_command_line, stop_leftovers
-from liver_sim.sessions.bag import BagError, BagWriter, bag_info, check_bag, repair_bag
+from liver_sim.base.process_settings import cli_command_line
+from liver_sim.running.launcher import RunFile, _process_start, stop_leftovers
+from liver_sim.sessions.bag import BagError, BagWriter, bag_info, check_bag
 from liver_sim.sessions.gaps import SequenceGaps
 
 GID_A, GID_B = bytes(range(16)), bytes(range(1, 17))
@@ -67,7 +68,8 @@ def test_a_recording_fails_on_any_reliable_message_lost_after_ready_and_only_cou
     assert failures({**whole, ("/pose", GID_A): (7, 9, 12)}) == ""    # best effort: counted, not a failure
     # every reliable topic, the whole mesh included: a gap, or a new writer's first messages
     assert failures({**whole, ("/nodes", GID_A): (40, 42)}) == "1 message(s) of reliable /nodes lost"
-    assert failures({**whole, ("/nodes", GID_B): (3, 4)}) == "2 message(s) of reliable /nodes lost (2 before its writer matched)"
+    assert (failures({**whole, ("/nodes", GID_B): (3, 4)})
+            == "2 message(s) of reliable /nodes lost (2 before its writer matched)")
     assert failures(whole, ["/nodes"]) == "the history of /nodes filled up between two drains"
 
 
@@ -115,7 +117,7 @@ os._exit(0)  # killed: no summary, no metadata.yaml
 
 @pytest.mark.parametrize("storage", ["mcap", "sqlite3"])
 def test_a_bag_whose_recorder_was_killed_is_repaired_into_a_new_bag(tmp_path, capsys, storage):
-    from liver_sim.cli import main
+    from liver_sim.cli.main import main
 
     bag = tmp_path / "killed"
     subprocess.run([sys.executable, "-c", KILLED_WRITER, str(bag), storage], check=True, timeout=60)
@@ -133,7 +135,7 @@ def test_a_bag_whose_recorder_was_killed_is_repaired_into_a_new_bag(tmp_path, ca
 
 
 def test_bench_record_never_replaces_an_existing_bag(tmp_path):
-    from liver_sim.bench_record import new_path
+    from liver_sim.bench.record import new_path
 
     (tmp_path / "bench_session").mkdir()
     assert new_path(tmp_path / "bench_session") == tmp_path / "bench_session_2"
@@ -237,7 +239,7 @@ class Tally:
 
 
 def test_a_recorded_demo_under_load_loses_nothing_the_publishers_numbered(ros_domain_id, tmp_path):
-    from liver_sim.demo import run_demo
+    from liver_sim.studies.demo import run_demo
 
     busy = subprocess.Popen([sys.executable, "-c", "while True: pass"])  # one more core-bound process
     tally = Tally()

@@ -13,14 +13,14 @@ import pytest
 from rclpy.serialization import serialize_message
 
 from liver_sim.analysis import largest_force_jump_n
-from liver_sim.cli import main
-from liver_sim.local_model import LocalModel
-from liver_sim.processes import cli_command_line
+from liver_sim.base.local_model import LocalModel
+from liver_sim.base.process_settings import cli_command_line
+from liver_sim.cli.main import main
 from liver_sim.sessions.bag import BagWriter, QosSpec, bag_info, read_messages
 from liver_sim.sessions.parameters import node_parameters
 from liver_sim.sessions.report import write_report
 from liver_sim.sessions.resimulate import resimulate
-from liver_sim.tool_scripts import ScriptSettings, make_script
+from liver_sim.tool.scripts import ScriptSettings, make_script
 from msg_defs.forces import wrench_stamped
 from msg_defs.local_model import local_model_marker
 from msg_defs.poses import pose_stamped
@@ -165,7 +165,7 @@ def test_parameter_overrides_are_checked_as_the_nodes_check_them():
 
 
 def test_the_physics_topic_parameters_default_to_the_topics_table():
-    from liver_sim.physics.pipeline import PARAMETERS
+    from liver_sim.physics.parameters import PARAMETERS
     from msg_defs.topics import TOPICS
 
     for key in ("nodes", "surface", "marker", "contact_plane", "tool_wrench", "tool_pose"):
@@ -278,7 +278,7 @@ def test_a_damaged_bag_is_refused_with_a_clear_error(tmp_path, capsys, kind, say
 
 
 def test_demo_records_its_run_and_the_report_reads_it(ros_domain_id, tmp_path):
-    from liver_sim.demo import run_demo
+    from liver_sim.studies.demo import run_demo
 
     summary = run_demo(tmp_path, duration_s=8.0, progress=lambda line: None, record_storage="mcap")
     bag = tmp_path / "session"
@@ -413,7 +413,7 @@ def test_replay_puts_nothing_on_the_device_topic(ros_env, tmp_path, ros_domain_i
 
 
 def test_ros_commands_keep_dds_on_this_machine_unless_told():
-    from liver_sim.processes import keep_dds_local
+    from liver_sim.base.process_settings import keep_dds_local
 
     env = {}
     assert "LOCALHOST (liver-sim default)" in keep_dds_local(None, env) and env["ROS_AUTOMATIC_DISCOVERY_RANGE"] == \
@@ -426,7 +426,7 @@ def test_ros_commands_keep_dds_on_this_machine_unless_told():
 def test_fig8_offline_on_the_exploration_is_five_times_smoother_with_the_local_model(tmp_path):
     """The whole explore script offline: the held physics force steps when a frame arrives, and its largest
     change between 1 ms commands in contact (touching and leaving included) is at least 5× the local model's."""
-    from liver_sim.sessions.fig8 import exploration_fig8
+    from liver_sim.studies.fig8 import exploration_fig8
 
     figures = exploration_fig8(tmp_path)
     assert figures["largest_jump_without_local_model_n"] > 0.0 and figures["largest_jump_with_local_model_n"] > 0.0

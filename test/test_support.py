@@ -5,15 +5,15 @@ import json
 import numpy as np
 import pytest
 
-from liver_sim.cli import main
+from liver_sim.cli.main import main
 from liver_sim.mesh.liver_shape import default_liver
 from liver_sim.physics import implicit_kernels, kernels, reference
 from liver_sim.physics.model import LiverModel, default_fixed_nodes
-from liver_sim.physics.params import ModelParams
-from liver_sim.physics.pipeline import model_params
+from liver_sim.physics.model_params import ModelParams
+from liver_sim.physics.parameters import model_params
 from liver_sim.physics.support import SupportArrays, build_support
 from liver_sim.sessions.parameters import node_parameters
-from liver_sim.validate import figures_json
+from liver_sim.studies.validate import figures_json
 
 
 def random_support(count=6, nodes=20, seed=0):

@@ -3,11 +3,11 @@ weights): continuous over edges and corners, never sinking between nodes, mesh-i
 import numpy as np
 import pytest
 
+from liver_sim.mesh.landmarks import press_anchor
 from liver_sim.mesh.liver_shape import build_liver, default_liver
 from liver_sim.physics.contact import ToolPose, ToolShape, probe_contacts, tool_state
 from liver_sim.physics.model import LiverModel, default_fixed_nodes
-from liver_sim.physics.params import ModelParams
-from liver_sim.scenarios import press_anchor
+from liver_sim.physics.model_params import ModelParams
 
 FRAME_RATE_HZ = 150.0
 UP = np.array([0.0, 0.0, 1.0])

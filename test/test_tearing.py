@@ -1,21 +1,21 @@
-"""P13 of docs/paper.md: tearing (paper §2.6) by face separation and node duplication, and topology changes of the model."""
+"""P13 of docs/paper.md: tearing (paper §2.6) by face separation and node duplication, and topology changes of the
+model."""
 import math
 
 import numpy as np
 import pytest
+from meshes import assert_same_state, assert_sound, box_mesh, components, model_state
 
-from liver_sim.local_model import penetration
+from liver_sim.base.local_model import penetration
+from liver_sim.mesh.landmarks import press_anchor
 from liver_sim.mesh.liver_shape import default_liver
 from liver_sim.mesh.tetmesh import TET_FACES, TetMesh
 from liver_sim.physics import model as model_module
 from liver_sim.physics.contact import ToolPose
 from liver_sim.physics.model import LiverModel
-from liver_sim.physics.params import ModelParams
+from liver_sim.physics.model_params import ModelParams
 from liver_sim.physics.tool_use import ToolUse
 from liver_sim.physics.topology import TearDetector, duplication_change, separate_faces
-from liver_sim.scenarios import press_anchor
-
-from meshes import assert_same_state, assert_sound, box_mesh, components, model_state
 
 SPACING_M = 0.02
 NX, NY, NZ = 10, 3, 3

@@ -2,12 +2,12 @@
 import numpy as np
 import pytest
 
+from liver_sim.mesh.landmarks import press_anchor
 from liver_sim.mesh.liver_shape import default_liver
 from liver_sim.physics.contact import ToolPose
 from liver_sim.physics.model import LiverModel
 from liver_sim.physics.tool_use import ToolUse
-from liver_sim.scenarios import press_anchor
-from liver_sim.tool_scripts import ScriptSettings, make_script
+from liver_sim.tool.scripts import ScriptSettings, make_script
 
 
 def play(mode, script_name="press_slide_release", **settings):

@@ -5,10 +5,17 @@ import csv
 import numpy as np
 import pytest
 
-from liver_sim.physics.params import TissueProperties
-from liver_sim.traction import (CLAMP_LENGTH_M, CLAMPED_SPACING_M, TARGET_STRAINS, cylinder_mesh, run_traction,
-                                section_stiffness_n, write_traction)
-from liver_sim.validate import TRACTION_SHAPE_TOLERANCE, TRACTION_STIFFNESS_TOLERANCE
+from liver_sim.physics.model_params import TissueProperties
+from liver_sim.studies.traction import (
+    CLAMP_LENGTH_M,
+    CLAMPED_SPACING_M,
+    TARGET_STRAINS,
+    cylinder_mesh,
+    run_traction,
+    section_stiffness_n,
+    write_traction,
+)
+from liver_sim.studies.validate import TRACTION_SHAPE_TOLERANCE, TRACTION_STIFFNESS_TOLERANCE
 
 
 @pytest.fixture(scope="module")

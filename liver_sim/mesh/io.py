@@ -23,7 +23,7 @@ import numba
 import numpy as np
 import trimesh
 
-from liver_sim.geometry.closest_point import closest_point_on_triangle, dot, sub
+from liver_sim.base.geometry.closest_point import closest_point_on_triangle, dot, sub
 from liver_sim.mesh.stuffing import tetrahedralize_to_target
 from liver_sim.mesh.tetmesh import MeshError, TetMesh
 

@@ -44,7 +44,7 @@ class GapCauses:
     - ``blocked off CPU``: the thread was not runnable between two steps: it woke late because the GIL was
       held by another thread of this process (rclpy's publish and take keep it while Fast DDS blocks), or
       because the machine itself stalled (a virtual CPU the host did not run: every loop of the machine
-      stalls at once; `liver-sim bench loop` measures these with a sentinel, liver_sim.machine_stalls).
+      stalls at once; `liver-sim bench loop` measures these with a sentinel, liver_sim.running.machine_stalls).
 
     Call :meth:`sample` from the loop thread every few ticks and :meth:`name` when a gap ended; both only
     read one small /proc file of the thread.

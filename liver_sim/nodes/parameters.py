@@ -1,11 +1,11 @@
-"""A node's parameters through rclpy: declared with their ranges (liver_sim.parameters), and every
+"""A node's parameters through rclpy: declared with their ranges (liver_sim.base.parameters), and every
 set_parameters answered."""
 from __future__ import annotations
 
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
 from rclpy.exceptions import ParameterException
 
-from liver_sim.parameters import Param, check_parameter
+from liver_sim.base.parameters import Param, check_parameter
 
 
 def declare_parameters(node, params: dict[str, Param]) -> dict:

@@ -1,13 +1,13 @@
 """`phantom_sim`: a simulated PHANToM for use without hardware (paper P12, docs/paper.md).
 
-A RateLoop at `rate_hz` (1 kHz) steps `liver_sim.phantom.PhantomSim` — a stylus with mass held by a
+A RateLoop at `rate_hz` (1 kHz) steps `liver_sim.phantom.device.PhantomSim` — a stylus with mass held by a
 virtual hand playing a `tool_scripts` script — and publishes the stylus on /phantom/measured_cp
 (frame `phantom_base`, stamped with the sample's time). The newest force command from
 /phantom/servo_cf (format `force_output`) pushes the stylus; a command older than
 `command_timeout_s` (counted from its reception), or a malformed one, counts as zero, as a real
 driver's safety would do. A running node changes only `command_timeout_s`; every other parameter
 change is refused with the reason.
-Its parameters are liver_sim.phantom.PARAMETERS.
+Its parameters are liver_sim.phantom.parameters.PARAMETERS.
 """
 from __future__ import annotations
 
@@ -16,14 +16,15 @@ import time
 import numpy as np
 from rclpy.node import Node
 
-from liver_sim.geometry.device_map import DeviceMap
+from liver_sim.base.geometry.device_map import DeviceMap
 from liver_sim.nodes.diagnostics import loop_status, publish_diagnostics
 from liver_sim.nodes.inputs import Latest, LoopInputs
 from liver_sim.nodes.parameters import declare_parameters, on_parameter_changes, read_at_start
 from liver_sim.nodes.rate_loop import RateLoop, apply_realtime_priority
 from liver_sim.nodes.run import run_node
-from liver_sim.phantom import PARAMETERS, PhantomSim, StylusParams
-from liver_sim.tool_scripts import IDENTITY_XYZW, script_from
+from liver_sim.phantom.device import PhantomSim, StylusParams
+from liver_sim.phantom.parameters import PARAMETERS
+from liver_sim.tool.scripts import IDENTITY_XYZW, script_from
 from msg_defs.forces import force_from_bytes, force_message_type
 from msg_defs.poses import pose_stamped_bytes
 from msg_defs.stamps import stamp_from_seconds

@@ -15,13 +15,14 @@ import numpy as np
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 
+from liver_sim.base.parameters import check_parameter
 from liver_sim.nodes.diagnostics import loop_status, publish_diagnostics
 from liver_sim.nodes.inputs import Latest, LoopInputs
 from liver_sim.nodes.parameters import declare_parameters
 from liver_sim.nodes.rate_loop import RateLoop, apply_realtime_priority
 from liver_sim.nodes.run import run_node
-from liver_sim.parameters import check_parameter
-from liver_sim.physics.pipeline import PARAMETERS, Frame, FramePipeline, build_model
+from liver_sim.physics.parameters import PARAMETERS, build_model
+from liver_sim.physics.pipeline import Frame, FramePipeline
 from msg_defs.forces import wrench_stamped_bytes
 from msg_defs.local_model import local_model_marker
 from msg_defs.point_cloud import nodes_to_pointcloud2

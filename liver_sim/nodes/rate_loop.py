@@ -18,9 +18,9 @@ import traceback
 import numpy as np
 import rclpy
 
+from liver_sim.base.process_settings import set_realtime_priority
 from liver_sim.nodes.gap_causes import GAP_CAUSE_S, SCHEDSTAT_EVERY_TICKS, GapCauses
 from liver_sim.nodes.garbage import freeze_garbage
-from liver_sim.processes import set_realtime_priority
 
 #: Seconds before a deadline at which a loop stops sleeping and spins.
 SPIN_MARGIN_S = 0.0001
@@ -71,13 +71,13 @@ class RateLoop(threading.Thread):
     Deadline k is start + k·period: the thread sleeps until SPIN_MARGIN_S before it, then spins
     (a SCHED_FIFO thread wakes on time, and sleeps to the deadline itself).
     A step that starts more than a period late is an overrun; a gap over `gap_bound_s` (GAP_CAUSE_S, or two
-    periods of a slower loop) gets its cause named (`gaps`, GapCauses), knowing how long the step before it took. Starting the loop freezes the garbage
-    collector (:func:`freeze_garbage`; not with `freeze` false): what the node built before is never scanned
-    again. A loop at most CATCH_UP_PERIODS
-    behind runs its missed ticks at once, so that a short stall costs no ticks; further behind,
-    it skips to the newest deadline rather than run a burst. An exception in a step is counted
-    (`errors`) and handed to `on_error(now, exc)` (default: printed); the loop goes on. `clock` and
-    `sleep` are time.monotonic and time.sleep unless a test gives its own.
+    periods of a slower loop) gets its cause named (`gaps`, GapCauses), knowing how long the step before it
+    took. Starting the loop freezes the garbage collector (:func:`freeze_garbage`; not with `freeze` false):
+    what the node built before is never scanned again. A loop at most CATCH_UP_PERIODS behind runs its
+    missed ticks at once, so that a short stall costs no ticks; further behind, it skips to the newest
+    deadline rather than run a burst. An exception in a step is counted (`errors`) and handed to
+    `on_error(now, exc)` (default: printed); the loop goes on. `clock` and `sleep` are time.monotonic and
+    time.sleep unless a test gives its own.
     """
 
     def __init__(self, rate_hz: float, step, name: str, clock=time.monotonic, sleep=time.sleep, on_error=None,

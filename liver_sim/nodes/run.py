@@ -12,8 +12,8 @@ from rclpy.executors import ExternalShutdownException
 from rclpy.experimental import EventsExecutor
 from rclpy.signals import SignalHandlerOptions
 
+from liver_sim.base.process_settings import use_dds_profile
 from liver_sim.nodes.garbage import FULL_COLLECTION_PERIOD_S, collect_garbage, freeze_garbage
-from liver_sim.processes import use_dds_profile
 
 #: How often (s) a thread holding the GIL is asked to hand it over.
 GIL_SWITCH_INTERVAL_S = 0.0002
@@ -43,10 +43,10 @@ def run_node(make_node, args=None) -> int:
     zero force there — then the node waits up to CLOSE_ACK_TIMEOUT_S for its reliable subscribers (a
     recorder) to acknowledge what it published; only then does the context go.  A refused parameter ends
     the process with status 2 and a message naming it.  The process loads the product's Fast DDS profile
-    (:func:`use_dds_profile`) unless the environment names one.  The interpreter hands the GIL over every GIL_SWITCH_INTERVAL_S so
-    that a rate loop and the executor thread do not hold each other up for Python's default 5 ms.  Once the node
-    is built, the garbage collector is frozen (:func:`freeze_garbage`) and the executor runs the full collection
-    every FULL_COLLECTION_PERIOD_S.
+    (:func:`use_dds_profile`) unless the environment names one.  The interpreter hands the GIL over every
+    GIL_SWITCH_INTERVAL_S so that a rate loop and the executor thread do not hold each other up for Python's
+    default 5 ms.  Once the node is built, the garbage collector is frozen (:func:`freeze_garbage`) and the
+    executor runs the full collection every FULL_COLLECTION_PERIOD_S.
     """
     sys.setswitchinterval(GIL_SWITCH_INTERVAL_S)
     dds_profile = use_dds_profile()

@@ -3,14 +3,14 @@
 - source=device: every /phantom/measured_cp sample is mapped device→liver and republished at once
   with the sample's stamp; implausible samples (NaN, beyond `workspace_radius_m`) are counted,
   logged (throttled) and dropped;
-- source=script: a RateLoop at `rate_hz` plays a `liver_sim.tool_scripts` script;
+- source=script: a RateLoop at `rate_hz` plays a `liver_sim.tool.scripts` script;
 - source=static: a RateLoop at `rate_hz` holds `static_position_m`, `static_orientation_xyzw`.
 
 Whatever the source, the device map is published once, latched (transient local), on `device_map_topic`:
 haptic_bridge turns its forces with this map and no other, so the two can never disagree. A running node
 changes only `workspace_radius_m`; every other parameter change is refused with the reason.
 
-The parameters are liver_sim.tool_parameters.PARAMETERS; the script and device-map ones are shared with
+The parameters are liver_sim.tool.parameters.PARAMETERS; the script and device-map ones are shared with
 `phantom_sim`, so both nodes can be given the same values.
 """
 from __future__ import annotations
@@ -21,14 +21,14 @@ from dataclasses import replace
 import numpy as np
 from rclpy.node import Node
 
-from liver_sim.geometry.device_map import DeviceMap
+from liver_sim.base.geometry.device_map import DeviceMap
+from liver_sim.base.parameters import quaternion_parameter, vector_parameter
 from liver_sim.nodes.diagnostics import loop_status, publish_diagnostics
 from liver_sim.nodes.parameters import declare_parameters, on_parameter_changes, read_at_start
 from liver_sim.nodes.rate_loop import LoopStats, RateLoop, apply_realtime_priority
 from liver_sim.nodes.run import run_node
-from liver_sim.parameters import quaternion_parameter, vector_parameter
-from liver_sim.tool_parameters import PARAMETERS
-from liver_sim.tool_scripts import IDENTITY_XYZW, ScriptedTrajectory, script_from
+from liver_sim.tool.parameters import PARAMETERS
+from liver_sim.tool.scripts import IDENTITY_XYZW, ScriptedTrajectory, script_from
 from msg_defs.device_map import device_map_message
 from msg_defs.poses import pose_from_bytes, pose_stamped_bytes
 from msg_defs.topics import TOPICS

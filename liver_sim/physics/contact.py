@@ -1,4 +1,5 @@
-"""The rigid tool (paper P9, docs/paper.md), its candidate skin elements, and the haptic local model of the touched surface (P11).
+"""The rigid tool (paper P9, docs/paper.md), its candidate skin elements, and the haptic local model of the touched
+surface (P11).
 
 The tool tip is the pose's position; the tool frame's +z axis points back along the shaft.
 - sphere: a ball of `radius_m` centred on the tip;
@@ -12,11 +13,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from liver_sim.geometry.rotations import quaternion_to_matrix
-from liver_sim.local_model import LocalModel
+from liver_sim.base.geometry.rotations import quaternion_to_matrix
+from liver_sim.base.local_model import LocalModel
 from liver_sim.physics import kernels
 from liver_sim.physics.implicit import Contacts
-from liver_sim.physics.params import ModelParams
+from liver_sim.physics.model_params import ModelParams
 
 TOOL_KINDS = {"sphere": kernels.TOOL_SPHERE, "capsule": kernels.TOOL_CAPSULE, "box": kernels.TOOL_BOX}
 

@@ -19,7 +19,7 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from liver_sim.geometry.closest_point import closest_point_on_triangle
+from liver_sim.base.geometry.closest_point import closest_point_on_triangle
 from liver_sim.physics.pairs import add_pair
 
 TOOL_NONE = 0
@@ -305,8 +305,8 @@ def probe_geometry(x, v, skin, triangles, probes, shift, radius, tool_velocity, 
     pushing the liver (from p to q; from q to p when p lies behind the triangle's outward face; the inward
     face normal when p is on it), the `depth` δ = radius ∓ |p − q| (m, negative apart), q (`point`), and
     the row's `share` of its probe's contact: s_t/Σ s, s_t = γ_t·max(δ_t, 0)² (when no row of the probe
-    touches, max(δ_t + dt·δ̇_t, 0)²: touching after `dt` at the nodes' and the tool's velocity), γ_t: 1 where q is a local
-    minimum of the distance to the skin, fading to 0 where a triangle sharing q's edge or corner is nearer
+    touches, max(δ_t + dt·δ̇_t, 0)²: touching after `dt` at the nodes' and the tool's velocity), γ_t: 1 where q is
+    a local minimum of the distance to the skin, fading to 0 where a triangle sharing q's edge or corner is nearer
     (_local_minimum).  A probe inside the liver
     (behind the outward face of its nearest triangle, at d_min) leaves through q: normals from q to p and
     δ = radius + 2·d_min − |p − q|, radius + d_min on the nearest row, continuous with the outside form at
@@ -325,7 +325,7 @@ def probe_geometry(x, v, skin, triangles, probes, shift, radius, tool_velocity, 
     fade = np.empty(count)
     for c in range(probes.shape[0]):
         p = (probes[c, 0] + shift[0], probes[c, 1] + shift[1], probes[c, 2] + shift[2])
-        nearest, nearest_d = -1, np.inf
+        nearest_d = np.inf
         inside = False
         for t in range(count):  # closest points; the nearest triangle's outward face says whether p is inside
             row = c * count + t
@@ -351,7 +351,7 @@ def probe_geometry(x, v, skin, triangles, probes, shift, radius, tool_velocity, 
             for k in range(3):
                 nodes[row, k] = tri[k]
             if dist < nearest_d:
-                nearest, nearest_d = t, dist
+                nearest_d = dist
                 inside = dist > 1e-12 and ox * fx + oy * fy + oz * fz > 0.0  # q − p along the outward face
         touching = False
         for t in range(count):

@@ -13,17 +13,24 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from liver_sim.local_model import LocalModel
+from liver_sim.base.local_model import LocalModel
 from liver_sim.mesh.tetmesh import TetMesh
 from liver_sim.physics import kernels
-from liver_sim.physics.contact import (ToolPose, ToolShape, force_local_model, probe_contacts, pull_local_model,
-                                      surface_contacts, tool_state)
+from liver_sim.physics.contact import (
+    ToolPose,
+    ToolShape,
+    force_local_model,
+    probe_contacts,
+    pull_local_model,
+    surface_contacts,
+    tool_state,
+)
+from liver_sim.physics.cutting import cut_along_path
 from liver_sim.physics.implicit import ImplicitEuler
 from liver_sim.physics.local_stiffness import LocalStiffness
-from liver_sim.physics.params import ModelParams
+from liver_sim.physics.model_params import ModelParams
 from liver_sim.physics.springs import build_springs, estimate_stable_time_step, stable_time_step
 from liver_sim.physics.support import build_support
-from liver_sim.physics.cutting import cut_along_path
 from liver_sim.physics.topology import NodeState, TearDetector, TopologyChange, apply_change, carry_over, tear
 
 #: Above this many springs the parallel kernel is used (below it thread start-up costs more).

@@ -17,7 +17,7 @@ import scipy.sparse.linalg
 
 from liver_sim.mesh.tetmesh import TRIANGLE_EDGES, TetMesh, isin_keys, unique_edges
 from liver_sim.physics.materials import material_coefficients
-from liver_sim.physics.params import ModelParams
+from liver_sim.physics.model_params import ModelParams
 from liver_sim.physics.support import SupportArrays
 
 

@@ -22,7 +22,8 @@ import numpy as np
 
 from liver_sim.mesh.tetmesh import TetMesh
 from liver_sim.physics.materials import triangle_areas
-from liver_sim.physics.params import ModelParams
+from liver_sim.physics.model_params import ModelParams
+
 
 class SupportArrays(NamedTuple):
     """The support's spring-dampers for the kernels: nodes (S,) int64, rest positions (S, 3) m,

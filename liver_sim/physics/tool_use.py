@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from liver_sim.local_model import LocalModel
+from liver_sim.base.local_model import LocalModel
 from liver_sim.physics.contact import ToolPose, candidate_nodes
 from liver_sim.physics.model import FrameResult, LiverModel
 

@@ -15,8 +15,16 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from liver_sim.mesh.tetmesh import (TET_FACES, TRIANGLE_EDGES, TetMesh, edge_keys, face_keys, isin_keys, key_groups,
-                                    unique_edges)
+from liver_sim.mesh.tetmesh import (
+    TET_FACES,
+    TRIANGLE_EDGES,
+    TetMesh,
+    edge_keys,
+    face_keys,
+    isin_keys,
+    key_groups,
+    unique_edges,
+)
 
 
 @dataclass(frozen=True, eq=False)

@@ -13,6 +13,13 @@ from functools import lru_cache
 from pathlib import Path
 from typing import Iterator
 
+import yaml
+from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
+from rosbags.rosbag2 import Reader, ReaderError, StoragePlugin, Writer, WriterError
+from rosbags.rosbag2.storage_mcap import McapReader, McapWriter, read_sized
+from rosbags.rosbag2.storage_sqlite3 import Sqlite3Reader
+from rosbags.typesys import Stores, get_typestore
+
 STORAGES = ("mcap", "sqlite3")
 #: rosbag2 metadata version written (Jazzy reads 9).
 BAG_VERSION = 9
@@ -29,7 +36,6 @@ class BagError(ValueError):
 @lru_cache(maxsize=1)
 def typestore():
     """rosbags' typestore of ROS 2 Jazzy's message types."""
-    from rosbags.typesys import Stores, get_typestore
 
     return get_typestore(Stores.ROS2_JAZZY)
 
@@ -50,8 +56,6 @@ class QosSpec:
     depth: int = 10
 
     def to_rosbags(self):
-        from rosbags.interfaces import (Qos, QosDurability, QosHistory, QosLiveliness, QosReliability,
-                                        QosTime)
         unset = QosTime(0, 0)
         return Qos(QosHistory.KEEP_LAST, self.depth,
                    QosReliability.RELIABLE if self.reliable else QosReliability.BEST_EFFORT,
@@ -78,7 +82,6 @@ class BagWriter:
     """
 
     def __init__(self, path, storage: str = "mcap"):
-        from rosbags.rosbag2 import StoragePlugin, Writer, WriterError
 
         self.path = Path(path)
         if storage not in STORAGES:
@@ -110,7 +113,6 @@ class BagWriter:
     def flush(self) -> None:
         """Put what was written so far into the storage file (an MCAP chunk, an sqlite3 commit), so that a
         recorder killed later leaves it there for `repair_bag`."""
-        from rosbags.rosbag2.storage_mcap import McapWriter
 
         storage = self._writer.storage
         if isinstance(storage, McapWriter):
@@ -159,13 +161,11 @@ _READ_ERRORS = (OSError, ValueError, KeyError, IndexError, EOFError, AssertionEr
 
 
 def _reader_errors():
-    from rosbags.rosbag2 import ReaderError
 
     return (ReaderError,) + _READ_ERRORS
 
 
 def _open_reader(path: Path):
-    from rosbags.rosbag2 import Reader
 
     if not path.exists():
         raise BagError(path, "does not exist")
@@ -185,7 +185,6 @@ def _open_reader(path: Path):
 
 def bag_info(path) -> BagInfo:
     """The bag's metadata, after checking that its storage opens."""
-    import yaml
 
     path = Path(path)
     reader = _open_reader(path)
@@ -267,7 +266,6 @@ def _complete_records_end(bio, data_start: int, size: int) -> int:
 
 def _salvaged_mcap(file: Path):
     """(connections, messages) of the complete records of an MCAP file, with or without its summary."""
-    from rosbags.rosbag2.storage_mcap import McapReader, read_sized
 
     reader = McapReader(file)
     reader.bio = file.open("rb")
@@ -282,7 +280,6 @@ def _salvaged_mcap(file: Path):
 
 def _salvaged_sqlite3(file: Path):
     """(connections, messages) of the committed rows of a rosbag2 sqlite3 file."""
-    from rosbags.rosbag2.storage_sqlite3 import Sqlite3Reader
 
     reader = Sqlite3Reader(file)
     reader.open()
@@ -293,7 +290,6 @@ def repair_bag(path, out, progress=print) -> dict[str, int]:
     """Write a complete bag at `out` (new) with every message the storage file of the bag `path` still holds,
     e.g. one whose recorder was killed before it could write its summary and metadata.yaml; `path` is left as
     it is. Returns {topic: count}; BagError when nothing can be read."""
-    from rosbags.interfaces import QosDurability, QosReliability
 
     path, out = Path(path), Path(out)
     file, storage = _storage_file(path)

@@ -1,6 +1,6 @@
 """The physics' and the bridge's parameters for offline runs: the nodes' own declarations
 (PARAMETERS), their config/<node>.yaml values, then `name:=value` overrides, range-checked as the
-nodes check them (liver_sim.parameters.check_parameter).
+nodes check them (liver_sim.base.parameters.check_parameter).
 
 An override `name:=value` applies to every node declaring `name` (tool_radius_m: both);
 `liver_physics.name:=value` or `haptic_bridge.name:=value` to one.  Values are YAML, as after `-p`.
@@ -9,15 +9,16 @@ from __future__ import annotations
 
 import yaml
 
-from liver_sim.processes import config_dir
+from haptic_bridge.parameters import PARAMETERS as BRIDGE
+from liver_sim.base.parameters import check_parameter
+from liver_sim.base.process_settings import config_dir
+from liver_sim.physics.parameters import PARAMETERS as PHYSICS
 
 NODES = ("liver_physics", "haptic_bridge")
 
 
 def declarations() -> dict:
     """{node: PARAMETERS} of the physics node and the haptic bridge."""
-    from haptic_bridge.parameters import PARAMETERS as BRIDGE
-    from liver_sim.physics.pipeline import PARAMETERS as PHYSICS
 
     return {"liver_physics": PHYSICS, "haptic_bridge": BRIDGE}
 
@@ -70,7 +71,6 @@ def parse_override(text: str) -> tuple[str | None, str, object]:
 
 def node_parameters(overrides=()) -> dict[str, dict]:
     """{node: {name: value}} for liver_physics and haptic_bridge: defaults, config file, overrides; checked."""
-    from liver_sim.parameters import check_parameter
 
     declared = declarations()
     values = {node: {name: spec.default for name, spec in declared[node].items()} for node in NODES}

@@ -13,6 +13,8 @@ import os
 from dataclasses import dataclass
 from functools import lru_cache
 
+from rclpy.impl.implementation_singleton import rclpy_implementation  # noqa: F401 (loads rcl and rcutils)
+
 #: rmw/types.h (Jazzy): bytes of a GID.
 GID_SIZE = 16
 #: rcl/types.h: a take that found no message.
@@ -52,7 +54,6 @@ def _loaded_library(name: str) -> ctypes.CDLL:
 
 @lru_cache(maxsize=1)
 def _functions():
-    from rclpy.impl.implementation_singleton import rclpy_implementation  # noqa: F401 (loads rcl and rcutils)
 
     rcl, rcutils = _loaded_library("librcl.so"), _loaded_library("librcutils.so")
     take = rcl.rcl_take_serialized_message

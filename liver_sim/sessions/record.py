@@ -19,9 +19,17 @@ import threading
 import time
 from pathlib import Path
 
-from liver_sim.processes import cli_command_line
+import rclpy
+from geometry_msgs.msg import WrenchStamped
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.signals import SignalHandlerOptions
+
+from liver_sim.base.process_settings import cli_command_line, set_realtime_priority
+from liver_sim.base.topic_names import BASELINE_FORCE_TOPIC
 from liver_sim.sessions.bag import BagWriter, QosSpec
 from liver_sim.sessions.gaps import SequenceGaps
+from liver_sim.sessions.rcl_take import SerializedTake
+from msg_defs.topics import TOPICS
 
 RECORDER_NODE = "liver_sim_recorder"
 #: Messages kept per subscription between two drains beyond the publishers' own history depth (which a
@@ -49,7 +57,6 @@ REALTIME_PRIORITY = 20
 
 def default_topics(marker: bool = False) -> list[str]:
     """The topics of docs/contract.md (and the Fig. 8 baseline force); /liver/marker only when asked for."""
-    from msg_defs.topics import BASELINE_FORCE_TOPIC, TOPICS
 
     names = [t.name for key, t in TOPICS.items() if marker or key != "marker"]
     return names + [BASELINE_FORCE_TOPIC]
@@ -63,10 +70,7 @@ def recorder_command(out: Path, storage: str = "mcap") -> list[str]:
 def known_topics() -> dict:
     """{name: (message class, QosSpec)} of the product's topics; force commands as the contract's default
     WrenchStamped (`force_output: wrench_stamped`)."""
-    from geometry_msgs.msg import WrenchStamped
-    from rclpy.qos import DurabilityPolicy, ReliabilityPolicy
 
-    from msg_defs.topics import BASELINE_FORCE_TOPIC, TOPICS
 
     known = {}
     for topic in TOPICS.values():
@@ -92,16 +96,15 @@ def type_name(msg_class) -> str:
 
 
 def _rclpy_qos(spec: QosSpec, depth: int):
-    from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
     return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth,
                       reliability=ReliabilityPolicy.RELIABLE if spec.reliable else ReliabilityPolicy.BEST_EFFORT,
-                      durability=DurabilityPolicy.TRANSIENT_LOCAL if spec.transient_local else DurabilityPolicy.VOLATILE)
+                      durability=(DurabilityPolicy.TRANSIENT_LOCAL if spec.transient_local
+                                  else DurabilityPolicy.VOLATILE))
 
 
 def offered_qos(node, topic: str) -> QosSpec | None:
     """The QoS the topic's publishers offer (reliable/transient local only if all of them are), or None."""
-    from rclpy.qos import DurabilityPolicy, ReliabilityPolicy
 
     publishers = node.get_publishers_info_by_topic(topic)
     if not publishers:
@@ -119,7 +122,6 @@ class Recorder:
     """
 
     def __init__(self, writer: BagWriter, topics: list[str], context, progress=print):
-        import rclpy
 
         self.writer = writer
         self.progress = progress
@@ -142,7 +144,6 @@ class Recorder:
         self._unknown = set()
 
     def _subscribe(self, topic: str, msg_class, spec: QosSpec) -> None:
-        from liver_sim.sessions.rcl_take import SerializedTake
 
         subscription = self.node.create_subscription(msg_class, topic, lambda _: None,
                                                      _rclpy_qos(spec, spec.depth + HISTORY_DEPTH), raw=True)
@@ -281,10 +282,7 @@ def run_record(out: Path, topics: list[str], storage: str = "mcap", duration_s: 
     metadata.yaml's custom_data gets the recorder's CPU and wall time (s), its history depth and deepest
     backlog, and the lost messages (SequenceGaps.custom_data).
     """
-    import rclpy
-    from rclpy.signals import SignalHandlerOptions
 
-    from liver_sim.processes import set_realtime_priority
 
     refused = set_realtime_priority(realtime_priority)  # before rclpy starts its threads: they inherit it
     stop = threading.Event()

@@ -17,9 +17,13 @@ import threading
 import time
 from pathlib import Path
 
+import rclpy
+from rclpy.signals import SignalHandlerOptions
+
+from liver_sim.base.topic_names import BASELINE_FORCE_TOPIC
 from liver_sim.sessions.bag import bag_info, read_messages
 from liver_sim.sessions.record import _rclpy_qos, known_topics, message_class
-from msg_defs.topics import BASELINE_FORCE_TOPIC, TOPICS
+from msg_defs.topics import TOPICS
 
 REPLAY_NODE = "liver_sim_replay"
 #: Recorded force commands: a replay never publishes them where a device driver listens.
@@ -52,8 +56,6 @@ def run_replay(bag: Path, rate: float = 1.0, topics: list[str] | None = None, de
     """Publish the bag's messages (only `topics` if given) at `rate` × their recorded pace after `delay_s`
     (time for subscribers to match), device commands only on `remap_device_commands` (see
     :func:`output_topics`); stop early on SIGINT/SIGTERM.  Returns {recorded topic: messages published}."""
-    import rclpy
-    from rclpy.signals import SignalHandlerOptions
 
     if not rate > 0.0:
         raise ValueError(f"--rate must be > 0, got {rate!r}")

@@ -12,14 +12,29 @@ import json
 from pathlib import Path
 
 import numpy as np
+from rclpy.serialization import deserialize_message
 
+from liver_sim.analysis import (
+    CONTACT_FORCE_N,
+    contact_fraction,
+    fig8_figures,
+    fig8_line,
+    largest_force_jump_n,
+    rate_figures,
+)
+from liver_sim.base.local_model import penetration
+from liver_sim.base.topic_names import BASELINE_FORCE_TOPIC
 from liver_sim.sessions.bag import BagError, bag_info, read_messages
+from liver_sim.sessions.parameters import node_parameters
+from liver_sim.sessions.record import message_class, type_name
+from msg_defs.forces import FORCE_OUTPUT_FORMATS, force_from_message, force_message_type
+from msg_defs.local_model import marker_to_local_model
+from msg_defs.poses import pose_to_arrays
+from msg_defs.topics import TOPICS
 
 
 def _force_format(msgtype: str) -> str | None:
     """The force_output format whose message type is `msgtype`, or None."""
-    from liver_sim.sessions.record import type_name
-    from msg_defs.forces import FORCE_OUTPUT_FORMATS, force_message_type
 
     for fmt in FORCE_OUTPUT_FORMATS:
         try:
@@ -32,14 +47,7 @@ def _force_format(msgtype: str) -> str | None:
 
 def session_arrays(bag: Path, physics: dict, bridge: dict) -> dict:
     """One pass over the bag: log times of every topic, forces, wrench, tool tips, local models, diagnostics."""
-    from rclpy.serialization import deserialize_message
 
-    from msg_defs.topics import BASELINE_FORCE_TOPIC
-    from liver_sim.sessions.record import message_class
-    from msg_defs.forces import force_from_message
-    from msg_defs.local_model import marker_to_local_model
-    from msg_defs.poses import pose_to_arrays
-    from msg_defs.topics import TOPICS
 
     force_topics = {"local_model": bridge["force_topic"], "without_local_model": BASELINE_FORCE_TOPIC}
     decoded = {bridge["force_topic"], BASELINE_FORCE_TOPIC, physics["tool_wrench_topic"], physics["tool_pose_topic"],
@@ -97,7 +105,6 @@ def session_arrays(bag: Path, physics: dict, bridge: dict) -> dict:
 
 def penetration_series(tool_t, tips, model_t, models, tool_radius_m: float) -> np.ndarray:
     """Depth (m) of the tool sphere at each tip below the newest local model logged before it (0 without one)."""
-    from liver_sim.local_model import penetration
 
     index = np.searchsorted(model_t, tool_t, side="right") - 1
     depth = np.zeros(len(tool_t))
@@ -144,7 +151,6 @@ def _zoom(ax, centre_s: float, half_width_s: float, series) -> None:
 def plot_force(data: dict, path: Path, title: str = "Force over time") -> None:
     """|force| over time: the 1 kHz commands and the 150 Hz physics contact force (markers); a second panel
     zooms on 0.1 s of contact, where the command meets the physics force at every update."""
-    from liver_sim.analysis import CONTACT_FORCE_N
 
     plt = _plots()
     fig, axes = plt.subplots(2, 1, figsize=(8, 7), dpi=110)
@@ -211,7 +217,6 @@ def _plot_rates(data: dict, topics: list[str], path: Path) -> None:
 def plot_fig8(data: dict, path: Path) -> None:
     """Fig. 8: |command| with and without the local model; a second panel zooms on 0.1 s around the baseline's
     largest step in contact."""
-    from liver_sim.analysis import CONTACT_FORCE_N
 
     plt = _plots()
     (t1, f1), (t0, f0) = data["forces"]["local_model"], data["forces"]["without_local_model"]
@@ -232,9 +237,6 @@ def plot_fig8(data: dict, path: Path) -> None:
 
 def write_report(bag: Path, out: Path, progress=print) -> dict:
     """Read the bag, write the PNGs and summary.json/.md into `out`; return the summary."""
-    from liver_sim.analysis import contact_fraction, fig8_figures, largest_force_jump_n, rate_figures
-    from liver_sim.sessions.parameters import node_parameters
-    from msg_defs.topics import TOPICS
 
     info = bag_info(bag)
     params = node_parameters()
@@ -303,7 +305,6 @@ def _lost_line(custom_data: dict) -> str:
 
 
 def _markdown(s: dict) -> str:
-    from liver_sim.analysis import fig8_line
 
     ms = lambda v: f"{v * 1e3:.2f} ms" if v is not None else "n/a"  # noqa: E731
     lines = [f"# Session {s['bag']}", "", f"- {s['storage']} bag, {s['duration_s']:.2f} s, "

@@ -17,15 +17,28 @@ from collections import deque
 from pathlib import Path
 
 import numpy as np
+from geometry_msgs.msg import PoseStamped
+from rclpy.serialization import deserialize_message, serialize_message
 
+from haptic_bridge.tick import BridgeTick
+from liver_sim.base.topic_names import BASELINE_FORCE_TOPIC
+from liver_sim.physics.parameters import build_model
+from liver_sim.physics.pipeline import FramePipeline
 from liver_sim.sessions.bag import BagError, BagWriter, canonical_cdr, read_messages
 from liver_sim.sessions.parameters import node_parameters
-from msg_defs.topics import BASELINE_FORCE_TOPIC
+from liver_sim.sessions.record import known_topics, type_name
+from liver_sim.tool.scripts import IDENTITY_XYZW
+from msg_defs.forces import force_from_message, force_message, force_message_type, wrench_stamped
+from msg_defs.local_model import local_model_from_bytes, local_model_marker
+from msg_defs.point_cloud import nodes_to_pointcloud2
+from msg_defs.poses import pose_stamped, pose_to_arrays
+from msg_defs.skin import skin_marker_serialized, skin_mesh_msg
+from msg_defs.stamps import seconds_from_stamp, stamp_from_seconds
+from msg_defs.topics import TOPICS
 
 
 def _ns(seconds: float) -> int:
     """Nanoseconds of a time as its message stamp carries it."""
-    from msg_defs.stamps import stamp_from_seconds
 
     stamp = stamp_from_seconds(seconds)
     return stamp.sec * 1_000_000_000 + stamp.nanosec
@@ -36,8 +49,6 @@ class _Session:
     message in time order."""
 
     def __init__(self, physics: dict, bridge: dict, emit, progress, compare: bool = False):
-        from haptic_bridge.tick import BridgeTick
-        from liver_sim.physics.pipeline import FramePipeline, build_model
 
         self.p, self.b = physics, bridge
         self.model = build_model(physics)
@@ -54,7 +65,6 @@ class _Session:
 
     def _receive(self, message, t: float):
         """Hand the pipeline a recorded pose received at `t`; the tip for the bridge, None when malformed."""
-        from msg_defs.poses import pose_to_arrays
 
         try:
             position, orientation = pose_to_arrays(message.pose)
@@ -66,13 +76,7 @@ class _Session:
 
     def _frame(self, t0: float):
         """Step one frame; return (publish time s, messages, (local model, lifetime), contact force N)."""
-        from rclpy.serialization import serialize_message
 
-        from msg_defs.forces import force_from_message, wrench_stamped
-        from msg_defs.local_model import local_model_from_bytes, local_model_marker
-        from msg_defs.point_cloud import nodes_to_pointcloud2
-        from msg_defs.skin import skin_marker_serialized, skin_mesh_msg
-        from msg_defs.stamps import stamp_from_seconds
 
         frame = self.pipeline.step(t0 + self.model.time_s)
         t = t0 + self.model.time_s
@@ -97,10 +101,7 @@ class _Session:
 
     def run(self, poses: list) -> None:
         """`poses`: [(time s, PoseStamped, recorded bytes)] in time order."""
-        from rclpy.serialization import serialize_message
 
-        from msg_defs.forces import force_message
-        from msg_defs.skin import skin_mesh_msg
 
         t0 = poses[0][0]
         self.emit(self.p["surface_topic"], "surface", t0, serialize_message(
@@ -145,10 +146,7 @@ class _Session:
 
 def recorded_poses(bag: Path, topic: str) -> list:
     """[(stamp s, PoseStamped, bytes)] of the bag's `topic`, ordered by stamp (stable)."""
-    from geometry_msgs.msg import PoseStamped
-    from rclpy.serialization import deserialize_message
 
-    from msg_defs.stamps import seconds_from_stamp
 
     poses = []
     for recorded in read_messages(bag, [topic]):
@@ -168,9 +166,6 @@ def resimulate(bag: Path, out: Path, overrides=(), storage: str = "mcap", progre
     """Re-run physics and bridge on the tool poses of `bag` with parameter `overrides` ('name:=value');
     write the outputs (and the input poses) to a new bag `out`; return a summary.  With `compare`, a
     second bridge without local model writes BASELINE_FORCE_TOPIC from the same inputs (Fig. 8)."""
-    from liver_sim.sessions.record import known_topics, type_name
-    from msg_defs.forces import force_message_type
-    from msg_defs.topics import TOPICS
 
     params = node_parameters(overrides)
     physics, bridge = params["liver_physics"], params["haptic_bridge"]
@@ -213,8 +208,6 @@ def play_script(script, duration_s: float, overrides=(), progress=lambda line: N
     Fig. 8 baseline bridge (local_model none) beside; nothing is written.  Returns arrays: command_s (K,),
     command_n and baseline_n (K, 3) N, the 1 kHz commands with and without the local model, and wrench_s,
     wrench_n, the physics contact force (N) as each frame was published."""
-    from msg_defs.poses import pose_stamped
-    from liver_sim.tool_scripts import IDENTITY_XYZW
 
     params = node_parameters(overrides)
     physics, bridge = params["liver_physics"], params["haptic_bridge"]

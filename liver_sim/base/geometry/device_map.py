@@ -1,0 +1,100 @@
+"""The device map: the haptic device's workspace (frame `phantom_base`) ↔ the liver frame, and its parameters.
+
+One type and one parameter set serve every node that maps between the two frames: the tool node
+(device samples → tool poses), the simulated PHANToM (script → hand target) and the haptic bridge
+(liver-frame forces → device commands). Metres, newtons.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from liver_sim.base.checks import positive, vector3
+from liver_sim.base.geometry.rotations import matrix_to_quaternion, quaternion_to_matrix
+from liver_sim.base.parameters import Param, quaternion_parameter, vector_parameter
+
+#: The device map's parameters, declared alike by every node that uses the map.
+DEVICE_MAP_PARAMETERS = {
+    "device_rotation_xyzw": Param([0.0, 0.0, 0.0, 1.0], "rotation R of the device→liver map "
+                                  "p_liver = device_scale·R·p_device + device_translation_m, as a quaternion "
+                                  "(x, y, z, w); forces get Rᵀ"),
+    "device_translation_m": Param([0.0, 0.0, 0.0], "translation of the device→liver map: liver-frame position "
+                                  "of the device origin (m)"),
+    "device_scale": Param(1.0, "scale of the device→liver map (liver metres per device metre); forces are "
+                          "not scaled", 0.01, 100.0),
+}
+
+
+def _rotation_matrix(rotation) -> np.ndarray:
+    """A read-only proper rotation matrix from a 3×3 matrix or an (x, y, z, w) quaternion, or ValueError."""
+    r = np.asarray(rotation, dtype=np.float64)
+    if r.shape == (4,):
+        r = quaternion_to_matrix(r)
+    elif r.shape != (3, 3) or not np.isfinite(r).all():
+        raise ValueError(f"DeviceMap.rotation must be a finite 3x3 matrix or (x, y, z, w) quaternion, "
+                         f"got shape {r.shape}")
+    elif not (np.allclose(r @ r.T, np.eye(3), atol=1e-6) and np.linalg.det(r) > 0.0):
+        raise ValueError("DeviceMap.rotation must be a proper rotation (orthonormal, det +1)")
+    r = np.array(r)
+    r.setflags(write=False)
+    return r
+
+
+@dataclass(frozen=True, eq=False)
+class DeviceMap:
+    """Device workspace → liver frame: p_liver = scale·R·p_device + translation.
+
+    `rotation` is a 3×3 matrix or a quaternion (x, y, z, w), `translation` is in metres, `scale`
+    (> 0, dimensionless) multiplies device motion into liver motion. Forces are free vectors: they
+    only rotate (by Rᵀ towards the device) and are not scaled, so a liver-side stiffness K (N/m) is
+    felt at the device as K·scale N per metre of stylus motion — use that product in the passivity
+    check. `workspace_radius_m` (m): a device sample farther than this from the device origin is
+    implausible (:meth:`pose` refuses it).
+    """
+
+    rotation: np.ndarray = field(default_factory=lambda: np.eye(3))
+    translation: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    scale: float = 1.0
+    workspace_radius_m: float = 0.5
+
+    def __post_init__(self):
+        object.__setattr__(self, "rotation", _rotation_matrix(self.rotation))
+        object.__setattr__(self, "translation", vector3(self.translation, "DeviceMap.translation"))
+        object.__setattr__(self, "scale", positive(self.scale, "DeviceMap.scale"))
+        object.__setattr__(self, "workspace_radius_m",
+                           positive(self.workspace_radius_m, "DeviceMap.workspace_radius_m"))
+
+    @classmethod
+    def from_parameters(cls, values: dict, workspace_radius_m: float = 0.5) -> DeviceMap:
+        """The map named by the DEVICE_MAP_PARAMETERS `values`, or ValueError naming the bad parameter."""
+        return cls(quaternion_parameter(values, "device_rotation_xyzw"),
+                   vector_parameter(values, "device_translation_m", 3), values["device_scale"], workspace_radius_m)
+
+    def device_to_liver(self, point: np.ndarray) -> np.ndarray:
+        """Device point (m) → liver point (m): scale·R·p + translation."""
+        return self.scale * (self.rotation @ point) + self.translation
+
+    def liver_to_device(self, point: np.ndarray) -> np.ndarray:
+        """Liver point (m) → device point (m): Rᵀ·(p − translation)/scale."""
+        return self.rotation.T @ (point - self.translation) / self.scale
+
+    def liver_to_device_force(self, force: np.ndarray) -> np.ndarray:
+        """Force (N) in the liver frame → device frame: Rᵀ·F (rotation only, no scale)."""
+        return self.rotation.T @ force
+
+    def pose(self, position, orientation_xyzw) -> tuple[np.ndarray, np.ndarray]:
+        """(liver position (m), liver orientation (x, y, z, w)) of one device sample (device frame, m).
+
+        A sample farther than `workspace_radius_m` from the device origin, or with a non-finite
+        or zero component, raises ValueError saying why.
+        """
+        position = np.asarray(position, dtype=np.float64)
+        if not np.isfinite(position).all():
+            raise ValueError(f"device position {position.tolist()} is not finite")
+        distance = float(np.linalg.norm(position))
+        if distance > self.workspace_radius_m:
+            raise ValueError(f"device position {np.round(position, 4).tolist()} m is {distance:.3g} m from the "
+                             f"device origin, beyond workspace_radius_m={self.workspace_radius_m:g}")
+        rotation = self.rotation @ quaternion_to_matrix(orientation_xyzw)
+        return self.device_to_liver(position), matrix_to_quaternion(rotation)

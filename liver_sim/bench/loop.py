@@ -1,0 +1,134 @@
+"""`liver-sim bench loop`: the four nodes in closed loop (R4 of docs/paper.md), watched from outside as a rig
+would: rates and period errors on the wire, pose-to-force latency, the Fig. 8 smoothness ratio, what each
+process cost, each against its target, beside the machine's own stalls."""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+from liver_sim.analysis import contact_fraction, fig8_figures, held_wrench_baseline
+from liver_sim.bench.machine import machine
+from liver_sim.running.machine_stalls import stall_summary
+from liver_sim.running.network import closed_loop_plan, run_network, wire_gaps, wire_rates
+from liver_sim.sessions.parameters import node_parameters
+
+LOOP_TARGETS = {"physics_rate_hz": (147.0, 153.0), "haptic_rate_hz_min": 995.0, "haptic_period_error_p99_s_max": 0.0005,
+                "haptic_max_gap_s_max": 0.005, "haptic_max_gap_outside_machine_stalls_s_max": 0.005,
+                "pose_to_force_p99_s_max": 0.002, "pose_to_force_p99_outside_machine_stalls_s_max": 0.002,
+                "fig8_smoothness_ratio_min": 5.0, "fig8_smoothness_ratio_outside_machine_stalls_min": 5.0}
+#: After a machine stall the simulated hand has moved on by the stall's length and the physics catches up two
+#: frames: commands from a stall's start to this long (s, three physics frames) after its end are the stall's.
+MACHINE_STALL_SETTLE_S = 0.02
+
+
+#: Fig. 8 compares commands sent one tick apart: pairs further apart than this (s) are scheduling gaps.
+FIG8_MAX_PERIOD_S = 0.0015
+
+
+def run_loop_bench(duration_s: float = 30.0, log_dir=None, progress=None, observers: dict | None = None,
+                   extra_load: bool = False) -> dict:
+    """The loop benchmark's JSON object (:func:`loop_run`); with `extra_load`, the same run follows with one
+    core-bound process at normal priority beside the network, reported under `with_extra_load`."""
+
+    log_dir = Path(log_dir or "out/bench_loop/logs")
+    report = loop_run(duration_s, log_dir, progress, observers)
+    if extra_load:
+        (progress or (lambda line: None))("the same run with one core-bound process at normal priority beside it:")
+        loaded = loop_run(duration_s, log_dir.with_name(log_dir.name + "_extra_load"), progress, observers, 1)
+        report["with_extra_load"] = {key: loaded[key] for key in ("results", "processes", "cores_used",
+                                                                   "load_average", "met")}
+    return report
+
+
+def loop_run(duration_s: float, log_dir, progress=None, observers: dict | None = None, extra_load: int = 0) -> dict:
+    """One run of the four nodes in closed loop for `duration_s` (R4), watched by a listener as a rig would.
+
+    Rates and period errors are given twice: as each node's own loop measured them (diagnostics)
+    and as the messages went on the wire (DDS publication times), over the `duration_s` in which all
+    nodes ran.  The pose-to-force latency runs from the publication of a tool pose on /tool/pose to
+    that of the force command computed from it.  The Fig. 8 baseline (local_model none) is the node's
+    BridgeTick run offline at the live bridge's tick times on the physics wrenches and tool poses the
+    listener received (analysis.held_wrench_baseline): no second live bridge.  `processes` gives what
+    each process cost over the window (network.process_costs: share of one core, context switches per
+    second), `load_average` the machine's before and after.  `observers` (label -> argv) run beside the
+    network (NetworkPlan.observers), e.g. a recorder; `extra_load` core-bound processes at normal priority
+    beside it (network.run_network).
+
+    Sentinels (liver_sim.running.machine_stalls, started by run_network) note when the machine itself ran nothing that
+    was due; each command gap over the target is listed with the part of it the machine
+    stalled (`haptic_gaps_over_target`), and the largest gap without those parts is a figure of its own, as
+    are the latency and Fig. 8 over the commands away from the stalls (from a stall's start to
+    MACHINE_STALL_SETTLE_S after its end: the simulated hand moved on meanwhile).
+    """
+
+    plan = closed_loop_plan(extra={"phantom_sim": {"loop_script": True, "script": "explore"}})
+    plan.observers.update(observers or {})
+    load_before = os.getloadavg()
+    snapshot = run_network(plan, duration_s, log_dir, progress or (lambda line: None), extra_load=extra_load)
+    load_after = os.getloadavg()
+    start, end = snapshot["window_s"]
+    sent = snapshot["force_published_s"]["local_model"]
+    inside = (sent >= start) & (sent <= end)
+    sent_local = sent[inside]
+    force = snapshot["forces"]["local_model"][1][inside]
+    latency = snapshot["pose_to_force_s"]["local_model"][inside]
+    stalls = snapshot["machine_stalls"]
+    calm = np.ones(sent_local.size, dtype=bool)  # commands away from every machine stall
+    for stall_start, stall_end in stalls:
+        calm &= (sent_local < stall_start) | (sent_local > stall_end + MACHINE_STALL_SETTLE_S)
+    latency_calm = latency[calm & np.isfinite(latency)]
+    latency = latency[np.isfinite(latency)]
+    baseline = held_wrench_baseline(sent_local, snapshot["wrench_arrival_s"], snapshot["wrench_n"],
+                                    snapshot["tool_arrival_s"], node_parameters(())["haptic_bridge"])
+    fig8 = fig8_figures(force, baseline, sent_local, FIG8_MAX_PERIOD_S)
+    fig8_calm = fig8_figures(force[calm], baseline[calm], sent_local[calm], FIG8_MAX_PERIOD_S)
+    on_wire = wire_rates(snapshot)
+    gaps = wire_gaps(snapshot, LOOP_TARGETS["haptic_max_gap_s_max"])
+    short = np.diff(sent_local)
+    short = short[short <= LOOP_TARGETS["haptic_max_gap_s_max"]]
+    figures = {
+        "physics_on_wire": on_wire["physics"],
+        "haptic_on_wire": on_wire["haptic"],
+        "node_loops": snapshot["diagnostics"],
+        "pose_to_force_p50_s": float(np.percentile(latency, 50)) if latency.size else None,
+        "pose_to_force_p99_s": float(np.percentile(latency, 99)) if latency.size else None,
+        "pose_to_force_p99_outside_machine_stalls_s": (float(np.percentile(latency_calm, 99)) if latency_calm.size
+                                                       else None),
+        "contact_fraction": contact_fraction(force),
+        **{key: value for key, value in fig8.items() if key.startswith("largest_jump")},
+        "fig8_script": "explore",
+        "fig8_baseline": "offline: BridgeTick(local_model none) at the live bridge's tick times",
+        "fig8_smoothness_ratio": fig8["smoothness_ratio"],
+        "fig8_smoothness_ratio_steady": fig8["smoothness_ratio_steady"],
+        "fig8_smoothness_ratio_outside_machine_stalls": fig8_calm["smoothness_ratio"],
+        "commands_outside_machine_stalls": float(calm.mean()) if calm.size else 1.0,
+        "machine_stalls": stall_summary(stalls),
+        "haptic_gaps_over_target": gaps,
+        "haptic_max_gap_outside_machine_stalls_s": max([float(short.max(initial=0.0))]
+                                                       + [gap["product_s"] for gap in gaps]),
+    }
+    physics, haptic = figures["physics_on_wire"], figures["haptic_on_wire"]
+    t = LOOP_TARGETS
+    met = {
+        "physics_rate_hz": t["physics_rate_hz"][0] <= physics["rate_hz"] <= t["physics_rate_hz"][1],
+        "haptic_rate_hz_min": haptic["rate_hz"] >= t["haptic_rate_hz_min"],
+        "haptic_period_error_p99_s_max": (haptic["period_error_p99_s"] or 1.0) <= t["haptic_period_error_p99_s_max"],
+        "haptic_max_gap_s_max": (haptic["max_gap_s"] or 1.0) <= t["haptic_max_gap_s_max"],
+        "haptic_max_gap_outside_machine_stalls_s_max": (figures["haptic_max_gap_outside_machine_stalls_s"]
+                                                        <= t["haptic_max_gap_outside_machine_stalls_s_max"]),
+        "pose_to_force_p99_s_max": (figures["pose_to_force_p99_s"] or 1.0) <= t["pose_to_force_p99_s_max"],
+        "fig8_smoothness_ratio_min": (figures["fig8_smoothness_ratio"] or 0.0) >= t["fig8_smoothness_ratio_min"],
+        "pose_to_force_p99_outside_machine_stalls_s_max": (
+            (figures["pose_to_force_p99_outside_machine_stalls_s"] or 1.0)
+            <= t["pose_to_force_p99_outside_machine_stalls_s_max"]),
+        "fig8_smoothness_ratio_outside_machine_stalls_min": (
+            (figures["fig8_smoothness_ratio_outside_machine_stalls"] or 0.0)
+            >= t["fig8_smoothness_ratio_outside_machine_stalls_min"]),
+    }
+    costs = snapshot["process_costs"]
+    return {"benchmark": "loop", "machine": machine(), "duration_s": duration_s, "results": figures,
+              "processes": costs, "cores_used": sum(c["cpu_share_of_one_core"] for c in costs.values()),
+              "load_average": {"before": list(load_before), "after": list(load_after)},
+              "targets": LOOP_TARGETS, "met": met}

@@ -1,0 +1,231 @@
+"""`liver-sim bench physics`: step and frame cost of the model for the default liver and larger livers (R2 of
+docs/paper.md).
+
+One explicit step = every spring's Eq. 1 force plus one integration of every node (no tool), timed
+with the serial kernel, the parallel kernel on all threads, and the plain-NumPy oracle, which also
+checks the kernels' result in the same process.  One frame = `LiverModel.step_frame` with the tool
+pressing (contact, integration, local model and the frame's Python), timed per integrator over the
+same scripted press (`frame_figures`), each integrator's positions compared with symplectic Euler at
+its stable step.
+"""
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+
+from liver_sim.bench.machine import machine
+from liver_sim.mesh.landmarks import press_anchor
+from liver_sim.mesh.liver_shape import build_liver, default_liver
+from liver_sim.physics import reference
+from liver_sim.physics.contact import ToolPose
+from liver_sim.physics.model import LiverModel, default_fixed_nodes
+from liver_sim.physics.model_params import ModelParams
+from liver_sim.studies.peers import NETWORK_POISSON_RATIO, liver_sim_press_force_n, time_mujoco_flex
+from liver_sim.tool.scripts import ScriptSettings, make_script
+
+#: Liver sizes measured after the default one (target tetrahedra).
+LARGER_LIVERS = (10_000, 30_000, 100_000)
+#: Fraction of the stability bound a benchmarked time step may use.
+STABILITY_MARGIN = 0.9
+#: The integrators timed frame by frame, side by side (the last is the reference's, at its stable step).
+FRAME_INTEGRATORS = ("implicit_euler", "symplectic_euler")
+TARGETS = {"default_us_per_step_1thread_max": 50.0, "default_speedup_vs_numpy_min": 10.0,
+           "spring_updates_per_s_min": 50e6, "default_implicit_ms_per_frame_1thread_max": 0.5,
+           "liver_10k_implicit_realtime_factor_min": 1.0}
+
+
+def _perturb(model: LiverModel) -> None:
+    rng = np.random.default_rng(0)
+    spacing = float(model.springs.rest_length_m.mean())
+    model.positions += rng.normal(scale=0.02 * spacing, size=model.positions.shape)
+    model.velocities += rng.normal(scale=0.001, size=model.velocities.shape)
+
+
+def _time_kernel(model: LiverModel, min_seconds: float) -> float:
+    """Microseconds per step of the model's kernel, over frames of many substeps."""
+    model.params = model.params.with_changes(substeps=max(1, int(2e6 // model.springs.edges)))
+    model.step_frame(None)
+    steps, start = 0, time.perf_counter()
+    while time.perf_counter() - start < min_seconds:
+        model.step_frame(None)
+        steps += model.params.substeps
+    return (time.perf_counter() - start) / steps * 1e6
+
+
+def _time_numpy(model: LiverModel, min_seconds: float) -> float:
+    x, v = model.positions.copy(), model.velocities.copy()
+    p = model.params
+    steps, start = 0, time.perf_counter()
+    while time.perf_counter() - start < min_seconds or steps < 3:
+        x, v = reference.step(x, v, model.springs, model.inv_mass, p.dt_s, p.environment_damping_per_s,
+                              p.gravity_m_s2, p.integrator, model.support)
+        steps += 1
+    return (time.perf_counter() - start) / steps * 1e6
+
+
+def _oracle_difference(model: LiverModel) -> float:
+    """Largest |x_kernel − x_numpy| (m) after one frame from the same perturbed state."""
+    x, v = model.positions.copy(), model.velocities.copy()
+    p = model.params
+    model.step_frame(None)
+    for _ in range(p.substeps):
+        x, v = reference.step(x, v, model.springs, model.inv_mass, p.dt_s, p.environment_damping_per_s,
+                              p.gravity_m_s2, p.integrator, model.support)
+    return float(np.abs(model.positions - x).max())
+
+
+def stable_params(mesh, integrator: str = "symplectic_euler") -> ModelParams:
+    """The default parameters with `integrator`; an explicit one with at least enough substeps per frame for
+    this mesh's stability bound."""
+    params = ModelParams(integrator=integrator)
+    stable = LiverModel(mesh, params).stable_dt_s
+    needed = math.ceil(1.0 / (params.frame_rate_hz * STABILITY_MARGIN * stable))
+    return params.with_changes(substeps=max(params.substeps, needed))
+
+
+def scripted_press(mesh, tool_radius_m: float) -> list[ToolPose]:
+    """Tool poses, one per 150 Hz frame, of a short press 1 cm into the top of `mesh` (0.3 s: approach,
+    press, hold), the benchmark's frames."""
+    settings = ScriptSettings(anchor_m=tuple(press_anchor(mesh)), tool_radius_m=tool_radius_m, depth_m=0.01,
+                              clearance_m=0.002, approach_s=0.05, press_s=0.2, hold_s=0.05)
+    script = make_script("press", settings)
+    return [ToolPose(script.position_at((frame + 1) / 150.0)) for frame in range(int(round(script.duration_s * 150)))]
+
+
+def _run_frames(model: LiverModel, poses, reference_positions=None) -> tuple[float, float, list]:
+    """(ms per frame, largest |x − reference| (m) over the frames, positions per frame if no reference)."""
+    model.warm_up()
+    model.step_frame(None)
+    model.reset()
+    trajectory, error = [], 0.0
+    elapsed = 0.0
+    for frame, pose in enumerate(poses):
+        start = time.perf_counter()
+        model.step_frame(pose)
+        elapsed += time.perf_counter() - start
+        if reference_positions is None:
+            trajectory.append(model.positions.copy())
+        else:
+            error = max(error, float(np.abs(model.positions - reference_positions[frame]).max()))
+    return elapsed / len(poses) * 1e3, error, trajectory
+
+
+def frame_figures(name: str, mesh, integrators=FRAME_INTEGRATORS) -> list[dict]:
+    """Per integrator, the whole frame's cost (LiverModel.step_frame: contact, integration, local model,
+    Python) over `scripted_press`, on one thread and on all (the parallel spring kernel where it has one),
+    and its largest position error against symplectic Euler at its stable step over the same frames."""
+    reference_params = stable_params(mesh, "symplectic_euler")
+    poses = scripted_press(mesh, LiverModel(mesh, reference_params).tool.radius_m)
+    _, _, reference_positions = _run_frames(LiverModel(mesh, reference_params), poses)
+    rows = []
+    for integrator in integrators:
+        params = reference_params if integrator == "symplectic_euler" else stable_params(mesh, integrator)
+        ms_serial, error, _ = _run_frames(LiverModel(mesh, params, parallel=False), poses, reference_positions)
+        ms_parallel, _, _ = _run_frames(LiverModel(mesh, params, parallel=True), poses, reference_positions)
+        rows.append({"mesh": name, "tetrahedra": int(len(mesh.tets)), "integrator": integrator,
+                     "steps_per_frame": params.substeps, "ms_per_frame_1thread": round(ms_serial, 4),
+                     "ms_per_frame_all_threads": round(ms_parallel, 4),
+                     "realtime_factor_150hz": round(1e3 / params.frame_rate_hz / min(ms_serial, ms_parallel), 3),
+                     "max_position_error_vs_reference_m": error, "frames": len(poses)})
+    return rows
+
+
+def bench_mesh(name: str, mesh, min_seconds: float = 1.0) -> dict:
+    """Figures for one mesh: the explicit kernel's step with the default model parameters and symplectic Euler
+    (substeps raised to its stability bound), and `frame_figures` per integrator under `integrators`."""
+    params = stable_params(mesh)
+    serial = LiverModel(mesh, params, parallel=False)
+    parallel = LiverModel(mesh, params, parallel=True)
+    configured = serial.params
+    for model in (serial, parallel):
+        model.warm_up()
+        _perturb(model)
+    difference = _oracle_difference(serial)
+    us_serial = _time_kernel(serial, min_seconds)
+    us_parallel = _time_kernel(parallel, min_seconds)
+    us_numpy = _time_numpy(serial, min_seconds)
+    best = min(us_serial, us_parallel)
+    frame_us = 1e6 / configured.frame_rate_hz
+    return {
+        "mesh": name,
+        "nodes": int(len(mesh.points)),
+        "tetrahedra": int(len(mesh.tets)),
+        "springs": serial.springs.springs,
+        "edges_evaluated": serial.springs.edges,
+        "us_per_step_1thread": round(us_serial, 3),
+        "us_per_step_all_threads": round(us_parallel, 3),
+        "numpy_us_per_step": round(us_numpy, 3),
+        "speedup_vs_numpy": round(us_numpy / us_serial, 2),
+        "spring_updates_per_s": round(serial.springs.edges / (best * 1e-6)),
+        "max_abs_diff_vs_numpy_m": difference,
+        "stable_dt_s": serial.stable_dt_s,
+        "configured_dt_s": configured.dt_s,
+        "substeps_per_frame": configured.substeps,
+        "realtime_factor_150hz": round(frame_us / (configured.substeps * best), 3),
+        "integrators": frame_figures(name, mesh),
+    }
+
+
+def livers(sizes, progress=None, doing: str = "timing"):
+    """(name, mesh) of the default liver, then of livers of about `sizes` tets, meshed one at a time."""
+    for name, make in [("default liver", default_liver)] + [(f"liver ~{n} tets", lambda n=n: build_liver(n))
+                                                             for n in sizes]:
+        if progress:
+            progress(f"meshing {name}")
+        mesh = make()
+        if progress:
+            progress(f"{doing} {name}: {len(mesh.tets)} tets")
+        yield name, mesh
+
+
+def peer_figures(mesh, liver_sim_ms_per_frame: float, force_check: bool = False, progress=None) -> dict:
+    """The same mesh and tissue (params.TissueProperties defaults: parenchyma E, η as Rayleigh damping η/E;
+    density; ν of the spring network; the default fixed nodes) through MuJoCo's flex (liver_sim.studies.peers), one
+    thread: `peer` (its settings and figures), `peer_ms_per_frame` and `peer_ratio` (peer ms / liver_sim ms per
+    frame).  With `force_check`, also the force on the sphere after the same 5 mm press on the default
+    LiverModel and on the peer: `press_force_n`, `peer_press_force_n` and `peer_force_ratio` (|peer| / |ours|)."""
+
+    if progress:
+        progress(f"MuJoCo flex: {len(mesh.tets)} tets")
+    params = ModelParams()
+    young_pa = params.tissue.parenchyma_young_modulus_kpa * 1e3
+    peer = time_mujoco_flex(mesh, young_pa, NETWORK_POISSON_RATIO, params.density_kg_m3, default_fixed_nodes(mesh),
+                            threads=1, damping_s=params.tissue.parenchyma_viscosity_pa_s / young_pa)
+    figures = {"peer": peer, "peer_ms_per_frame": round(peer["ms_per_frame_median"], 3),
+               "peer_ratio": round(peer["ms_per_frame_median"] / liver_sim_ms_per_frame, 3)}
+    if force_check:
+        ours = liver_sim_press_force_n(LiverModel(mesh, params), peer["frames"])
+        figures.update(press_force_n=ours.tolist(), peer_press_force_n=peer["tool_force_n"],
+                       peer_force_ratio=round(float(np.linalg.norm(peer["tool_force_n"]) / np.linalg.norm(ours)), 3))
+    return figures
+
+
+def run_physics_bench(sizes=LARGER_LIVERS, min_seconds: float = 1.0, progress=None, peers: bool = False) -> dict:
+    """The benchmark's JSON object: machine, results (default liver first; per mesh, `integrators`: the
+    frame figures of each integrator) and targets met; with `peers`, each mesh row also has peer_figures
+    against the default (implicit) integrator's whole frame, with the force check on the default liver."""
+    results = []
+    for name, mesh in livers(sizes, progress):
+        row = bench_mesh(name, mesh, min_seconds)
+        results.append(row)
+        if peers:
+            ours = next(r for r in row["integrators"] if r["integrator"] == ModelParams().integrator)
+            row.update(peer_figures(mesh, ours["ms_per_frame_1thread"], force_check=len(results) == 1,
+                                    progress=progress))
+    default = results[0]
+    implicit = {r["mesh"]: row for r in results for row in r["integrators"] if row["integrator"] == "implicit_euler"}
+    near_10k = min(results[1:], key=lambda r: abs(r["tetrahedra"] - 10_000), default=None)
+    met = {
+        "default_us_per_step_1thread_max": default["us_per_step_1thread"] <= TARGETS["default_us_per_step_1thread_max"],
+        "default_speedup_vs_numpy_min": default["speedup_vs_numpy"] >= TARGETS["default_speedup_vs_numpy_min"],
+        "spring_updates_per_s_min": max(r["spring_updates_per_s"] for r in results)
+        >= TARGETS["spring_updates_per_s_min"],
+        "default_implicit_ms_per_frame_1thread_max": implicit[default["mesh"]]["ms_per_frame_1thread"]
+        <= TARGETS["default_implicit_ms_per_frame_1thread_max"],
+    }
+    if near_10k is not None and abs(near_10k["tetrahedra"] - 10_000) <= 2_000:
+        met["liver_10k_implicit_realtime_factor_min"] = (implicit[near_10k["mesh"]]["realtime_factor_150hz"]
+                                                         >= TARGETS["liver_10k_implicit_realtime_factor_min"])
+    return {"benchmark": "physics", "machine": machine(), "results": results, "targets": TARGETS, "met": met}

@@ -1,0 +1,412 @@
+"""The ``liver-sim`` command line.
+
+Each subcommand is an ``add_*_command(subparsers)`` function that declares its
+arguments and sets ``handler`` to a function ``handler(args) -> int``; list it in
+:data:`COMMANDS`.  A refused input ends the command with exit status 2 and
+``liver-sim: error: <file>: <defect>`` on stderr.  A command that starts ROS (:func:`starts_ros`)
+keeps DDS on this machine unless ``--discovery-range`` or ROS_AUTOMATIC_DISCOVERY_RANGE says otherwise,
+and says its domain and range first.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import signal
+import sys
+from pathlib import Path
+
+from liver_sim.base.process_settings import DISCOVERY_RANGES, keep_dds_local, use_dds_profile
+from liver_sim.cli.sessions import (
+    add_bag_command,
+    add_fig8_command,
+    add_record_command,
+    add_replay_command,
+    add_report_command,
+    add_resimulate_command,
+)
+from liver_sim.mesh.io import (
+    CAPSULE_REGION,
+    ORGAN_SIZE_RANGE_M,
+    PARENCHYMA_REGION,
+    WRITE_SUFFIXES,
+    checked_output_path,
+    load_mesh,
+    write_mesh,
+)
+from liver_sim.mesh.liver_shape import build_liver, default_liver
+from liver_sim.mesh.tetmesh import TetMesh
+from liver_sim.running.launcher import NodeFailure
+from liver_sim.sessions.bag import STORAGES
+
+PROG = "liver-sim"
+#: Exit status of a command that refused its input.
+EXIT_REFUSED = 2
+#: Exit status of a command whose node processes failed (NodeFailure).
+EXIT_NODE_FAILED = 1
+
+
+def positive_int(text: str) -> int:
+    """argparse type: an integer >= 1."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"{value} is not positive")
+    return value
+
+
+def positive_float(text: str) -> float:
+    """argparse type: a finite number > 0."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not (math.isfinite(value) and value > 0.0):
+        raise argparse.ArgumentTypeError(f"{value} is not a finite number > 0")
+    return value
+
+
+def add_scale_argument(parser) -> None:
+    """--scale FACTOR: the factor from the mesh file's units to metres."""
+    parser.add_argument("--scale", type=positive_float, default=1.0, metavar="FACTOR",
+                        help="multiply the file's coordinates by FACTOR to get metres, before anything else "
+                             "(0.01: file in centimetres, 0.001: millimetres; default: 1, metres). A mesh "
+                             f"not {ORGAN_SIZE_RANGE_M[0]:g}-{ORGAN_SIZE_RANGE_M[1]:g} m across is refused")
+
+
+def add_mesh_command(commands) -> None:
+    """``liver-sim mesh info|build``: describe or convert a mesh (default: the built-in liver)."""
+    mesh_parser = commands.add_parser("mesh", help="describe or write tetrahedral meshes")
+    actions = mesh_parser.add_subparsers(dest="action", required=True, metavar="ACTION")
+
+    def add_source_arguments(parser) -> None:
+        parser.add_argument("path", nargs="?", metavar="PATH",
+                            help="volume mesh (.msh .vtu .vtk .mesh) or closed surface "
+                                 "(.stl .obj .ply .off); default: the built-in liver")
+        parser.add_argument("--target-tets", type=positive_int, metavar="N",
+                            help="tet count aimed at when tetrahedralising a surface or the "
+                                 "built-in liver (volume meshes are used as they are)")
+        add_scale_argument(parser)
+
+    info = actions.add_parser("info", help="print size, volume, quality and hash of a mesh")
+    add_source_arguments(info)
+    info.add_argument("--json", action="store_true", help="print one JSON object")
+    info.set_defaults(handler=mesh_info)
+
+    build = actions.add_parser("build", help="write the tet mesh with its skin tagged")
+    add_source_arguments(build)
+    build.add_argument("--out", required=True, metavar="FILE",
+                       help=f"output file, format by extension: {' '.join(WRITE_SUFFIXES)}")
+    build.set_defaults(handler=mesh_build)
+
+
+def mesh_from_args(args) -> TetMesh:
+    """The mesh named by PATH in metres (its coordinates × --scale), or the built-in liver (rebuilt when
+    --target-tets is given)."""
+    if args.path is not None:
+        return load_mesh(args.path, args.target_tets, args.scale)
+    if args.scale != 1.0:
+        raise ValueError("--scale applies to a mesh file (PATH); the built-in liver is in metres")
+    if args.target_tets is not None:
+        return build_liver(args.target_tets)
+    return default_liver()
+
+
+def mesh_info(args) -> int:
+    """Print :meth:`TetMesh.summary` (plus the volume in litres), as text or JSON."""
+    info = mesh_from_args(args).summary()
+    info["volume_l"] = info["volume_m3"] * 1e3
+    if args.json:
+        print(json.dumps(info))
+        return 0
+    (lo, hi), size = info["bounds_m"], info["size_m"]
+    print(f"source          {info['source']}")
+    print(f"nodes           {info['nodes']}")
+    print(f"tetrahedra      {info['tetrahedra']}")
+    print(f"skin triangles  {info['skin_triangles']}")
+    print(f"volume          {info['volume_m3']:.6g} m^3 ({info['volume_l']:.4g} L)")
+    print("bounding box    " + "  ".join(f"{a}: {l:.4g} .. {h:.4g}" for a, l, h in zip("xyz", lo, hi)) + " m")
+    print("size            " + " x ".join(f"{s:.4g}" for s in size) + " m")
+    print(f"dihedral angles {info['min_dihedral_deg']:.2f} .. {info['max_dihedral_deg']:.2f} deg")
+    print(f"watertight      {'yes' if info['watertight'] else 'no'}")
+    print(f"sha256          {info['sha256']}")
+    return 0
+
+
+def mesh_build(args) -> int:
+    """Write the mesh to --out and say what was written."""
+    out = checked_output_path(args.out)  # refuse a bad extension before building anything
+    mesh = mesh_from_args(args)
+    write_mesh(mesh, out)
+    print(f"wrote {out}: {len(mesh.points)} nodes, {len(mesh.tets)} tetrahedra (region "
+          f"{PARENCHYMA_REGION} 'parenchyma'), {len(mesh.skin)} skin triangles (region "
+          f"{CAPSULE_REGION} 'capsule'), sha256 {mesh.sha256}")
+    return 0
+
+
+def add_validate_command(commands) -> None:
+    """``liver-sim validate [--json] [--out DIR]``: behaviours B1–B4, traction with the liver's materials and the
+    local model's continuity, each figure beside its threshold."""
+    parser = commands.add_parser("validate", help="the paper's behaviours (B1-B4), traction with the liver's "
+                                 "materials and the local model's continuity, as figures against thresholds")
+    parser.add_argument("--json", action="store_true", help="print the figures as JSON on stdout (progress on stderr)")
+    parser.add_argument("--out", type=Path, default=None, metavar="DIR",
+                        help="write a plot per behaviour and validate.json to DIR")
+    parser.set_defaults(handler=validate)
+
+
+def validate(args) -> int:
+    from liver_sim.studies.validate import main_validate
+
+    stream = sys.stderr if args.json else sys.stdout
+    return main_validate(args.json, args.out, progress=lambda text: print(text, file=stream, flush=True))
+
+
+def add_traction_command(commands) -> None:
+    """``liver-sim traction [--out DIR]``: the traction test of Figs. 4–5."""
+    parser = commands.add_parser("traction", help="traction test of a cylinder beside the connector law (Figs. 4-5)")
+    parser.add_argument("--out", type=Path, default=Path("out/traction"), help="output folder (default: %(default)s)")
+    parser.set_defaults(handler=traction)
+
+
+def traction(args) -> int:
+    from liver_sim.studies.traction import run_traction, write_traction
+
+    def report(level, levels, force, elongation):
+        print(f"  level {level:2d}/{levels}: {force:8.4f} N -> elongation {elongation * 100:6.2f} %", flush=True)
+
+    print("pulling a cylinder (top fixed, equal forces on the bottom nodes) to static equilibrium", flush=True)
+    result = run_traction(progress=report)
+    csv_path, png_path = write_traction(result, args.out)
+    print(f"wrote {csv_path} and {png_path}")
+    return 0
+
+
+def add_bench_command(commands) -> None:
+    """``liver-sim bench physics [--json]``: step cost of the model (not a test)."""
+    parser = commands.add_parser("bench", help="benchmarks (print JSON with --json)")
+    kinds = parser.add_subparsers(dest="bench", required=True, metavar="BENCHMARK")
+    physics = kinds.add_parser("physics", help="us per step for the default liver and ~10k/~100k-tet livers")
+    physics.add_argument("--json", action="store_true", help="print one JSON object")
+    physics.add_argument("--sizes", type=positive_int, nargs="*", default=None, metavar="TETS",
+                         help="target tet counts of the larger livers (default: 10000 100000)")
+    physics.add_argument("--seconds", type=float, default=1.0, help="timing per kernel and mesh (default: 1 s)")
+    physics.add_argument("--peers", action="store_true",
+                         help="also run each mesh through MuJoCo's flex and report the ratio (pip install .[peers])")
+    physics.set_defaults(handler=bench_physics)
+    loop = kinds.add_parser("loop", help="the four nodes in closed loop: rates, jitter, latency, Fig. 8 smoothness")
+    loop.add_argument("--json", action="store_true", help="print one JSON object")
+    loop.add_argument("--duration", type=float, default=30.0, help="seconds of closed loop (default: 30)")
+    loop.add_argument("--out", type=Path, default=Path("out/bench_loop"), help="folder for the nodes' logs")
+    loop.add_argument("--extra-load", action="store_true",
+                      help="then the same run beside one core-bound process at normal priority (with_extra_load)")
+    loop.set_defaults(handler=bench_loop)
+    topology = kinds.add_parser("topology", help="time of a tear and of a cut for the default liver and a "
+                                                  "~10k-tet liver (target: one 150 Hz frame for the default liver)")
+    topology.add_argument("--json", action="store_true", help="print one JSON object")
+    topology.add_argument("--sizes", type=positive_int, nargs="*", default=None, metavar="TETS",
+                          help="target tet counts of the larger livers (default: 10000)")
+    topology.add_argument("--repeats", type=positive_int, default=9, help="timed repetitions (default: 9)")
+    topology.set_defaults(handler=bench_topology)
+    record = kinds.add_parser("record", help="the closed loop while `liver-sim record` records it: recorder CPU "
+                                             "share, haptic loop figures with and without it")
+    record.add_argument("--json", action="store_true", help="print one JSON object")
+    record.add_argument("--duration", type=float, default=30.0, help="seconds of closed loop per run (default: 30)")
+    record.add_argument("--storage", choices=STORAGES, default="mcap", help="bag storage (default: %(default)s)")
+    record.add_argument("--out", type=Path, default=Path("out/bench_record"), help="folder for the bag and the logs")
+    record.add_argument("--no-compare", action="store_true", help="skip the first run without the recorder")
+    record.set_defaults(handler=bench_record)
+
+
+def bench_physics(args) -> int:
+    from liver_sim.bench.physics import LARGER_LIVERS, run_physics_bench
+
+    progress = None if args.json else (lambda line: print(line, flush=True))
+    sizes = LARGER_LIVERS if args.sizes is None else tuple(args.sizes)
+    if args.peers:
+        from liver_sim.studies.peers import import_mujoco
+        try:
+            import_mujoco()
+        except ImportError as exc:
+            print(f"{PROG}: error: {exc}", file=sys.stderr)
+            return EXIT_REFUSED
+    report = run_physics_bench(sizes, args.seconds, progress, peers=args.peers)
+    if args.json:
+        print(json.dumps(report))
+        return 0
+    print(f"machine: {report['machine']['cpu']}, {report['machine']['cores']} cores")
+    print(f"{'mesh':<20}{'tets':>8}{'springs':>9}{'us/step 1t':>12}{'us/step all':>12}{'numpy us':>10}"
+          f"{'stable dt':>11}{'RT x150Hz':>10}")
+    for r in report["results"]:
+        print(f"{r['mesh']:<20}{r['tetrahedra']:>8}{r['springs']:>9}{r['us_per_step_1thread']:>12.1f}"
+              f"{r['us_per_step_all_threads']:>12.1f}{r['numpy_us_per_step']:>10.0f}"
+              f"{r['stable_dt_s'] * 1e6:>9.0f}us{r['realtime_factor_150hz']:>10.2f}")
+    print(f"\nwhole frames over a scripted press:\n{'mesh':<20}{'integrator':>18}{'steps':>7}{'ms 1t':>9}"
+          f"{'ms all':>9}{'RT x150Hz':>10}{'error vs ref':>14}")
+    for row in (row for r in report["results"] for row in r["integrators"]):
+        print(f"{row['mesh']:<20}{row['integrator']:>18}{row['steps_per_frame']:>7}{row['ms_per_frame_1thread']:>9.3f}"
+              f"{row['ms_per_frame_all_threads']:>9.3f}{row['realtime_factor_150hz']:>10.2f}"
+              f"{row['max_position_error_vs_reference_m'] * 1e3:>12.3f}mm")
+    for r in (r for r in report["results"] if "peer" in r):
+        print(f"{r['mesh']:<20} {r['peer']['simulator']}: {r['peer_ms_per_frame']:.2f} ms/frame "
+              f"({r['peer']['steps_per_frame']} step, 1 thread, stable: {r['peer']['stable']}), "
+              f"peer/liver_sim = {r['peer_ratio']:.2f}"
+              + (f", press force peer/liver_sim = {r['peer_force_ratio']:.2f}" if "peer_force_ratio" in r else ""))
+    for target, met in report["met"].items():
+        print(f"target {target} = {report['targets'][target]:g}: {'met' if met else 'NOT met'}")
+    return 0
+
+
+def bench_topology(args) -> int:
+    from liver_sim.bench.topology import run_topology_bench
+
+    report = run_topology_bench((10_000,) if args.sizes is None else tuple(args.sizes), args.repeats,
+                                None if args.json else (lambda line: print(line, flush=True)))
+    if args.json:
+        print(json.dumps(report))
+        return 0
+    print(f"machine: {report['machine']['cpu']}, {report['machine']['cores']} cores")
+    print(f"{'mesh':<20}{'tets':>8}{'detect/frame':>14}{'tear':>10}{'faces':>7}{'cut':>10}")
+    for r in report["results"]:
+        print(f"{r['mesh']:<20}{r['tetrahedra']:>8}{r['tear_detection_per_frame_s'] * 1e3:>12.3f}ms"
+              f"{r['tear_s'] * 1e3:>8.1f}ms{r['tear_faces_opened']:>7}{r['cut_s'] * 1e3:>8.1f}ms")
+    for target, met in report["met"].items():
+        print(f"target {target} = {report['targets'][target]:.4g}: {'met' if met else 'NOT met'}")
+    return 0
+
+
+def bench_loop(args) -> int:
+    from liver_sim.bench.loop import run_loop_bench
+
+    report = run_loop_bench(args.duration, args.out / "logs", None if args.json else print,
+                            extra_load=args.extra_load)
+    if args.json:
+        print(json.dumps(report, default=float))
+        return 0
+    print(json.dumps(report["results"], indent=2, default=float))
+    for target, met in report["met"].items():
+        print(f"target {target} = {report['targets'][target]}: {'met' if met else 'NOT met'}")
+    return 0
+
+
+def bench_record(args) -> int:
+    from liver_sim.bench.record import run_record_bench
+
+    report = run_record_bench(args.duration, args.out, args.storage,
+                              None if args.json else (lambda line: print(line, flush=True)),
+                              compare=not args.no_compare)
+    if args.json:
+        print(json.dumps(report, default=float))
+        return 0
+    print(json.dumps({k: report[k] for k in ("recorder", "bag")}, indent=2, default=float))
+    number = lambda value: float("nan") if value is None else value  # noqa: E731
+    without = report.get("loop_without_recorder", {})
+    print(f"{'haptic loop':<28}{'without recorder':>18}{'with recorder':>16}")
+    for name, value in report["loop_with_recorder"].items():
+        print(f"{name:<28}{number(without.get(name)):>18.4g}{number(value):>16.4g}")
+    for target, met in report["met"].items():
+        before = report.get("met_without_recorder", {}).get(target)
+        print(f"target {target} = {report['targets'][target]}: {'met' if met else 'NOT met'} while recording"
+              + ("" if before is None else f" ({'met' if before else 'NOT met'} without)"))
+    return 0
+
+
+def add_demo_command(commands) -> None:
+    """``liver-sim demo [--scenario press|tear|cut] [--mesh PATH [--scale F]] [--duration S] [--out DIR] [--offline]
+    [--record [--storage …]]``: the closed-loop demo."""
+    parser = commands.add_parser("demo", help="the four nodes in closed loop with a simulated PHANToM "
+                                              "pressing the default liver or --mesh (--offline: the model alone, "
+                                              "no ROS)")
+    parser.add_argument("--scenario", choices=("press", "tear", "cut"), default="press",
+                        help="press: press, slide and release (default); tear: grasp and pull until the liver "
+                             "tears; cut: cut the liver along the tool path; tear and cut draw it before and after")
+    parser.add_argument("--duration", type=float, default=None,
+                        help="seconds to run (default: 14 s for press, 12 s for tear and cut; offline: the "
+                             "script's 4.85 s)")
+    parser.add_argument("--mesh", type=Path, default=None, metavar="PATH",
+                        help="run on this volume mesh (.msh .vtu .vtk .mesh) or closed surface (.stl .obj .ply "
+                             ".off) instead of the default liver; the simulated hand presses its top")
+    add_scale_argument(parser)
+    parser.add_argument("--out", type=Path, default=Path("out/demo"), help="output folder (default: %(default)s)")
+    parser.add_argument("--offline", action="store_true", help="scripted press-and-release in this process, no ROS")
+    parser.add_argument("--record", action="store_true", help="record the run with `liver-sim record` into OUT/session")
+    parser.add_argument("--storage", choices=STORAGES, default="mcap", help="storage of the recorded bag")
+    parser.set_defaults(handler=demo)
+
+
+def demo(args) -> int:
+    from liver_sim.studies.demo import run_demo
+    from liver_sim.studies.demo_liver import DemoMesh
+    from liver_sim.studies.demo_offline import run_offline_demo
+
+    progress = lambda line: print(line, flush=True)  # noqa: E731
+    if args.mesh is None and args.scale != 1.0:
+        raise ValueError("--scale applies to --mesh PATH; the default liver is in metres")
+    liver = DemoMesh(args.mesh, args.scale)
+    if args.offline:
+        if args.record or args.scenario != "press":
+            raise ValueError("--record and --scenario run the node network; --offline is the press without ROS")
+        run_offline_demo(args.out, args.duration, progress, liver)
+    else:
+        run_demo(args.out, args.duration, progress, record_storage=args.storage if args.record else None,
+                 scenario=args.scenario, liver=liver)
+    return 0
+
+
+#: The subcommands, in the order `liver-sim --help` lists them.
+COMMANDS = (add_mesh_command, add_traction_command, add_validate_command, add_bench_command, add_demo_command,
+            add_record_command, add_replay_command, add_resimulate_command, add_fig8_command, add_report_command,
+            add_bag_command)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The ``liver-sim`` argument parser with every subcommand in :data:`COMMANDS`."""
+    parser = argparse.ArgumentParser(prog=PROG, description="Human liver simulation "
+                                     "(Boux de Casson et al.): meshes, traction tests, demos.")
+    parser.add_argument("--discovery-range", choices=DISCOVERY_RANGES, default=None,
+                        help="DDS discovery range of the commands that start ROS (default: "
+                             "$ROS_AUTOMATIC_DISCOVERY_RANGE if set, else LOCALHOST: nothing leaves this machine)")
+    commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    for add_command in COMMANDS:
+        add_command(commands)
+    return parser
+
+
+def starts_ros(args) -> bool:
+    """Whether the parsed command starts ROS (a context or node processes)."""
+    return (args.command in ("record", "replay") or (args.command == "demo" and not args.offline)
+            or (args.command == "bench" and args.bench in ("loop", "record")))
+
+
+def _terminate(signum, _frame) -> None:
+    """SIGTERM/SIGHUP end a command like Ctrl-C does: cleanup (stopping started nodes) runs."""
+    raise SystemExit(128 + signum)
+
+
+def main(argv=None) -> int:
+    """Run ``liver-sim`` with `argv` (default: sys.argv[1:]); return the exit status."""
+    for signum in (signal.SIGTERM, signal.SIGHUP):
+        signal.signal(signum, _terminate)
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:  # --help or a usage error, already reported by argparse
+        return exc.code if isinstance(exc.code, int) else EXIT_REFUSED
+    try:
+        if starts_ros(args):
+            # stdout, beside the command's progress; stderr when stdout carries JSON
+            print(f"{PROG}: {keep_dds_local(args.discovery_range)}; {use_dds_profile()}", flush=True,
+                  file=sys.stderr if getattr(args, "json", False) else sys.stdout)
+        return args.handler(args)
+    except ValueError as exc:  # MeshError, or a refusal of the stuffing; both name the source
+        print(f"{PROG}: error: {exc}", file=sys.stderr)
+        return EXIT_REFUSED
+    except NodeFailure as exc:  # names the node, its status and the end of its log
+        print(f"{PROG}: error: {exc}", file=sys.stderr)
+        return EXIT_NODE_FAILED
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,2 +1,0 @@
-"""Shared geometry at the bottom of the layers (it imports only liver_sim.checks and liver_sim.parameters):
-rotations, the device map between the haptic device and the liver, numba closest-point primitives."""

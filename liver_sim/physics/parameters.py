@@ -1,0 +1,149 @@
+"""The physics node's parameter table (liver_sim.base.parameters.Param: default, unit, range), the
+ModelParams its values name (`model_params`) and the model they build (`build_model`): declared by
+`liver_physics`, read by the offline sessions, so both refuse the same values."""
+from __future__ import annotations
+
+from liver_sim.base.parameters import Param, realtime_priority_parameter
+from liver_sim.base.topic_names import TOPIC_NAMES
+from liver_sim.mesh.io import load_mesh
+from liver_sim.mesh.liver_shape import default_liver
+from liver_sim.physics.contact import ToolShape
+from liver_sim.physics.model import LiverModel
+from liver_sim.physics.model_params import (
+    INTEGRATOR_SUBSTEPS,
+    INTEGRATORS,
+    SPRING_CONSTANTS,
+    SUPPORTS,
+    ModelParams,
+    SpringLaw,
+    TissueProperties,
+)
+from liver_sim.physics.tool_use import TOOL_MODES
+
+DEFAULTS = ModelParams()
+TISSUE = DEFAULTS.tissue
+PARAMETERS = {
+    "mesh_path": Param("", "volume or closed-surface mesh file (metres); empty: the embedded default liver"),
+    "mesh_scale": Param(1.0, "factor from mesh_path's units to metres (dimensionless; 0.01: centimetres, 0.001: "
+                        "millimetres); a mesh not 0.02-0.5 m across after scaling is refused", 1e-6, 1e6),
+    "target_tets": Param(1150, "tetrahedra to aim for when mesh_path is a surface", 50, 2_000_000),
+    "frame_id": Param("liver", "frame of every published position"),
+    "rate_hz": Param(DEFAULTS.frame_rate_hz, "physics frame rate (Hz)", 1.0, 1000.0),
+    "realtime_priority": realtime_priority_parameter(60),
+    "integrator": Param(DEFAULTS.integrator, "implicit_euler (linearised backward Euler), symplectic_euler or "
+                        "explicit_euler (Eq. 2)", choices=INTEGRATORS),
+    "substeps": Param(0, "integration steps per frame; 0: the integrator's own ("
+                      + ", ".join(f"{k} {n}" for k, n in INTEGRATOR_SUBSTEPS.items()) + ")", 0, 10_000),
+    "spring_constants": Param(DEFAULTS.spring_constants, "material: each spring's λ1, λ2, μ from the tissue "
+                              "properties and the mesh; paper: the paper's per-spring constants below",
+                              choices=SPRING_CONSTANTS),
+    "parenchyma_young_modulus_kpa": Param(TISSUE.parenchyma_young_modulus_kpa, "parenchyma Young's modulus (kPa)",
+                                          0.01, 1e4),
+    "parenchyma_poisson_ratio": Param(TISSUE.parenchyma_poisson_ratio, "parenchyma Poisson's ratio (the network "
+                                      "matches the indentation modulus E/(1-ν²))", 0.0, 0.499),
+    "parenchyma_viscosity_pa_s": Param(TISSUE.parenchyma_viscosity_pa_s, "parenchyma viscosity η (Pa·s)", 0.0, 1e6),
+    "capsule_stiffness_n_per_m": Param(TISSUE.capsule_stiffness_n_per_m, "capsule membrane stiffness E·t (N/m)",
+                                       0.0, 1e6),
+    "capsule_viscosity_ns_per_m": Param(TISSUE.capsule_viscosity_ns_per_m, "capsule membrane viscosity η·t (N·s/m)",
+                                        0.0, 1e4),
+    "capsule_lambda1_n": Param(DEFAULTS.capsule.lambda1_n, "paper: capsule spring cubic stiffness λ1 of Eq. 1 (N)",
+                               0.0, 1e6),
+    "capsule_lambda2_n": Param(DEFAULTS.capsule.lambda2_n, "paper: capsule linear stiffness λ2 of Eq. 1 (N)",
+                               0.0, 1e6),
+    "capsule_mu_ns_per_m": Param(DEFAULTS.capsule.mu_ns_per_m, "paper: capsule viscosity μ of Eq. 1 (N·s/m)",
+                                 0.0, 1e4),
+    "parenchyma_lambda1_n": Param(DEFAULTS.parenchyma.lambda1_n, "paper: parenchyma cubic stiffness λ1 (N)",
+                                  0.0, 1e6),
+    "parenchyma_lambda2_n": Param(DEFAULTS.parenchyma.lambda2_n, "paper: parenchyma linear stiffness λ2 (N)",
+                                  0.0, 1e6),
+    "parenchyma_mu_ns_per_m": Param(DEFAULTS.parenchyma.mu_ns_per_m, "paper: parenchyma viscosity μ (N·s/m)",
+                                    0.0, 1e4),
+    "density_kg_m3": Param(DEFAULTS.density_kg_m3, "tissue density for the lumped masses (kg/m³)", 1.0, 1e5),
+    "environment_damping_per_s": Param(DEFAULTS.environment_damping_per_s,
+                                       "environmental viscosity c: a −= c·v (1/s)", 0.0, 1e4),
+    "gravity_m_s2": Param(list(DEFAULTS.gravity_m_s2), "gravity vector in the liver frame (m/s²)"),
+    "fixed_nodes": Param([-1], "indices of fixed nodes; [-1]: none with support organ (the central tet's four "
+                         "nodes if support_regions hold no skin node), the central tet's with support paper"),
+    "support": Param(DEFAULTS.support, "how the liver is held: organ (skin in support_regions tied to its rest "
+                     "position) or paper (the four nodes of the tet nearest the centroid fixed, paper §3.1)",
+                     choices=SUPPORTS),
+    "support_regions": Param([float(v) for region in DEFAULTS.support_regions for v in region],
+                             "support organ: spheres, five numbers each: centre x, y, z (m, liver frame), radius "
+                             "(m), stiffness per unit skin area (N/m³); each skin node inside is tied to its rest "
+                             "position with that stiffness times its share of skin area (m²). Default: the "
+                             "default liver's bare area, vena cava, left triangular ligament, visceral bed"),
+    "support_damping_s": Param(DEFAULTS.support_damping_s, "support organ: damping of each tie over its stiffness "
+                               "(s, Kelvin-Voigt time constant)", 0.0, 10.0),
+    "contact_stiffness_n_per_m": Param(DEFAULTS.contact_stiffness_n_per_m, "penalty λ of Eq. 3 (N/m)", 0.0, 1e6),
+    "contact_damping_ns_per_m": Param(DEFAULTS.contact_damping_ns_per_m, "penalty μ of Eq. 3 (N·s/m)", 0.0, 1e4),
+    "tool_shape": Param("sphere", "rigid tool: sphere, capsule or box", choices=("sphere", "capsule", "box")),
+    "tool_radius_m": Param(ToolShape().radius_m, "sphere/capsule radius (m)", 1e-4, 0.2),
+    "tool_length_m": Param(ToolShape().length_m, "capsule shaft length along the tool +z (m)", 0.0, 1.0),
+    "tool_half_extents_m": Param(list(ToolShape().half_extents_m), "box half extents (m)"),
+    "tearing": Param(DEFAULTS.tearing, "separate tetrahedra stretched beyond the tearing strains (paper §2.6); "
+                     "the torn mesh is republished on surface_topic"),
+    "tear_strain_parenchyma": Param(DEFAULTS.tear_strain_parenchyma, "stretch across a face between two tets "
+                                    "(mean normal strain, dimensionless) above which they separate", 0.01, 10.0),
+    "tear_strain_capsule": Param(DEFAULTS.tear_strain_capsule, "the same for a face with an edge on the capsule "
+                                 "(dimensionless)", 0.01, 10.0),
+    "tool_mode": Param("press", "press: the tool pushes the surface (Eq. 3); grasp: the skin nodes it touches "
+                       "follow it until tool_mode changes; cut: each stroke in contact cuts the skin (and cut_depth_m "
+                       "of tissue under it) along the tool path when the tool leaves the surface (§3.5). May be "
+                       "changed at run time", choices=TOOL_MODES),
+    "grasp_margin_m": Param(0.005, "grasp: skin nodes this close to the tool's bounding ball are held (m)",
+                            0.0, 0.05),
+    "cut_depth_m": Param(0.005, "cut: depth of the cut below the tool path (m); under one element layer cuts "
+                         "the capsule (membrane) only", 0.0005, 0.2),
+    "local_model": Param("plane", "local model published for the haptic loop", choices=("plane", "sphere")),
+    "local_model_reach_m": Param(0.02, "publish a local model while the tool is this close to the skin (m)",
+                                 0.0, 1.0),
+    "local_model_lifetime_s": Param(0.05, "how long the bridge may trust one local model (s)", 0.001, 10.0),
+    "tool_pose_timeout_s": Param(0.5, "a tool pose older than this is ignored: no tool (s)", 0.001, 60.0),
+    "workspace_margin_m": Param(0.3, "tool poses farther than this from the liver's bounds are refused (m)",
+                                0.0, 100.0),
+    "marker_rate_hz": Param(30.0, "rate of the /liver/marker TRIANGLE_LIST (Hz)", 0.1, 150.0),
+    # the default names of msg_defs.topics.TOPICS (which needs rclpy for its QoS profiles)
+    "nodes_topic": Param(TOPIC_NAMES["nodes"], "deformed node positions (PointCloud2)"),
+    "surface_topic": Param(TOPIC_NAMES["surface"], "skin triangles (shape_msgs/Mesh)"),
+    "marker_topic": Param(TOPIC_NAMES["marker"], "deformed skin for viewers (Marker)"),
+    "contact_plane_topic": Param(TOPIC_NAMES["contact_plane"], "local model for the haptic bridge (Marker)"),
+    "tool_wrench_topic": Param(TOPIC_NAMES["tool_wrench"], "contact force on the tool (WrenchStamped)"),
+    "tool_pose_topic": Param(TOPIC_NAMES["tool_pose"], "tool tip pose in the liver frame (PoseStamped)"),
+}
+
+
+def model_params(values: dict) -> ModelParams:
+    """The ModelParams named by the node's parameter values (validated)."""
+    fixed = tuple(values["fixed_nodes"]) if list(values["fixed_nodes"]) != [-1] else None
+    regions = list(values["support_regions"])
+    if len(regions) % 5:
+        raise ValueError(f"parameter support_regions must hold five numbers per region (x, y, z, radius m, "
+                         f"stiffness N/m³), got {len(regions)} numbers")
+    return ModelParams(
+        spring_constants=values["spring_constants"],
+        tissue=TissueProperties(values["parenchyma_young_modulus_kpa"], values["parenchyma_poisson_ratio"],
+                                values["parenchyma_viscosity_pa_s"], values["capsule_stiffness_n_per_m"],
+                                values["capsule_viscosity_ns_per_m"]),
+        capsule=SpringLaw(values["capsule_lambda1_n"], values["capsule_lambda2_n"], values["capsule_mu_ns_per_m"]),
+        parenchyma=SpringLaw(values["parenchyma_lambda1_n"], values["parenchyma_lambda2_n"],
+                             values["parenchyma_mu_ns_per_m"]),
+        density_kg_m3=values["density_kg_m3"], environment_damping_per_s=values["environment_damping_per_s"],
+        gravity_m_s2=tuple(values["gravity_m_s2"]), integrator=values["integrator"],
+        frame_rate_hz=values["rate_hz"], substeps=values["substeps"] or None, fixed_nodes=fixed,
+        support=values["support"], support_regions=tuple(tuple(regions[i:i + 5]) for i in range(0, len(regions), 5)),
+        support_damping_s=values["support_damping_s"],
+        contact_stiffness_n_per_m=values["contact_stiffness_n_per_m"],
+        contact_damping_ns_per_m=values["contact_damping_ns_per_m"], tearing=values["tearing"],
+        tear_strain_parenchyma=values["tear_strain_parenchyma"],
+        tear_strain_capsule=values["tear_strain_capsule"]).validate()
+
+
+def build_model(values: dict) -> LiverModel:
+    """The LiverModel (mesh, parameters, tool, local model) named by the node's parameter values, warmed up."""
+    mesh = (load_mesh(values["mesh_path"], values["target_tets"], values["mesh_scale"]) if values["mesh_path"]
+            else default_liver())
+    tool = ToolShape(values["tool_shape"], values["tool_radius_m"], values["tool_length_m"],
+                     tuple(values["tool_half_extents_m"]))
+    model = LiverModel(mesh, model_params(values), tool, values["local_model"], values["local_model_reach_m"])
+    model.warm_up()
+    return model

@@ -1,0 +1,239 @@
+"""Starting the product's nodes as separate processes, with the command lines a person would type
+(liver_sim.base.process_settings.command_line).
+
+A run's processes never outlive it: each gets SIGTERM when the thread that started it dies (Linux
+parent-death signal; SIGTERM so that a bridge still sends its zero and a recorder closes its bag), and
+each run notes its processes in a run file per ROS domain (RUN_DIR/domain-<id>.json, pids with their
+kernel start times). A new run on the domain stops what a dead run left there, and refuses a domain a
+live run of another process uses.
+"""
+from __future__ import annotations
+
+import ctypes
+import fcntl
+import json
+import os
+import signal
+import subprocess
+import tempfile
+import time
+from contextlib import contextmanager
+from pathlib import Path
+
+#: Where the run files live: one per ROS domain, for this user.
+RUN_DIR = Path(tempfile.gettempdir()) / f"liver_sim-runs-{os.getuid()}"
+#: A stopping node is signalled again (SIGINT, SIGTERM, SIGKILL) after this long (s).
+STOP_TIMEOUT_S = 5.0
+#: A stopping process started `patient` (a recorder closing its bag) is signalled again only after this long
+#: (s) without using CPU time, so that it is never cut short while it writes ...
+IDLE_BEFORE_ESCALATION_S = 5.0
+#: ... or after this long (s) in all, whatever it does.
+MAX_STOP_S = 300.0
+#: Lines of a failed process's log shown in its report.
+LOG_TAIL_LINES = 15
+PR_SET_PDEATHSIG = 1
+
+
+class NodeFailure(RuntimeError):
+    """A process of a run that exited early or with a non-zero status: names it, its status, the tail of its log."""
+
+    def __init__(self, failures: list[tuple[str, int, Path]], when: str):
+        self.failures = failures
+        parts = []
+        for label, status, log in failures:
+            how = (f"was killed by {signal.Signals(-status).name}" if status < 0
+                   else f"exited with status {status}")
+            tail = log_tail(log)
+            parts.append(f"{label} {how} {when}; last lines of {log}:\n" + "\n".join(f"  | {t}" for t in tail))
+        super().__init__("\n".join(parts))
+
+
+def log_tail(path: Path, lines: int = LOG_TAIL_LINES) -> list[str]:
+    """The last `lines` lines of a log (none if it is missing)."""
+    try:
+        return path.read_text(errors="replace").splitlines()[-lines:]
+    except OSError:
+        return []
+
+
+def _process_start(pid: int) -> int | None:
+    """The kernel start time of `pid` (clock ticks since boot; with the pid, a process's identity), or None
+    when no such process runs (a zombie counts as gone)."""
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return None
+    fields = stat.rsplit(")", 1)[1].split()
+    return None if fields[0] in ("Z", "X") else int(fields[19])
+
+
+def _cpu_ticks(pid: int) -> int:
+    """User + system CPU time of `pid` (clock ticks); -1 when it is gone."""
+    try:
+        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    except OSError:
+        return -1
+    return int(fields[11]) + int(fields[12])
+
+
+def die_with_parent(parent_pid: int):
+    """preexec_fn: SIGTERM this child when the thread that started it dies (prctl PR_SET_PDEATHSIG), and at
+    once if the parent is already gone."""
+    prctl = ctypes.CDLL(None, use_errno=True).prctl  # looked up before the fork
+
+    def preexec() -> None:
+        prctl(PR_SET_PDEATHSIG, int(signal.SIGTERM), 0, 0, 0)
+        if os.getppid() != parent_pid:
+            os.kill(os.getpid(), signal.SIGTERM)
+    return preexec
+
+
+class RunFile:
+    """The run file of a ROS domain: {"runs": [{"owner": [pid, start], "log_dir", "processes": [[label, pid,
+    start, patient], …]}]}, read and written under an exclusive lock."""
+
+    def __init__(self, domain: str, run_dir: Path | None = None):
+        self.run_dir = RUN_DIR if run_dir is None else run_dir
+        self.path = self.run_dir / f"domain-{domain}.json"
+
+    @contextmanager
+    def edit(self):
+        """The runs, as a list to change in place; written back on exit."""
+        self.run_dir.mkdir(mode=0o700, parents=True, exist_ok=True)
+        with open(self.run_dir / f"{self.path.name}.lock", "a+") as lock:
+            fcntl.flock(lock, fcntl.LOCK_EX)
+            try:
+                runs = json.loads(self.path.read_text())["runs"] if self.path.exists() else []
+            except (ValueError, KeyError, TypeError):
+                runs = []  # a damaged run file names nothing that can be trusted
+            yield runs
+            runs[:] = [run for run in runs if run["processes"]]
+            if runs:
+                self.path.write_text(json.dumps({"runs": runs}, indent=1) + "\n")
+            elif self.path.exists():
+                self.path.unlink()
+
+
+def _alive(identity) -> bool:
+    pid, start = identity
+    return _process_start(pid) == start
+
+
+def stop_leftovers(run_file: RunFile, progress=print) -> list[str]:
+    """Stop the processes that runs of dead processes left in the run file's domain (SIGTERM, then SIGKILL
+    once idle); return their labels and pids. RuntimeError when a live run of another process uses the domain."""
+    me = [os.getpid(), _process_start(os.getpid())]
+    stopped = []
+    with run_file.edit() as runs:
+        for run in runs:
+            alive = [entry for entry in run["processes"] if _alive(entry[1:3])]
+            if _alive(run["owner"]):
+                if run["owner"] != me and alive:
+                    raise RuntimeError(f"{run_file.path}: pid {run['owner'][0]} runs {', '.join(e[0] for e in alive)} "
+                                       f"on this ROS domain (logs in {run['log_dir']}); stop it or choose another "
+                                       "ROS_DOMAIN_ID")
+                continue
+            for label, pid, _, _ in alive:
+                os.kill(pid, signal.SIGTERM)
+            for label, pid, start, patient in alive:
+                _wait_gone(pid, start, (signal.SIGKILL,), patient)
+                stopped.append(f"{label} (pid {pid})")
+            run["processes"] = []
+    if stopped:
+        progress(f"stopped what an earlier run left on this domain: {', '.join(stopped)}")
+    return stopped
+
+
+def _wait_gone(pid: int, start: int, escalation, patient: bool, poll=None) -> None:
+    """Wait until the process (pid, start) is gone (or `poll` gives its status), sending the next signal of
+    `escalation` after STOP_TIMEOUT_S, or when `patient` once it has used no CPU time for
+    IDLE_BEFORE_ESCALATION_S (at the latest after MAX_STOP_S)."""
+    escalation = list(escalation)
+    began = idle_since = time.monotonic()
+    ticks = _cpu_ticks(pid)
+    while (poll is None or poll() is None) and _process_start(pid) == start:
+        now, used = time.monotonic(), _cpu_ticks(pid)
+        if used != ticks:
+            ticks, idle_since = used, now
+        due = (now - idle_since > IDLE_BEFORE_ESCALATION_S or now - began > MAX_STOP_S) if patient \
+            else now - began > STOP_TIMEOUT_S
+        if escalation and due:
+            os.kill(pid, escalation.pop(0))
+            idle_since = began = now
+        time.sleep(0.02)
+
+
+class NodeProcesses:
+    """Started node processes, noted in the domain's run file, stopped with SIGINT (then SIGTERM, then
+    SIGKILL: see _wait_gone) on exit or stop(). `exit_codes` keeps the status of every stopped process."""
+
+    def __init__(self, log_dir: Path, progress=print, run_dir: Path | None = None):
+        self.log_dir = log_dir
+        self.processes: dict[str, subprocess.Popen] = {}
+        self.exit_codes: dict[str, int] = {}
+        self._identity = [os.getpid(), _process_start(os.getpid())]
+        self._run_file = RunFile(os.environ.get("ROS_DOMAIN_ID") or "0", run_dir)
+        stop_leftovers(self._run_file, progress)
+
+    def start(self, label: str, args: list[str], patient: bool = False) -> subprocess.Popen:
+        """Start one node; its output goes to <log_dir>/<label>.log. A `patient` one (a recorder) is given
+        the time it needs to stop while it still works (_wait_gone)."""
+        self.log_dir.mkdir(parents=True, exist_ok=True)
+        with open(self.log_dir / f"{label}.log", "w") as log:
+            process = subprocess.Popen(args, stdout=log, stderr=subprocess.STDOUT, env=dict(os.environ),
+                                       start_new_session=True, preexec_fn=die_with_parent(os.getpid()))
+        self.processes[label] = process
+        self.exit_codes.pop(label, None)
+        with self._run_file.edit() as runs:
+            run = next((r for r in runs if r["owner"] == self._identity and r["log_dir"] == str(self.log_dir)),
+                       None)
+            if run is None:
+                run = {"owner": self._identity, "log_dir": str(self.log_dir), "processes": []}
+                runs.append(run)
+            run["processes"].append([label, process.pid, _process_start(process.pid), patient])
+        return process
+
+    def stop(self, label: str | list[str] | None = None) -> dict[str, int]:
+        """Stop one node, a list of them, or all, politely first; return their exit statuses."""
+        labels = [label] if isinstance(label, str) else list(self.processes if label is None else label)
+        for name in labels:
+            process = self.processes[name]
+            if process.poll() is None:
+                process.send_signal(signal.SIGINT)
+        pids = {self.processes[name].pid for name in labels}
+        with self._run_file.edit() as runs:
+            patient = {e[1] for run in runs if run["owner"] == self._identity for e in run["processes"] if e[3]}
+        for name in labels:
+            process = self.processes[name]
+            start = _process_start(process.pid)  # our unreaped child: the pid cannot have been reused
+            if start is not None:
+                _wait_gone(process.pid, start, (signal.SIGTERM, signal.SIGKILL), process.pid in patient,
+                           process.poll)
+            self.exit_codes[name] = process.wait()
+        with self._run_file.edit() as runs:
+            for run in runs:
+                if run["owner"] == self._identity:
+                    run["processes"] = [e for e in run["processes"] if e[1] not in pids]
+        return {name: self.exit_codes[name] for name in labels}
+
+    def failed(self) -> dict[str, int]:
+        """Nodes that have exited, with their exit status."""
+        return {name: p.returncode for name, p in self.processes.items() if p.poll() is not None}
+
+    def check(self, when: str = "while running") -> None:
+        """NodeFailure naming every node that has exited (early)."""
+        failed = self.failed()
+        if failed:
+            raise NodeFailure([(name, status, self.log_dir / f"{name}.log") for name, status in failed.items()], when)
+
+    def check_exit_codes(self) -> None:
+        """NodeFailure naming every stopped node whose exit status was not 0."""
+        bad = [(name, status, self.log_dir / f"{name}.log") for name, status in self.exit_codes.items() if status]
+        if bad:
+            raise NodeFailure(bad, "at stop")
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.stop()

@@ -1,0 +1,194 @@
+"""A listening node for the demo and the loop benchmark: keeps what the network publishes, with
+the time each message arrived, for analysis after the run."""
+from __future__ import annotations
+
+import threading
+import time
+
+import numpy as np
+from rclpy.node import Node
+from rclpy.serialization import deserialize_message
+
+from liver_sim.nodes.inputs import LoopInputs
+from liver_sim.nodes.rate_loop import RateLoop
+from msg_defs.forces import force_from_bytes, force_message_type
+from msg_defs.point_cloud import pointcloud2_to_nodes
+from msg_defs.poses import pose_from_bytes
+from msg_defs.skin import mesh_msg_to_arrays
+from msg_defs.stamps import seconds_from_stamp, stamp_s_from_bytes
+from msg_defs.topics import TOPICS, batch_qos
+
+#: How often (Hz) the listener takes the 1 kHz and 150 Hz streams, in batches.
+POLL_RATE_HZ = 200.0
+#: Messages each stream keeps between two polls: 5 s of the 1 kHz commands, so that a listener starved of CPU
+#: for seconds (normal priority beside real-time nodes and a busy machine) loses nothing it must measure.
+HISTORY_DEPTH = 5000
+
+
+class NetworkListener(Node):
+    """Listens to the force commands, the tool pose, the nodes, the physics wrench, /liver/surface and /diagnostics.
+
+    `force_topics` maps a label to (topic, force_output format), e.g. {'local_model': ('/phantom/servo_cf',
+    'wrench_stamped')}. The force commands, tool poses, nodes and physics wrenches are taken in batches by a
+    POLL_RATE_HZ loop (cheaper than a callback each) and timed by DDS: `*_arrival_s` is when the message reached
+    this process (the rmw's receive time, on the time.monotonic() scale). Messages are decoded in
+    `snapshot()`, only those not decoded by an earlier call. `peak_nodes` are the node positions
+    farthest (largest coordinate change) from the first ones received with the same node count;
+    `initial_nodes` and `initial_surface` the first ones received, `surface` the newest (a tear or a
+    cut changes it, and the node count with it).
+    """
+
+    def __init__(self, force_topics: dict[str, tuple[str, str]], name: str = "liver_sim_listener", context=None):
+        super().__init__(name, context=context)
+        self._lock = threading.Lock()
+        self._monotonic_minus_wall_s = time.monotonic() - time.time()
+        self._force_formats = {label: fmt for label, (_, fmt) in force_topics.items()}
+        self._received = {("force", label): [] for label in force_topics}
+        self._received["tool_pose"], self._received["nodes"], self._received["tool_wrench"] = [], [], []
+        self._decoded = {key: [] for key in self._received}
+        self.diagnostics: dict[str, dict] = {}
+        self.initial_surface = self.surface = None
+        self.surface_messages = 0
+        self.initial_nodes = self.first_nodes = self.peak_nodes = self.last_nodes = None
+        self._peak_displacement = -1.0
+        self._polled = LoopInputs(self)
+        for label, (topic, fmt) in force_topics.items():
+            self._take(("force", label), force_message_type(fmt), topic, TOPICS["servo_cf"])
+        self._take("tool_pose", TOPICS["tool_pose"].type, TOPICS["tool_pose"].name, TOPICS["tool_pose"])
+        self._take("nodes", TOPICS["nodes"].type, TOPICS["nodes"].name, TOPICS["nodes"])
+        self._take("tool_wrench", TOPICS["tool_wrench"].type, TOPICS["tool_wrench"].name, TOPICS["tool_wrench"])
+        self.create_subscription(TOPICS["surface"].type, TOPICS["surface"].name, self._on_surface,
+                                 TOPICS["surface"].qos)
+        self.create_subscription(TOPICS["diagnostics"].type, TOPICS["diagnostics"].name, self._on_diagnostics,
+                                 TOPICS["diagnostics"].qos)
+        self._poller = RateLoop(POLL_RATE_HZ, lambda now: self._polled.poll(), f"{name}_poll", freeze=False)
+        self._poller.start()
+
+    def destroy_node(self) -> None:
+        self._poller.stop()
+        self._polled.destroy()
+        super().destroy_node()
+
+    def _take(self, key, msg_type, topic: str, row) -> None:
+        """Keep every message of `topic` as (bytes, rmw info) under `key`."""
+        received = self._received[key]
+
+        def keep(data: bytes, info: dict) -> None:
+            with self._lock:
+                received.append((data, info))
+        self._polled.subscribe(msg_type, topic, batch_qos(row, HISTORY_DEPTH), keep, raw=True, every=True)
+
+    def _new(self, key) -> list:
+        """The messages under `key` not decoded yet: (arrival here s, publication s, bytes), both times as
+        DDS stamped them, on the time.monotonic() scale."""
+        with self._lock:
+            new = self._received[key][len(self._decoded[key]):]
+        offset = self._monotonic_minus_wall_s
+        return [(info["received_timestamp"] * 1e-9 + offset, info["source_timestamp"] * 1e-9 + offset, data)
+                for data, info in new]
+
+    def _decode_forces(self, label) -> tuple:
+        """(arrival_s, published_s, forces (K, 3) N, pose stamps (K,) s or NaN) of the force commands so far."""
+        fmt = self._force_formats[label]
+        decoded = self._decoded["force", label]
+        for arrival, published, data in self._new(("force", label)):
+            force = force_from_bytes(fmt, data)
+            stamp = stamp_s_from_bytes(data, "WrenchStamped") if fmt == "wrench_stamped" else np.nan
+            decoded.append((arrival, published, force, stamp))
+        return (np.array([d[0] for d in decoded]), np.array([d[1] for d in decoded]),
+                np.array([d[2] for d in decoded]).reshape(-1, 3), np.array([d[3] for d in decoded]))
+
+    def _decode_tool_poses(self) -> tuple:
+        """(arrival_s, published_s, stamp_s, positions (K, 3) m) of the tool poses so far."""
+        decoded = self._decoded["tool_pose"]
+        for arrival, published, data in self._new("tool_pose"):
+            try:
+                position, _, (sec, nanosec) = pose_from_bytes(data)
+            except ValueError:
+                continue  # a refused pose is the nodes' business; it has no place in the figures
+            decoded.append((arrival, published, sec + nanosec * 1e-9, position))
+        return tuple(np.array([d[i] for d in decoded]) for i in range(3)) + (
+            np.array([d[3] for d in decoded]).reshape(-1, 3),)
+
+    def _decode_nodes(self) -> tuple:
+        """(arrival_s, published_s, stamp_s) of the node clouds so far; tracks the first, peak and last positions."""
+        decoded = self._decoded["nodes"]
+        for arrival, published, data in self._new("nodes"):
+            message = deserialize_message(data, TOPICS["nodes"].type)
+            decoded.append((arrival, published, seconds_from_stamp(message.header.stamp)))
+            try:
+                positions = pointcloud2_to_nodes(message)
+            except ValueError as exc:
+                self.get_logger().warning(f"ignored /liver/nodes message: {exc}", throttle_duration_sec=1.0)
+                continue
+            if self.initial_nodes is None:
+                self.initial_nodes = positions
+            if self.first_nodes is None or len(self.first_nodes) != len(positions):
+                self.first_nodes, self._peak_displacement = positions, -1.0
+            self.last_nodes = positions
+            displacement = float(np.abs(positions - self.first_nodes).max())
+            if displacement > self._peak_displacement:
+                self._peak_displacement, self.peak_nodes = displacement, positions
+        return tuple(np.array([d[i] for d in decoded]) for i in range(3))
+
+    def _decode_wrenches(self) -> tuple:
+        """(arrival_s, forces (K, 3) N) of the physics wrenches so far."""
+        decoded = self._decoded["tool_wrench"]
+        for arrival, _, data in self._new("tool_wrench"):
+            try:
+                decoded.append((arrival, force_from_bytes("wrench_stamped", data)))
+            except ValueError:
+                continue  # a refused wrench is the bridge's business
+        return np.array([d[0] for d in decoded]), np.array([d[1] for d in decoded]).reshape(-1, 3)
+
+    def _on_surface(self, message) -> None:
+        try:
+            surface = mesh_msg_to_arrays(message)
+        except ValueError as exc:
+            self.get_logger().warning(f"ignored /liver/surface message: {exc}")
+            return
+        with self._lock:
+            self.surface = surface
+            self.initial_surface = surface if self.initial_surface is None else self.initial_surface
+            self.surface_messages += 1
+
+    def _on_diagnostics(self, message) -> None:
+        with self._lock:
+            for status in message.status:
+                self.diagnostics[status.name] = {kv.key: kv.value for kv in status.values}
+
+    def snapshot(self) -> dict:
+        """Copies of everything received so far, as numpy arrays where that fits.
+
+        `*_arrival_s` are when messages reached this process, `*_published_s` when their publisher sent
+        them (DDS times, independent of how promptly this process runs). `pose_to_force_s[label]`: for
+        each force command stamped with a tool pose, the time from that pose's publication to the
+        command's (s; NaN when the pose was not seen).
+        """
+        decoded = {label: self._decode_forces(label) for label in self._force_formats}
+        tool_arrival, tool_published, tool_stamp, tool_position = self._decode_tool_poses()
+        nodes_arrival, nodes_published, nodes_stamp = self._decode_nodes()
+        wrench_arrival, wrench = self._decode_wrenches()
+        published_by_stamp = dict(zip(tool_stamp.tolist(), tool_published.tolist()))
+        with self._lock:
+            return {
+                "forces": {label: (arrival, values) for label, (arrival, _, values, _) in decoded.items()},
+                "force_published_s": {label: published for label, (_, published, _, _) in decoded.items()},
+                "pose_to_force_s": {label: np.array([sent - published_by_stamp.get(stamp, np.nan)
+                                                     for sent, stamp in zip(sent_s, stamps)])
+                                    for label, (_, sent_s, _, stamps) in decoded.items()},
+                "wrench_arrival_s": wrench_arrival,
+                "wrench_n": wrench,
+                "tool_arrival_s": tool_arrival,
+                "tool_position_m": tool_position,
+                "nodes_arrival_s": nodes_arrival,
+                "nodes_published_s": nodes_published,
+                "nodes_stamp_s": nodes_stamp,
+                "diagnostics": {k: dict(v) for k, v in self.diagnostics.items()},
+                "surface": self.surface,
+                "initial_surface": self.initial_surface,
+                "surface_messages": self.surface_messages,
+                "initial_nodes": self.initial_nodes,
+                "peak_nodes": self.peak_nodes,
+                "last_nodes": self.last_nodes,
+            }

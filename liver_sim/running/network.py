@@ -1,0 +1,229 @@
+"""Running the four-node network as separate processes, listening to it, and stopping it cleanly.
+
+Used by `liver-sim demo` and `liver-sim bench loop`.  Processes run in the ROS_DOMAIN_ID of the
+environment and on loopback unless the environment says otherwise.
+"""
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import rclpy
+from rclpy.experimental import EventsExecutor
+
+from liver_sim.analysis import rate_figures
+from liver_sim.base.process_settings import command_line, printable
+from liver_sim.mesh.landmarks import press_anchor
+from liver_sim.mesh.liver_shape import default_liver
+from liver_sim.nodes.run import spin
+from liver_sim.running.launcher import NodeProcesses, log_tail
+from liver_sim.running.listener import NetworkListener
+from liver_sim.running.machine_stalls import Sentinels, gaps_with_stalls
+from liver_sim.sessions.record import READY, RECORDER_NODE
+from msg_defs.topics import TOPICS
+
+#: The scripted hand waits this long (s) before moving: DDS discovery of a new process takes seconds,
+#: and the press must not begin before the tool node relays the stylus.
+DEVICE_START_DELAY_S = 3.0
+
+
+def default_anchor() -> list[float]:
+    """Top of the default liver (m, liver frame): where the scripted hand presses."""
+    return [round(float(v), 6) for v in press_anchor(default_liver())]
+
+
+@dataclass
+class NetworkPlan:
+    """The command lines of one run: label -> argv."""
+
+    commands: dict[str, list[str]] = field(default_factory=dict)
+    force_topics: dict[str, tuple[str, str]] = field(default_factory=dict)
+    #: started once the physics publishes, so that a scripted device does not press an absent liver
+    after_physics: tuple = ("phantom_sim",)
+    #: `liver-sim record` command lines: started before the nodes, which start once each has printed its
+    #: READY line and its subscriptions show in the graph; stopped after the nodes, given the time they need
+    observers: dict[str, list[str]] = field(default_factory=dict)
+
+
+def closed_loop_plan(extra: dict | None = None) -> NetworkPlan:
+    """The four nodes in closed loop with the simulated PHANToM pressing the top of the liver.
+
+    `extra` maps an executable to more `-p` overrides.  (Fig. 8's baseline bridge without local model
+    runs offline on what the network sent: analysis.held_wrench_baseline, `liver-sim resimulate --compare`.)
+    """
+    extra = extra or {}
+    plan = NetworkPlan()
+    plan.commands["liver_physics"] = command_line("liver_physics", extra.get("liver_physics"))
+    plan.commands["haptic_bridge"] = command_line("haptic_bridge", extra.get("haptic_bridge"))
+    plan.commands["liver_tool"] = command_line("liver_tool", {"source": "device", **extra.get("liver_tool", {})})
+    plan.commands["phantom_sim"] = command_line("phantom_sim", {"anchor_m": default_anchor(),
+                                                                "start_delay_s": DEVICE_START_DELAY_S,
+                                                                **extra.get("phantom_sim", {})})
+    plan.force_topics["local_model"] = ("/phantom/servo_cf", "wrench_stamped")
+    return plan
+
+
+#: A process that keeps one core busy at normal priority (`extra_load`): what a person runs beside the rig.
+CORE_BOUND_PROCESS = [sys.executable, "-c", "while True: pass"]
+
+
+def process_counters(pid: int) -> dict | None:
+    """CPU time (s, user + system, all threads: /proc/<pid>/stat) and voluntary and involuntary context
+    switches (summed over /proc/<pid>/task/*/status) of `pid`; None when it is gone."""
+    try:
+        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+        switches = {"voluntary_ctxt_switches": 0, "nonvoluntary_ctxt_switches": 0}
+        for task in Path(f"/proc/{pid}/task").iterdir():
+            try:
+                for line in (task / "status").read_text().splitlines():
+                    key, _, value = line.partition(":")
+                    if key in switches:
+                        switches[key] += int(value)
+            except OSError:  # a thread that ended meanwhile
+                continue
+    except OSError:
+        return None
+    return {"cpu_s": (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK"),
+            "voluntary": switches["voluntary_ctxt_switches"], "involuntary": switches["nonvoluntary_ctxt_switches"]}
+
+
+def process_costs(before: dict, after: dict, wall_s: float) -> dict:
+    """{label: cpu_share_of_one_core, voluntary_switches_per_s, involuntary_switches_per_s} between two
+    samples {label: process_counters(pid)} taken `wall_s` apart; labels missing from either are left out."""
+    costs = {}
+    for label, first in before.items():
+        last = after.get(label)
+        if first is None or last is None:
+            continue
+        costs[label] = {"cpu_share_of_one_core": (last["cpu_s"] - first["cpu_s"]) / wall_s,
+                        "voluntary_switches_per_s": (last["voluntary"] - first["voluntary"]) / wall_s,
+                        "involuntary_switches_per_s": (last["involuntary"] - first["involuntary"]) / wall_s}
+    return costs
+
+
+def run_network(plan: NetworkPlan, duration_s: float, log_dir: Path, progress=print,
+                settle_s: float = 1.0, extra_load: int = 0) -> dict:
+    """Start the plan's processes, listen for `duration_s` after they are up, stop them; return the snapshot
+    (NetworkListener.snapshot) with `window_s`, the (start, end) of those `duration_s` (monotonic s),
+    `process_costs` over them (:func:`process_costs`: each node, observer, `listener` — this process — and
+    each of the `extra_load` CORE_BOUND_PROCESSes started at normal priority once the network is up), and
+    `machine_stalls` (K, 2) within them, measured by a sentinel per CPU (liver_sim.running.machine_stalls).
+
+    Raises NodeFailure naming any process that exited early or with a non-zero status at stop, with the tail
+    of its log (in log_dir); RuntimeError if the network does not come up.
+    """
+
+
+    progress(f"ROS_DOMAIN_ID={os.environ.get('ROS_DOMAIN_ID', '0')} "
+             f"ROS_AUTOMATIC_DISCOVERY_RANGE={os.environ.get('ROS_AUTOMATIC_DISCOVERY_RANGE', '(default)')}")
+    for label, args in {**plan.observers, **plan.commands}.items():
+        progress(f"  {label}: {printable(args)}")
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    listener = NetworkListener(plan.force_topics, context=context)
+    executor = EventsExecutor(context=context)
+    executor.add_node(listener)
+    spinner = threading.Thread(target=spin, args=(executor, context), daemon=True)
+    spinner.start()
+    processes = None
+    loads = []
+    sentinels = Sentinels(log_dir)
+    try:
+        processes = NodeProcesses(log_dir, progress)
+        for label, args in plan.observers.items():
+            processes.start(label, args, patient=True)
+        _wait_until(listener, processes, f"the recorder(s) {', '.join(plan.observers)} (ready and subscribed)",
+                    lambda heard: all(_recorder_ready(heard, log_dir / f"{label}.log") for label in plan.observers))
+        for label, args in plan.commands.items():
+            if label not in plan.after_physics:
+                processes.start(label, args)
+        _wait_until(listener, processes, "the network (node positions and every force topic)",
+                    lambda heard: all(len(t) for t, _ in heard.snapshot()["forces"].values())
+                    and len(heard.snapshot()["nodes_arrival_s"]))
+        late = [label for label in plan.after_physics if label in plan.commands]
+        for label in late:
+            processes.start(label, plan.commands[label])
+        if late:
+            _wait_until(listener, processes, f"the tool pose from {', '.join(late)}",
+                        lambda heard: len(heard.snapshot()["tool_arrival_s"]) > 0)
+        for k in range(extra_load):
+            loads.append(subprocess.Popen(CORE_BOUND_PROCESS))
+            progress(f"  extra load {k + 1}: pid {loads[-1].pid}, one core busy at normal priority")
+        sentinels.start()  # once the network is up: they watch the window
+        time.sleep(settle_s)
+        pids = {label: process.pid for label, process in processes.processes.items()}
+        pids.update({"listener": os.getpid(), **{f"extra_load_{k + 1}": p.pid for k, p in enumerate(loads)}})
+        before = {label: process_counters(pid) for label, pid in pids.items()}
+        start = time.monotonic()
+        while time.monotonic() - start < duration_s:
+            time.sleep(min(1.0, duration_s - (time.monotonic() - start)))
+            processes.check("while running")
+            progress(f"  {time.monotonic() - start:5.1f} / {duration_s:.1f} s")
+        window = (start, time.monotonic())
+        costs = process_costs(before, {label: process_counters(pid) for label, pid in pids.items()},
+                              window[1] - window[0])
+    finally:
+        sentinels.stop()
+        for load in loads:
+            load.kill()
+            load.wait()
+        if processes is not None:
+            processes.stop([label for label in plan.commands if label in processes.processes])
+            if plan.observers:
+                progress("  nodes stopped; waiting for the recorder to close its bag")
+            processes.stop()
+        snapshot = listener.snapshot()  # with what the nodes sent while they stopped
+        context.try_shutdown()
+        spinner.join(timeout=2.0)
+        listener.destroy_node()
+    processes.check_exit_codes()
+    return {**snapshot, "window_s": window, "process_costs": costs, "machine_stalls": sentinels.stalls(window)}
+
+
+def wire_rates(snapshot: dict, label: str = "local_model") -> dict:
+    """The network's rates as its messages went on the wire (DDS publication times) within the snapshot's
+    `window_s`, the `duration_s` in which every node ran: {'physics': rate_figures of /liver/nodes at 150 Hz,
+    'haptic': of the `label` force commands at 1 kHz}. Start-up, shutdown and a listener's batched arrivals
+    do not count."""
+
+    start, end = snapshot["window_s"]
+    nodes, forces = snapshot["nodes_published_s"], snapshot["force_published_s"][label]
+    return {"physics": rate_figures(nodes[(nodes >= start) & (nodes <= end)], 150.0),
+            "haptic": rate_figures(forces[(forces >= start) & (forces <= end)], 1000.0)}
+
+
+def wire_gaps(snapshot: dict, bound_s: float, label: str = "local_model") -> list[dict]:
+    """The gaps longer than `bound_s` between the `label` force commands published within the snapshot's
+    `window_s`, each with the part of it the machine stalled (machine_stalls.gaps_with_stalls; `start_s` from
+    the window's start)."""
+
+    start, end = snapshot["window_s"]
+    sent = snapshot["force_published_s"][label]
+    gaps = gaps_with_stalls(sent[(sent >= start) & (sent <= end)], bound_s, snapshot["machine_stalls"])
+    return [{**gap, "start_s": gap["start_s"] - start} for gap in gaps]
+
+
+def _recorder_ready(listener, log: Path) -> bool:
+    """Whether the recorder logging to `log` said READY and the graph shows its subscriptions to the
+    contract's topics."""
+
+    if not any(line.startswith(READY) for line in log_tail(log, 1000)):
+        return False
+    return all(any(s.node_name == RECORDER_NODE for s in listener.get_subscriptions_info_by_topic(t.name))
+               for key, t in TOPICS.items() if key != "marker")
+
+
+def _wait_until(listener, processes: NodeProcesses, what: str, ready, timeout_s: float = 60.0) -> None:
+    """Until `ready(listener)`; RuntimeError naming `what` after `timeout_s`, or naming a node that exited."""
+    start = time.monotonic()
+    while time.monotonic() - start < timeout_s:
+        if ready(listener):
+            return
+        processes.check("during start-up")
+        time.sleep(0.1)
+    raise RuntimeError(f"{what} did not come up within {timeout_s:.0f} s; see logs in {processes.log_dir}")

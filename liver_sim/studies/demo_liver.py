@@ -1,0 +1,56 @@
+"""The liver a demo runs on: the default liver or a user's mesh, and the parameters that make the physics
+node load it and the simulated hand press its top."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from liver_sim.mesh.io import load_mesh
+from liver_sim.mesh.landmarks import press_anchor
+from liver_sim.mesh.liver_shape import default_liver
+from liver_sim.mesh.tetmesh import TetMesh
+from liver_sim.physics.parameters import PARAMETERS as PHYSICS_PARAMETERS
+from liver_sim.tool.scripts import ScriptSettings
+
+
+@dataclass(frozen=True)
+class DemoMesh:
+    """The liver a demo runs on: `path` None for the default liver, else a mesh file whose coordinates ×
+    `scale` are metres, loaded as the physics node loads it (mesh_path, mesh_scale, target_tets)."""
+
+    path: Path | None = None
+    scale: float = 1.0
+
+    @property
+    def name(self) -> str:
+        """What titles call it: "default liver" or the file's name."""
+        return "default liver" if self.path is None else self.path.name
+
+    @property
+    def title(self) -> str:
+        """`name` at the start of a title."""
+        return self.name[:1].upper() + self.name[1:]
+
+    def load(self) -> TetMesh:
+        """The mesh in metres; MeshError (a ValueError naming the file) when refused."""
+        if self.path is None:
+            return default_liver()
+        return load_mesh(self.path, PHYSICS_PARAMETERS["target_tets"].default, self.scale)
+
+    def physics_parameters(self, mesh: TetMesh) -> dict:
+        """The physics node's parameters that load this mesh (none for the default liver)."""
+        if self.path is None:
+            return {}
+        return {"mesh_path": str(self.path.resolve()), "mesh_scale": self.scale}
+
+    def device_parameters(self, mesh: TetMesh) -> dict:
+        """The script anchor and device map that make the simulated hand press the top of `mesh` with the
+        same device-frame moves as on the default liver (none for the default liver)."""
+        if self.path is None:
+            return {}
+        anchor = press_anchor(mesh)
+        shift = anchor - np.asarray(ScriptSettings().anchor_m)  # the device origin follows the press point
+        return {"anchor_m": [round(float(v), 6) for v in anchor],
+                "device_translation_m": [round(float(v), 6) for v in shift]}
