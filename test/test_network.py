@@ -30,16 +30,16 @@ def assert_safe(forces):
 
 def test_closed_loop_press_deforms_the_liver_and_it_returns(ros_domain_id, tmp_path):
     script = {"script": "press_release", "depth_m": 0.02, "rest_s": 6.0}
-    snapshot = run_network(closed_loop_plan(extra={"phantom_sim": script}), 11.0, tmp_path, progress=lambda s: None)
-    _, forces = snapshot["forces"]["local_model"]
+    run = run_network(closed_loop_plan(extra={"phantom_sim": script}), 11.0, tmp_path, progress=lambda s: None)
+    _, forces = run.forces["local_model"]
     norms = np.linalg.norm(forces, axis=1)
     assert_safe(forces)
     assert norms.max() > 0.1                      # felt in contact
     assert (norms[:50] == 0.0).all()              # nothing before the press
     assert (norms[-200:] == 0.0).all()            # nothing once the tool is up again
     rest = default_liver().points
-    peak = np.linalg.norm(snapshot["peak_nodes"] - rest, axis=1).max()
-    final = np.linalg.norm(snapshot["last_nodes"] - rest, axis=1).max()
+    peak = np.linalg.norm(run.peak_nodes - rest, axis=1).max()
+    final = np.linalg.norm(run.last_nodes - rest, axis=1).max()
     assert peak > 0.002
     assert final < 0.3 * peak
 
@@ -59,7 +59,7 @@ class Network:
         self.thread.start()
 
     def forces_since(self, t0):
-        arrival, forces = self.listener.snapshot()["forces"]["local_model"]
+        arrival, forces = self.listener.snapshot().forces["local_model"]
         return forces[arrival >= t0]
 
     def wait_for(self, condition, timeout_s, what):

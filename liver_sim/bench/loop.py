@@ -66,32 +66,32 @@ def loop_run(duration_s: float, log_dir, progress=None, observers: dict | None =
     plan = closed_loop_plan(extra={"phantom_sim": {"loop_script": True, "script": "explore"}})
     plan.observers.update(observers or {})
     load_before = os.getloadavg()
-    snapshot = run_network(plan, duration_s, log_dir, progress or (lambda line: None), extra_load=extra_load)
+    run = run_network(plan, duration_s, log_dir, progress or (lambda line: None), extra_load=extra_load)
     load_after = os.getloadavg()
-    start, end = snapshot["window_s"]
-    sent = snapshot["force_published_s"]["local_model"]
+    start, end = run.window_s
+    sent = run.force_published_s["local_model"]
     inside = (sent >= start) & (sent <= end)
     sent_local = sent[inside]
-    force = snapshot["forces"]["local_model"][1][inside]
-    latency = snapshot["pose_to_force_s"]["local_model"][inside]
-    stalls = snapshot["machine_stalls"]
+    force = run.forces["local_model"][1][inside]
+    latency = run.pose_to_force_s["local_model"][inside]
+    stalls = run.machine_stalls
     calm = np.ones(sent_local.size, dtype=bool)  # commands away from every machine stall
     for stall_start, stall_end in stalls:
         calm &= (sent_local < stall_start) | (sent_local > stall_end + MACHINE_STALL_SETTLE_S)
     latency_calm = latency[calm & np.isfinite(latency)]
     latency = latency[np.isfinite(latency)]
-    baseline = held_wrench_baseline(sent_local, snapshot["wrench_arrival_s"], snapshot["wrench_n"],
-                                    snapshot["tool_arrival_s"], node_parameters(())["haptic_bridge"])
+    baseline = held_wrench_baseline(sent_local, run.wrench_arrival_s, run.wrench_n,
+                                    run.tool_arrival_s, node_parameters(())["haptic_bridge"])
     fig8 = fig8_figures(force, baseline, sent_local, FIG8_MAX_PERIOD_S)
     fig8_calm = fig8_figures(force[calm], baseline[calm], sent_local[calm], FIG8_MAX_PERIOD_S)
-    on_wire = wire_rates(snapshot)
-    gaps = wire_gaps(snapshot, LOOP_TARGETS["haptic_max_gap_s_max"])
+    on_wire = wire_rates(run)
+    gaps = wire_gaps(run, LOOP_TARGETS["haptic_max_gap_s_max"])
     short = np.diff(sent_local)
     short = short[short <= LOOP_TARGETS["haptic_max_gap_s_max"]]
     figures = {
         "physics_on_wire": on_wire["physics"],
         "haptic_on_wire": on_wire["haptic"],
-        "node_loops": snapshot["diagnostics"],
+        "node_loops": run.diagnostics,
         "pose_to_force_p50_s": float(np.percentile(latency, 50)) if latency.size else None,
         "pose_to_force_p99_s": float(np.percentile(latency, 99)) if latency.size else None,
         "pose_to_force_p99_outside_machine_stalls_s": (float(np.percentile(latency_calm, 99)) if latency_calm.size
@@ -127,7 +127,7 @@ def loop_run(duration_s: float, log_dir, progress=None, observers: dict | None =
             (figures["fig8_smoothness_ratio_outside_machine_stalls"] or 0.0)
             >= t["fig8_smoothness_ratio_outside_machine_stalls_min"]),
     }
-    costs = snapshot["process_costs"]
+    costs = run.process_costs
     return {"benchmark": "loop", "machine": machine(), "duration_s": duration_s, "results": figures,
               "processes": costs, "cores_used": sum(c["cpu_share_of_one_core"] for c in costs.values()),
               "load_average": {"before": list(load_before), "after": list(load_after)},

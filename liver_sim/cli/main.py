@@ -6,6 +6,10 @@ arguments and sets ``handler`` to a function ``handler(args) -> int``; list it i
 ``liver-sim: error: <file>: <defect>`` on stderr.  A command that starts ROS (:func:`starts_ros`)
 keeps DDS on this machine unless ``--discovery-range`` or ROS_AUTOMATIC_DISCOVERY_RANGE says otherwise,
 and says its domain and range first.
+
+Each handler imports the modules of its command when it runs (marked where it does): they load what other
+commands never need (numba's kernels, rclpy and the message packages, matplotlib), so that `liver-sim
+--help` and a mesh command start at once.
 """
 from __future__ import annotations
 
@@ -158,6 +162,7 @@ def add_validate_command(commands) -> None:
 
 
 def validate(args) -> int:
+    # this command's own modules, loaded when it runs (module docstring)
     from liver_sim.studies.validate import main_validate
 
     stream = sys.stderr if args.json else sys.stdout
@@ -172,6 +177,7 @@ def add_traction_command(commands) -> None:
 
 
 def traction(args) -> int:
+    # this command's own modules, loaded when it runs (module docstring)
     from liver_sim.studies.traction import run_traction, write_traction
 
     def report(level, levels, force, elongation):
@@ -221,11 +227,13 @@ def add_bench_command(commands) -> None:
 
 
 def bench_physics(args) -> int:
+    # this command's own modules, loaded when it runs (module docstring)
     from liver_sim.bench.physics import LARGER_LIVERS, run_physics_bench
 
     progress = None if args.json else (lambda line: print(line, flush=True))
     sizes = LARGER_LIVERS if args.sizes is None else tuple(args.sizes)
     if args.peers:
+        # this command's own modules, loaded when it runs (module docstring)
         from liver_sim.studies.peers import import_mujoco
         try:
             import_mujoco()
@@ -260,6 +268,7 @@ def bench_physics(args) -> int:
 
 
 def bench_topology(args) -> int:
+    # this command's own modules, loaded when it runs (module docstring)
     from liver_sim.bench.topology import run_topology_bench
 
     report = run_topology_bench((10_000,) if args.sizes is None else tuple(args.sizes), args.repeats,
@@ -278,6 +287,7 @@ def bench_topology(args) -> int:
 
 
 def bench_loop(args) -> int:
+    # this command's own modules, loaded when it runs (module docstring)
     from liver_sim.bench.loop import run_loop_bench
 
     report = run_loop_bench(args.duration, args.out / "logs", None if args.json else print,
@@ -292,6 +302,7 @@ def bench_loop(args) -> int:
 
 
 def bench_record(args) -> int:
+    # this command's own modules, loaded when it runs (module docstring)
     from liver_sim.bench.record import run_record_bench
 
     report = run_record_bench(args.duration, args.out, args.storage,
@@ -337,6 +348,7 @@ def add_demo_command(commands) -> None:
 
 
 def demo(args) -> int:
+    # this command's own modules, loaded when it runs (module docstring)
     from liver_sim.studies.demo import run_demo
     from liver_sim.studies.demo_liver import DemoMesh
     from liver_sim.studies.demo_offline import run_offline_demo

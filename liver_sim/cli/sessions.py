@@ -1,7 +1,10 @@
-"""The session subcommands of ``liver-sim``: record, replay, resimulate, report (listed in cli.COMMANDS)."""
+"""The session subcommands of ``liver-sim``: record, replay, resimulate, report, fig8, bag repair (listed in
+liver_sim.cli.main.COMMANDS). Like the other commands, each handler imports its modules when it runs
+(liver_sim.cli.main says why)."""
 from __future__ import annotations
 
 import json
+import time
 from pathlib import Path
 
 from liver_sim.sessions.bag import STORAGES
@@ -19,6 +22,7 @@ def _output(args, suffix: str) -> Path:
 def add_record_command(commands) -> None:
     """``liver-sim record [--topics …] [--storage mcap|sqlite3] [--out DIR] [--duration S] [--marker]
     [--realtime-priority N]``."""
+    # this command's own modules, loaded when it runs (module docstring)
     from liver_sim.sessions.record import REALTIME_PRIORITY
 
     parser = commands.add_parser("record", help="record the product's topics into a rosbag2 bag until Ctrl-C")
@@ -38,8 +42,7 @@ def add_record_command(commands) -> None:
 
 
 def record(args) -> int:
-    import time
-
+    # this command's own modules, loaded when it runs (module docstring)
     from liver_sim.sessions.record import EXIT_LOST, default_topics, run_record
 
     out = args.out or Path("out/sessions") / time.strftime("session_%Y%m%d_%H%M%S")
@@ -66,6 +69,7 @@ def add_replay_command(commands) -> None:
 
 
 def replay(args) -> int:
+    # this command's own modules, loaded when it runs (module docstring)
     from liver_sim.sessions.replay import run_replay
 
     run_replay(args.bag, args.rate, args.topics, args.delay, _progress, args.remap_device_commands)
@@ -87,6 +91,7 @@ def add_resimulate_command(commands) -> None:
 
 
 def resimulate(args) -> int:
+    # this command's own modules, loaded when it runs (module docstring)
     from liver_sim.sessions.resimulate import resimulate as run
 
     run(args.bag, _output(args, "_resimulated"), args.overrides, args.storage, _progress, args.compare)
@@ -105,6 +110,7 @@ def add_fig8_command(commands) -> None:
 
 
 def fig8(args) -> int:
+    # this command's own modules, loaded when it runs (module docstring)
     from liver_sim.analysis import fig8_line
     from liver_sim.studies.fig8 import exploration_fig8
 
@@ -127,6 +133,7 @@ def add_report_command(commands) -> None:
 
 
 def report(args) -> int:
+    # this command's own modules, loaded when it runs (module docstring)
     from liver_sim.sessions.report import write_report
 
     write_report(args.bag, _output(args, "_report"), _progress)
@@ -145,6 +152,7 @@ def add_bag_command(commands) -> None:
 
 
 def bag_repair(args) -> int:
+    # this command's own modules, loaded when it runs (module docstring)
     from liver_sim.sessions.bag import repair_bag
 
     repair_bag(args.bag, _output(args, "_repaired"), _progress)

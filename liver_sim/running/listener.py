@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import threading
 import time
+from dataclasses import dataclass
 
 import numpy as np
 from rclpy.node import Node
@@ -23,6 +24,42 @@ POLL_RATE_HZ = 200.0
 #: Messages each stream keeps between two polls: 5 s of the 1 kHz commands, so that a listener starved of CPU
 #: for seconds (normal priority beside real-time nodes and a busy machine) loses nothing it must measure.
 HISTORY_DEPTH = 5000
+
+
+@dataclass(frozen=True)
+class NetworkSnapshot:
+    """What a NetworkListener received so far. Times are seconds on the time.monotonic() scale: `*_arrival_s`
+    when a message reached the listener, `*_published_s` when its publisher sent it (DDS source times, whatever
+    the listener's own scheduling). Forces in N, positions in m, in the frame of their topic."""
+
+    #: label -> (arrival_s (K,), force commands (K, 3) N), one label per force topic listened to
+    forces: dict
+    #: label -> publication times (K,) of those force commands
+    force_published_s: dict
+    #: label -> for each force command stamped with a tool pose, the time from that pose's publication to the
+    #: command's (K,) s; NaN where the pose was not seen
+    pose_to_force_s: dict
+    #: arrival times (W,) and forces (W, 3) of the physics contact force on the tool (/liver/tool_wrench)
+    wrench_arrival_s: np.ndarray
+    wrench_n: np.ndarray
+    #: arrival times (P,) and tip positions (P, 3) of /tool/pose
+    tool_arrival_s: np.ndarray
+    tool_position_m: np.ndarray
+    #: arrival, publication and header-stamp times (F,) of /liver/nodes
+    nodes_arrival_s: np.ndarray
+    nodes_published_s: np.ndarray
+    nodes_stamp_s: np.ndarray
+    #: "node: loop" -> the newest /diagnostics key-values of each status
+    diagnostics: dict
+    #: (skin triangles (T, 3), rest positions (N, 3)) of the newest and of the first /liver/surface, or None
+    surface: tuple | None
+    initial_surface: tuple | None
+    #: how many /liver/surface messages arrived (one at start, one more per tear or cut)
+    surface_messages: int
+    #: node positions (N, 3): the first received, the farthest from them with the same node count, the newest
+    initial_nodes: np.ndarray | None
+    peak_nodes: np.ndarray | None
+    last_nodes: np.ndarray | None
 
 
 class NetworkListener(Node):
@@ -157,7 +194,7 @@ class NetworkListener(Node):
             for status in message.status:
                 self.diagnostics[status.name] = {kv.key: kv.value for kv in status.values}
 
-    def snapshot(self) -> dict:
+    def snapshot(self) -> NetworkSnapshot:
         """Copies of everything received so far, as numpy arrays where that fits.
 
         `*_arrival_s` are when messages reached this process, `*_published_s` when their publisher sent
@@ -171,24 +208,24 @@ class NetworkListener(Node):
         wrench_arrival, wrench = self._decode_wrenches()
         published_by_stamp = dict(zip(tool_stamp.tolist(), tool_published.tolist()))
         with self._lock:
-            return {
-                "forces": {label: (arrival, values) for label, (arrival, _, values, _) in decoded.items()},
-                "force_published_s": {label: published for label, (_, published, _, _) in decoded.items()},
-                "pose_to_force_s": {label: np.array([sent - published_by_stamp.get(stamp, np.nan)
-                                                     for sent, stamp in zip(sent_s, stamps)])
-                                    for label, (_, sent_s, _, stamps) in decoded.items()},
-                "wrench_arrival_s": wrench_arrival,
-                "wrench_n": wrench,
-                "tool_arrival_s": tool_arrival,
-                "tool_position_m": tool_position,
-                "nodes_arrival_s": nodes_arrival,
-                "nodes_published_s": nodes_published,
-                "nodes_stamp_s": nodes_stamp,
-                "diagnostics": {k: dict(v) for k, v in self.diagnostics.items()},
-                "surface": self.surface,
-                "initial_surface": self.initial_surface,
-                "surface_messages": self.surface_messages,
-                "initial_nodes": self.initial_nodes,
-                "peak_nodes": self.peak_nodes,
-                "last_nodes": self.last_nodes,
-            }
+            return NetworkSnapshot(
+                forces={label: (arrival, values) for label, (arrival, _, values, _) in decoded.items()},
+                force_published_s={label: published for label, (_, published, _, _) in decoded.items()},
+                pose_to_force_s={label: np.array([sent - published_by_stamp.get(stamp, np.nan)
+                                                  for sent, stamp in zip(sent_s, stamps)])
+                                 for label, (_, sent_s, _, stamps) in decoded.items()},
+                wrench_arrival_s=wrench_arrival,
+                wrench_n=wrench,
+                tool_arrival_s=tool_arrival,
+                tool_position_m=tool_position,
+                nodes_arrival_s=nodes_arrival,
+                nodes_published_s=nodes_published,
+                nodes_stamp_s=nodes_stamp,
+                diagnostics={k: dict(v) for k, v in self.diagnostics.items()},
+                surface=self.surface,
+                initial_surface=self.initial_surface,
+                surface_messages=self.surface_messages,
+                initial_nodes=self.initial_nodes,
+                peak_nodes=self.peak_nodes,
+                last_nodes=self.last_nodes,
+            )

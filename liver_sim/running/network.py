@@ -10,9 +10,10 @@ import subprocess
 import sys
 import threading
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 
+import numpy as np
 import rclpy
 from rclpy.experimental import EventsExecutor
 
@@ -22,7 +23,7 @@ from liver_sim.mesh.landmarks import press_anchor
 from liver_sim.mesh.liver_shape import default_liver
 from liver_sim.nodes.run import spin
 from liver_sim.running.launcher import NodeProcesses, log_tail
-from liver_sim.running.listener import NetworkListener
+from liver_sim.running.listener import NetworkListener, NetworkSnapshot
 from liver_sim.running.machine_stalls import Sentinels, gaps_with_stalls
 from liver_sim.sessions.record import READY, RECORDER_NODE
 from msg_defs.topics import TOPICS
@@ -106,13 +107,27 @@ def process_costs(before: dict, after: dict, wall_s: float) -> dict:
     return costs
 
 
+@dataclass(frozen=True)
+class NetworkRun(NetworkSnapshot):
+    """What `run_network` returns: everything the listener received (NetworkSnapshot, the nodes' last
+    messages while they stopped included), and the window in which every node ran."""
+
+    #: (start, end) monotonic s of the `duration_s` in which every node ran; figures on the wire use it
+    window_s: tuple[float, float]
+    #: label -> {cpu_share_of_one_core, voluntary_switches_per_s, involuntary_switches_per_s} over the window
+    #: (:func:`process_costs`), for each node, observer, `listener` (the calling process) and extra load
+    process_costs: dict
+    #: (K, 2) start and end (monotonic s) of each stall of the machine itself within the window
+    machine_stalls: np.ndarray
+
+
 def run_network(plan: NetworkPlan, duration_s: float, log_dir: Path, progress=print,
-                settle_s: float = 1.0, extra_load: int = 0) -> dict:
-    """Start the plan's processes, listen for `duration_s` after they are up, stop them; return the snapshot
-    (NetworkListener.snapshot) with `window_s`, the (start, end) of those `duration_s` (monotonic s),
-    `process_costs` over them (:func:`process_costs`: each node, observer, `listener` — this process — and
-    each of the `extra_load` CORE_BOUND_PROCESSes started at normal priority once the network is up), and
-    `machine_stalls` (K, 2) within them, measured by a sentinel per CPU (liver_sim.running.machine_stalls).
+                settle_s: float = 1.0, extra_load: int = 0) -> NetworkRun:
+    """Start the plan's processes, listen for `duration_s` after they are up, stop them; return a NetworkRun:
+    what the listener received, the window of those `duration_s`, what each process cost over it (each node,
+    observer, `listener` — this process — and each of the `extra_load` CORE_BOUND_PROCESSes started at normal
+    priority once the network is up), and the stalls of the machine within it, measured by a sentinel per CPU
+    (liver_sim.running.machine_stalls).
 
     Raises NodeFailure naming any process that exited early or with a non-zero status at stop, with the tail
     of its log (in log_dir); RuntimeError if the network does not come up.
@@ -143,14 +158,14 @@ def run_network(plan: NetworkPlan, duration_s: float, log_dir: Path, progress=pr
             if label not in plan.after_physics:
                 processes.start(label, args)
         _wait_until(listener, processes, "the network (node positions and every force topic)",
-                    lambda heard: all(len(t) for t, _ in heard.snapshot()["forces"].values())
-                    and len(heard.snapshot()["nodes_arrival_s"]))
+                    lambda heard: all(len(t) for t, _ in heard.snapshot().forces.values())
+                    and len(heard.snapshot().nodes_arrival_s))
         late = [label for label in plan.after_physics if label in plan.commands]
         for label in late:
             processes.start(label, plan.commands[label])
         if late:
             _wait_until(listener, processes, f"the tool pose from {', '.join(late)}",
-                        lambda heard: len(heard.snapshot()["tool_arrival_s"]) > 0)
+                        lambda heard: len(heard.snapshot().tool_arrival_s) > 0)
         for k in range(extra_load):
             loads.append(subprocess.Popen(CORE_BOUND_PROCESS))
             progress(f"  extra load {k + 1}: pid {loads[-1].pid}, one core busy at normal priority")
@@ -182,29 +197,30 @@ def run_network(plan: NetworkPlan, duration_s: float, log_dir: Path, progress=pr
         spinner.join(timeout=2.0)
         listener.destroy_node()
     processes.check_exit_codes()
-    return {**snapshot, "window_s": window, "process_costs": costs, "machine_stalls": sentinels.stalls(window)}
+    return NetworkRun(**{f.name: getattr(snapshot, f.name) for f in fields(NetworkSnapshot)}, window_s=window,
+                      process_costs=costs, machine_stalls=sentinels.stalls(window))
 
 
-def wire_rates(snapshot: dict, label: str = "local_model") -> dict:
-    """The network's rates as its messages went on the wire (DDS publication times) within the snapshot's
+def wire_rates(run: NetworkRun, label: str = "local_model") -> dict:
+    """The network's rates as its messages went on the wire (DDS publication times) within the run's
     `window_s`, the `duration_s` in which every node ran: {'physics': rate_figures of /liver/nodes at 150 Hz,
     'haptic': of the `label` force commands at 1 kHz}. Start-up, shutdown and a listener's batched arrivals
     do not count."""
 
-    start, end = snapshot["window_s"]
-    nodes, forces = snapshot["nodes_published_s"], snapshot["force_published_s"][label]
+    start, end = run.window_s
+    nodes, forces = run.nodes_published_s, run.force_published_s[label]
     return {"physics": rate_figures(nodes[(nodes >= start) & (nodes <= end)], 150.0),
             "haptic": rate_figures(forces[(forces >= start) & (forces <= end)], 1000.0)}
 
 
-def wire_gaps(snapshot: dict, bound_s: float, label: str = "local_model") -> list[dict]:
-    """The gaps longer than `bound_s` between the `label` force commands published within the snapshot's
+def wire_gaps(run: NetworkRun, bound_s: float, label: str = "local_model") -> list[dict]:
+    """The gaps longer than `bound_s` between the `label` force commands published within the run's
     `window_s`, each with the part of it the machine stalled (machine_stalls.gaps_with_stalls; `start_s` from
     the window's start)."""
 
-    start, end = snapshot["window_s"]
-    sent = snapshot["force_published_s"][label]
-    gaps = gaps_with_stalls(sent[(sent >= start) & (sent <= end)], bound_s, snapshot["machine_stalls"])
+    start, end = run.window_s
+    sent = run.force_published_s[label]
+    gaps = gaps_with_stalls(sent[(sent >= start) & (sent <= end)], bound_s, run.machine_stalls)
     return [{**gap, "start_s": gap["start_s"] - start} for gap in gaps]
 
 

@@ -14,7 +14,7 @@ import numpy as np
 
 from liver_sim.analysis import largest_force_jump_n
 from liver_sim.running.machine_stalls import stall_summary
-from liver_sim.running.network import closed_loop_plan, run_network, wire_gaps, wire_rates
+from liver_sim.running.network import NetworkRun, closed_loop_plan, run_network, wire_gaps, wire_rates
 from liver_sim.sessions.record import recorder_command
 from liver_sim.sessions.report import plot_force
 from liver_sim.studies.demo_liver import DemoMesh
@@ -67,29 +67,29 @@ def run_demo(out_dir: Path, duration_s: float | None = None, progress=print, rec
     if record_storage:
         plan.observers["recorder"] = recorder_command(out_dir / "session", record_storage)
     progress(f"{spec.title}: starting the node network (the same command lines work in four terminals):")
-    snapshot = run_network(plan, duration_s, out_dir / "logs", progress)
-    _, haptic_force = snapshot["forces"]["local_model"]
-    wrench = snapshot["wrench_n"]
-    peak_nodes = snapshot["peak_nodes"] if snapshot["peak_nodes"] is not None else mesh.points
-    last_nodes = snapshot["last_nodes"] if snapshot["last_nodes"] is not None else mesh.points
+    run = run_network(plan, duration_s, out_dir / "logs", progress)
+    _, haptic_force = run.forces["local_model"]
+    wrench = run.wrench_n
+    peak_nodes = run.peak_nodes if run.peak_nodes is not None else mesh.points
+    last_nodes = run.last_nodes if run.last_nodes is not None else mesh.points
     haptic_norm = np.linalg.norm(haptic_force, axis=1)
     summary = {
         "scenario": scenario,
         "mesh": {"source": mesh.source, "scale": liver.scale, "sha256": mesh.sha256},
         "duration_s": duration_s,
-        **wire_rates(snapshot),
-        "machine_stalls": stall_summary(snapshot["machine_stalls"]),
-        "haptic_gaps_over_5ms": wire_gaps(snapshot, GAP_S),
+        **wire_rates(run),
+        "machine_stalls": stall_summary(run.machine_stalls),
+        "haptic_gaps_over_5ms": wire_gaps(run, GAP_S),
         "peak_haptic_force_n": float(haptic_norm.max()) if haptic_norm.size else 0.0,
         "peak_physics_force_n": float(np.linalg.norm(wrench, axis=1).max()) if len(wrench) else 0.0,
         "largest_force_jump_n": largest_force_jump_n(haptic_force),
-        "topology_changes": max(0, snapshot["surface_messages"] - 1),
-        "nodes": [len(n) if n is not None else 0 for n in (snapshot["initial_nodes"], snapshot["last_nodes"])],
+        "topology_changes": max(0, run.surface_messages - 1),
+        "nodes": [len(n) if n is not None else 0 for n in (run.initial_nodes, run.last_nodes)],
         "skin_triangles": [len(s[0]) if s is not None else 0
-                           for s in (snapshot["initial_surface"], snapshot["surface"])],
+                           for s in (run.initial_surface, run.surface)],
         "surface_nodes": [len(s[1]) if s is not None else 0
-                          for s in (snapshot["initial_surface"], snapshot["surface"])],
-        "diagnostics": snapshot["diagnostics"],
+                          for s in (run.initial_surface, run.surface)],
+        "diagnostics": run.diagnostics,
     }
     if len(last_nodes) == len(mesh.points):
         summary["peak_displacement_m"] = float(np.linalg.norm(peak_nodes - mesh.points, axis=1).max())
@@ -97,7 +97,7 @@ def run_demo(out_dir: Path, duration_s: float | None = None, progress=print, rec
     out_dir.mkdir(parents=True, exist_ok=True)
     (out_dir / "summary.json").write_text(json.dumps(summary, indent=2, default=float) + "\n")
     (out_dir / "summary.md").write_text(_network_markdown(summary, f"{spec.title} ({liver.name})"))
-    plot_network_forces(snapshot, f"{spec.title} ({liver.name})", out_dir / "force.png")
+    plot_network_forces(run, f"{spec.title} ({liver.name})", out_dir / "force.png")
     if scenario == "press":
         figures = PLOTTED_FIGURES
         plot_liver(mesh.points, mesh.skin, peak_nodes, None, 0.0,
@@ -105,7 +105,7 @@ def run_demo(out_dir: Path, duration_s: float | None = None, progress=print, rec
                    out_dir / "liver_press.png")
     else:
         figures = TOPOLOGY_FIGURES
-        plot_topology(snapshot, spec.title, mesh, out_dir)
+        plot_topology(run, spec.title, mesh, out_dir)
     progress(f"physics {summary['physics']['rate_hz']:.1f} Hz, haptic {summary['haptic']['rate_hz']:.1f} Hz "
              f"(period error p99 {1e3 * (summary['haptic']['period_error_p99_s'] or 0):.2f} ms; "
              f"{_gaps_line(summary)}), "
@@ -162,10 +162,10 @@ def _network_markdown(summary: dict, title: str) -> str:
     ])
 
 
-def plot_network_forces(snapshot: dict, title: str, path: Path) -> None:
+def plot_network_forces(run: NetworkRun, title: str, path: Path) -> None:
     """The report's force plot (sessions.report.plot_force: 1 kHz commands, 150 Hz physics force as markers,
     a zoom on contact where they meet at each update) of what the listener received, titled `title`."""
-    arrival, force = snapshot["forces"]["local_model"]
-    origin = min([a[0] for a in (arrival, snapshot["wrench_arrival_s"]) if len(a)], default=0.0)
+    arrival, force = run.forces["local_model"]
+    origin = min([a[0] for a in (arrival, run.wrench_arrival_s) if len(a)], default=0.0)
     plot_force({"forces": {"local_model": (arrival - origin, force)},
-                "wrench": (snapshot["wrench_arrival_s"] - origin, snapshot["wrench_n"])}, path, title)
+                "wrench": (run.wrench_arrival_s - origin, run.wrench_n)}, path, title)

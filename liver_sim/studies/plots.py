@@ -75,13 +75,13 @@ def plot_liver(rest_m: np.ndarray, skin: np.ndarray, positions_m: np.ndarray, to
     plt.close(fig)
 
 
-def plot_topology(snapshot: dict, title: str, mesh, out_dir: Path) -> None:
+def plot_topology(run, title: str, mesh, out_dir: Path) -> None:
     """before.png and after.png: the skin first received (else `mesh`'s) and the newest skin on the last
     nodes received."""
-    first = snapshot["initial_surface"] or (mesh.skin, mesh.points)
-    last = snapshot["surface"] or first
-    for name, (skin, rest), nodes, when in (("before.png", first, snapshot["initial_nodes"], "before"),
-                                            ("after.png", last, snapshot["last_nodes"], "after")):
+    first = run.initial_surface or (mesh.skin, mesh.points)
+    last = run.surface or first
+    for name, (skin, rest), nodes, when in (("before.png", first, run.initial_nodes, "before"),
+                                            ("after.png", last, run.last_nodes, "after")):
         positions = nodes if nodes is not None and len(nodes) == len(rest) else rest
         wounds = opened_triangles(rest, skin)
         plot_liver(rest, skin, positions, None, 0.0, f"{title}: {when} ({len(rest)} nodes, {len(skin)} skin "
