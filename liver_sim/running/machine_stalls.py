@@ -75,7 +75,6 @@ class Sentinels:
         self._processes = []
 
     def start(self) -> None:
-
         for cpu, path in self.files.items():
             path.parent.mkdir(parents=True, exist_ok=True)
             command = [sys.executable, "-m", "liver_sim.running.machine_stalls", str(path), str(cpu)]
@@ -124,7 +123,6 @@ def _covered_s(stalls: np.ndarray, start: float, end: float) -> float:
 
 
 def main(argv: list[str] | None = None) -> int:
-
     args = sys.argv[1:] if argv is None else argv
     if len(args) != 2 or not args[1].isdigit():
         print("usage: python -m liver_sim.running.machine_stalls OUT CPU", file=sys.stderr)

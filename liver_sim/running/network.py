@@ -133,7 +133,6 @@ def run_network(plan: NetworkPlan, duration_s: float, log_dir: Path, progress=pr
     of its log (in log_dir); RuntimeError if the network does not come up.
     """
 
-
     progress(f"ROS_DOMAIN_ID={os.environ.get('ROS_DOMAIN_ID', '0')} "
              f"ROS_AUTOMATIC_DISCOVERY_RANGE={os.environ.get('ROS_AUTOMATIC_DISCOVERY_RANGE', '(default)')}")
     for label, args in {**plan.observers, **plan.commands}.items():

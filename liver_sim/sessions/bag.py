@@ -82,7 +82,6 @@ class BagWriter:
     """
 
     def __init__(self, path, storage: str = "mcap"):
-
         self.path = Path(path)
         if storage not in STORAGES:
             raise BagError(self.path, f"storage {storage!r} is not one of {', '.join(STORAGES)}")
@@ -161,12 +160,10 @@ _READ_ERRORS = (OSError, ValueError, KeyError, IndexError, EOFError, AssertionEr
 
 
 def _reader_errors():
-
     return (ReaderError,) + _READ_ERRORS
 
 
 def _open_reader(path: Path):
-
     if not path.exists():
         raise BagError(path, "does not exist")
     if not path.is_dir():

@@ -54,7 +54,6 @@ def _loaded_library(name: str) -> ctypes.CDLL:
 
 @lru_cache(maxsize=1)
 def _functions():
-
     rcl, rcutils = _loaded_library("librcl.so"), _loaded_library("librcutils.so")
     take = rcl.rcl_take_serialized_message
     take.argtypes = [ctypes.c_void_p, ctypes.POINTER(_Uint8Array), ctypes.POINTER(_MessageInfo), ctypes.c_void_p]

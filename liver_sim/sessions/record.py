@@ -71,7 +71,6 @@ def known_topics() -> dict:
     """{name: (message class, QosSpec)} of the product's topics; force commands as the contract's default
     WrenchStamped (`force_output: wrench_stamped`)."""
 
-
     known = {}
     for topic in TOPICS.values():
         spec = QosSpec(topic.qos.reliability == ReliabilityPolicy.RELIABLE,
@@ -96,7 +95,6 @@ def type_name(msg_class) -> str:
 
 
 def _rclpy_qos(spec: QosSpec, depth: int):
-
     return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth,
                       reliability=ReliabilityPolicy.RELIABLE if spec.reliable else ReliabilityPolicy.BEST_EFFORT,
                       durability=(DurabilityPolicy.TRANSIENT_LOCAL if spec.transient_local
@@ -122,7 +120,6 @@ class Recorder:
     """
 
     def __init__(self, writer: BagWriter, topics: list[str], context, progress=print):
-
         self.writer = writer
         self.progress = progress
         self.node = rclpy.create_node(RECORDER_NODE, context=context, start_parameter_services=False,
@@ -144,7 +141,6 @@ class Recorder:
         self._unknown = set()
 
     def _subscribe(self, topic: str, msg_class, spec: QosSpec) -> None:
-
         subscription = self.node.create_subscription(msg_class, topic, lambda _: None,
                                                      _rclpy_qos(spec, spec.depth + HISTORY_DEPTH), raw=True)
         self._subscriptions.append((topic, type_name(msg_class), spec, subscription, SerializedTake(subscription)))
@@ -282,7 +278,6 @@ def run_record(out: Path, topics: list[str], storage: str = "mcap", duration_s: 
     metadata.yaml's custom_data gets the recorder's CPU and wall time (s), its history depth and deepest
     backlog, and the lost messages (SequenceGaps.custom_data).
     """
-
 
     refused = set_realtime_priority(realtime_priority)  # before rclpy starts its threads: they inherit it
     stop = threading.Event()

@@ -48,7 +48,6 @@ def _force_format(msgtype: str) -> str | None:
 def session_arrays(bag: Path, physics: dict, bridge: dict) -> dict:
     """One pass over the bag: log times of every topic, forces, wrench, tool tips, local models, diagnostics."""
 
-
     force_topics = {"local_model": bridge["force_topic"], "without_local_model": BASELINE_FORCE_TOPIC}
     decoded = {bridge["force_topic"], BASELINE_FORCE_TOPIC, physics["tool_wrench_topic"], physics["tool_pose_topic"],
                physics["contact_plane_topic"], TOPICS["diagnostics"].name}
@@ -305,7 +304,6 @@ def _lost_line(custom_data: dict) -> str:
 
 
 def _markdown(s: dict) -> str:
-
     ms = lambda v: f"{v * 1e3:.2f} ms" if v is not None else "n/a"  # noqa: E731
     lines = [f"# Session {s['bag']}", "", f"- {s['storage']} bag, {s['duration_s']:.2f} s, "
              f"{sum(t['messages'] for t in s['topics'].values())} messages", "", "| topic | type | messages |",

@@ -49,7 +49,6 @@ class _Session:
     message in time order."""
 
     def __init__(self, physics: dict, bridge: dict, emit, progress, compare: bool = False):
-
         self.p, self.b = physics, bridge
         self.model = build_model(physics)
         self.pipeline = FramePipeline(self.model, physics)
@@ -77,7 +76,6 @@ class _Session:
     def _frame(self, t0: float):
         """Step one frame; return (publish time s, messages, (local model, lifetime), contact force N)."""
 
-
         frame = self.pipeline.step(t0 + self.model.time_s)
         t = t0 + self.model.time_s
         stamp, frame_id = stamp_from_seconds(t), self.p["frame_id"]
@@ -101,7 +99,6 @@ class _Session:
 
     def run(self, poses: list) -> None:
         """`poses`: [(time s, PoseStamped, recorded bytes)] in time order."""
-
 
         t0 = poses[0][0]
         self.emit(self.p["surface_topic"], "surface", t0, serialize_message(
@@ -146,7 +143,6 @@ class _Session:
 
 def recorded_poses(bag: Path, topic: str) -> list:
     """[(stamp s, PoseStamped, bytes)] of the bag's `topic`, ordered by stamp (stable)."""
-
 
     poses = []
     for recorded in read_messages(bag, [topic]):
