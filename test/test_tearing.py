@@ -14,8 +14,9 @@ from liver_sim.physics import model as model_module
 from liver_sim.physics.contact import ToolPose
 from liver_sim.physics.model import LiverModel
 from liver_sim.physics.model_params import ModelParams
+from liver_sim.physics.tearing import TearDetector, duplication_change
 from liver_sim.physics.tool_use import ToolUse
-from liver_sim.physics.topology import TearDetector, duplication_change, separate_faces
+from liver_sim.physics.topology import separate_faces
 
 SPACING_M = 0.02
 NX, NY, NZ = 10, 3, 3

@@ -33,7 +33,8 @@ from liver_sim.physics.model_params import ModelParams
 from liver_sim.physics.spring_kernels import SpringArrays, spring_forces_serial, support_forces
 from liver_sim.physics.springs import build_springs, estimate_stable_time_step, stable_time_step
 from liver_sim.physics.support import build_support
-from liver_sim.physics.topology import NodeState, TearDetector, TopologyChange, apply_change, carry_over, tear
+from liver_sim.physics.tearing import TearDetector, tear
+from liver_sim.physics.topology import NodeState, TopologyChange, apply_change, carry_over
 
 #: Above this many springs the parallel kernel is used (below it thread start-up costs more).
 PARALLEL_MIN_EDGES = 20_000
