@@ -34,7 +34,7 @@ from liver_sim.physics.spring_kernels import SpringArrays, spring_forces_serial,
 from liver_sim.physics.springs import build_springs, estimate_stable_time_step, stable_time_step
 from liver_sim.physics.support import build_support
 from liver_sim.physics.tearing import TearDetector, tear
-from liver_sim.physics.topology import NodeState, TopologyChange, apply_change, carry_over
+from liver_sim.physics.topology import NodeState, TopologyChange, carry_over
 
 #: Above this many springs the parallel kernel is used (below it thread start-up costs more).
 PARALLEL_MIN_EDGES = 20_000
@@ -78,7 +78,8 @@ class LiverModel:
 
     `external_forces_n` (N, 3) are applied to the nodes at every step (zero by default).
     `capsule_triangles` are the skin triangles carrying capsule springs (the whole skin until a tear
-    or a cut opens faces); `apply_topology` replaces the mesh and increments `topology_version`.
+    or a cut opens faces); `apply_topology` replaces the mesh and increments `topology_version`,
+    `apply_topology_change` does so all or nothing (how tears and cuts are applied).
     `held_nodes` (see `hold`) are moved by the tool, like the fixed nodes by the scene, not integrated.
     `local_stiffness` (physics.local_stiffness) gives the local model's K under the tool.
     `support` (physics.support) ties the supported capsule nodes to their rest positions; with
@@ -155,14 +156,31 @@ class LiverModel:
             self.params = self.params.with_changes(substeps=min(needed, 10_000))
         self.topology_version += 1  # the tear detector is keyed by it
 
+    def apply_topology_change(self, change: TopologyChange) -> None:
+        """`apply_topology(change)` all or nothing: the change is checked (carry_over: check_change) before
+        the model is touched; if applying raises midway, every attribute of the model is put back, with the
+        contents of its arrays, and the error re-raised: positions, velocities, masses, mesh, springs, fixed
+        and held nodes, topology_version are then as they were."""
+        saved = dict(vars(self))
+        contents = {name: value.copy() for name, value in saved.items() if isinstance(value, np.ndarray)}
+        try:
+            self.apply_topology(change)
+        except BaseException:
+            for name, value in contents.items():
+                if saved[name].flags.writeable:
+                    np.copyto(saved[name], value)
+            vars(self).clear()
+            vars(self).update(saved)
+            raise
+
     def cut(self, path_m: np.ndarray, depth_m: float) -> bool:
         """Cut along the blade's path (P, 3) m, deformed frame, down to `depth_m` under it (P14, §3.5;
-        see cutting.cut_along_path); True when the mesh changed.  All or nothing (topology.apply_change):
+        see cutting.cut_along_path); True when the mesh changed.  All or nothing (apply_topology_change):
         when it raises, the model is as it was."""
         change = cut_along_path(self.mesh.points, self.mesh.tets, self.positions, self.capsule_triangles,
                                 path_m, depth_m)
         if change is not None:
-            apply_change(self, change)
+            self.apply_topology_change(change)
         return change is not None
 
     def hold(self, nodes: np.ndarray) -> None:
@@ -255,14 +273,14 @@ class LiverModel:
         return self._tear_detector[1]
 
     def _tear(self) -> tuple[bool, str | None]:
-        """Open the faces stretched beyond the tearing thresholds, all or nothing (topology.apply_change):
+        """Open the faces stretched beyond the tearing thresholds, all or nothing (apply_topology_change):
         (True when the mesh changed, why the tear failed or None)."""
         params = self.params
         try:
             change = tear(self.mesh.points, self.mesh.tets, self.positions, self.capsule_triangles,
                           params.tear_strain_parenchyma, params.tear_strain_capsule, detector=self._detector())
             if change is not None:
-                apply_change(self, change)
+                self.apply_topology_change(change)
         except Exception as exc:  # the model is as it was; the frame goes on
             return False, f"tear failed, the mesh is unchanged: {type(exc).__name__}: {exc}"
         return change is not None, None

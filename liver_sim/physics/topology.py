@@ -92,24 +92,6 @@ def check_change(change: TopologyChange, old_node_count: int, source: str = "top
     return mesh
 
 
-def apply_change(model, change: TopologyChange) -> None:
-    """Apply `change` to `model` (its apply_topology) all or nothing: the change is checked (carry_over:
-    check_change) before the model is touched; if applying raises midway, every attribute of the model
-    is put back, with the contents of its arrays, and the error re-raised: positions, velocities,
-    masses, mesh, springs, fixed and held nodes, topology_version are then as they were."""
-    saved = dict(vars(model))
-    contents = {name: value.copy() for name, value in saved.items() if isinstance(value, np.ndarray)}
-    try:
-        model.apply_topology(change)
-    except BaseException:
-        for name, value in contents.items():
-            if saved[name].flags.writeable:
-                np.copyto(saved[name], value)
-        vars(model).clear()
-        vars(model).update(saved)
-        raise
-
-
 def carry_over(change: TopologyChange, state: NodeState, source: str, density_kg_m3: float,
                min_node_mass_fraction: float) -> tuple[TetMesh, NodeState]:
     """The new mesh (named `source`) of `change` and the node state carried onto it.
