@@ -6,7 +6,7 @@ from meshes import box_mesh
 
 from liver_sim.mesh.landmarks import press_anchor
 from liver_sim.mesh.liver_shape import default_liver
-from liver_sim.physics import implicit_kernels, kernels, pcg, reference
+from liver_sim.physics import explicit_kernels, implicit_kernels, pcg, reference
 from liver_sim.physics.contact import ToolPose, ToolShape, surface_contacts, tool_state
 from liver_sim.physics.implicit import Contacts, ImplicitEuler
 from liver_sim.physics.model import LiverModel
@@ -134,12 +134,12 @@ def test_stable_at_one_step_per_frame_where_symplectic_euler_diverges(liver):
     assert np.isfinite(x).all() and np.abs(x - liver.mesh.points).max() < 0.002
     assert np.abs(v).max() < 1e-3
     xe, ve = perturbed(liver)
-    settings = kernels.StepSettings(FRAME_S, 30, p.environment_damping_per_s, np.zeros(3), True)
+    settings = explicit_kernels.StepSettings(FRAME_S, 30, p.environment_damping_per_s, np.zeros(3), True)
     no_tool = tool_state(liver.tool, None, None, p, 0.0, xe, liver.mesh.skin)
-    work = kernels.WorkArrays(np.zeros_like(xe), np.zeros((1, len(xe), 3)), False)
+    work = explicit_kernels.WorkArrays(np.zeros_like(xe), np.zeros((1, len(xe), 3)), False)
     with np.errstate(all="ignore"):
-        kernels.run_frame(xe, ve, liver.inv_mass, np.zeros_like(xe), liver._spring_arrays, liver.support, settings,
-                          no_tool, work)
+        explicit_kernels.run_frame(xe, ve, liver.inv_mass, np.zeros_like(xe), liver._spring_arrays, liver.support,
+                                   settings, no_tool, work)
     assert not (np.isfinite(xe).all() and np.abs(xe - liver.mesh.points).max() < 0.1)
 
 

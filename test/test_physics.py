@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from meshes import box_mesh, kinetic_energy_j
 
-from liver_sim.physics import kernels, reference
+from liver_sim.physics import explicit_kernels, reference, spring_kernels
 from liver_sim.physics.contact import ToolPose
 from liver_sim.physics.model import LiverModel, default_fixed_nodes
 from liver_sim.physics.model_params import FIG2_LAW, ModelParams, SpringLaw
@@ -42,7 +42,7 @@ def two_node_state():
 def test_spring_kernel_force_by_hand():
     x, v, arrays = two_node_state()
     f = np.zeros((2, 3))
-    kernels.spring_forces_serial(x, v, *arrays.values(), f)
+    spring_kernels.spring_forces_serial(x, v, *arrays.values(), f)
     np.testing.assert_allclose(f, [[0.085, 0, 0], [-0.085, 0, 0]])
 
 
@@ -52,7 +52,7 @@ def test_integrators_by_hand(symplectic):
     v = np.array([[1.0, 0.0, 0.0]])
     f = np.array([[2.0, 0.0, 0.0]])
     dt, mass = 0.1, 0.5
-    kernels.integrate(x, v, f, np.array([1.0 / mass]), dt, 0.0, np.zeros(3), symplectic)
+    explicit_kernels.integrate(x, v, f, np.array([1.0 / mass]), dt, 0.0, np.zeros(3), symplectic)
     # a = 4 m/s²: v ← 1 + 0.1·4 = 1.4; x ← 0.1·v_old = 0.1 (Eq. 2) or 0.1·v_new = 0.14
     assert v[0, 0] == pytest.approx(1.4)
     assert x[0, 0] == pytest.approx(0.14 if symplectic else 0.1)
@@ -61,7 +61,8 @@ def test_integrators_by_hand(symplectic):
 def test_integrate_applies_gravity_environment_damping_and_fixed_nodes():
     x = np.zeros((2, 3))
     v = np.array([[1.0, 0.0, 0.0], [1.0, 0.0, 0.0]])
-    kernels.integrate(x, v, np.zeros((2, 3)), np.array([1.0, 0.0]), 0.1, 2.0, np.array([0.0, 0.0, -9.81]), True)
+    explicit_kernels.integrate(x, v, np.zeros((2, 3)), np.array([1.0, 0.0]), 0.1, 2.0, np.array([0.0, 0.0, -9.81]),
+                               True)
     np.testing.assert_allclose(v[0], [1.0 - 0.1 * 2.0, 0.0, -0.981])
     np.testing.assert_allclose(v[1], [1.0, 0.0, 0.0])  # fixed: untouched
     np.testing.assert_allclose(x[1], 0.0)
@@ -89,11 +90,12 @@ def test_spring_kernels_equal_numpy_oracle(box, parallel):
     x, v = perturbed_state(box)
     f = np.zeros_like(x)
     if parallel:
-        kernels.spring_forces_parallel(x, v, springs.node_i, springs.node_j, springs.rest_length_m, springs.lambda1_n,
-                                       springs.lambda2_n, springs.mu_ns_per_m, np.zeros((3, len(x), 3)), f)
+        spring_kernels.spring_forces_parallel(x, v, springs.node_i, springs.node_j, springs.rest_length_m,
+                                              springs.lambda1_n, springs.lambda2_n, springs.mu_ns_per_m,
+                                              np.zeros((3, len(x), 3)), f)
     else:
-        kernels.spring_forces_serial(x, v, springs.node_i, springs.node_j, springs.rest_length_m, springs.lambda1_n,
-                                     springs.lambda2_n, springs.mu_ns_per_m, f)
+        spring_kernels.spring_forces_serial(x, v, springs.node_i, springs.node_j, springs.rest_length_m,
+                                            springs.lambda1_n, springs.lambda2_n, springs.mu_ns_per_m, f)
     expected = reference.spring_forces(x, v, springs)
     assert np.abs(expected).max() > 0.1
     np.testing.assert_allclose(f, expected, rtol=1e-10, atol=1e-12)

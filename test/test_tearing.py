@@ -1,5 +1,6 @@
 """P13 of docs/paper.md: tearing (paper §2.6) by face separation and node duplication, and topology changes of the
 model."""
+import dataclasses
 import math
 
 import numpy as np
@@ -14,8 +15,9 @@ from liver_sim.physics import model as model_module
 from liver_sim.physics.contact import ToolPose
 from liver_sim.physics.model import LiverModel
 from liver_sim.physics.model_params import ModelParams
+from liver_sim.physics.tearing import TearDetector, duplication_change
 from liver_sim.physics.tool_use import ToolUse
-from liver_sim.physics.topology import TearDetector, duplication_change, separate_faces
+from liver_sim.physics.topology import separate_faces
 
 SPACING_M = 0.02
 NX, NY, NZ = 10, 3, 3
@@ -266,6 +268,31 @@ def test_copies_of_fixed_nodes_stay_fixed():
     copies = np.flatnonzero(change.node_sources[:, 0] == centre)
     assert len(copies) == 2
     assert np.array_equal(model.fixed_nodes, copies) and (model.inv_mass[copies] == 0.0).all()
+
+
+def test_apply_topology_change_is_all_or_nothing(monkeypatch):
+    model = pulled_bar(16.0)
+    for _ in range(3):
+        model.step_frame()
+    mesh = model.mesh
+    faces = mesh.tets[:, TET_FACES].reshape(-1, 3)
+    plane = np.isclose(mesh.points[faces][:, :, 0], 5 * SPACING_M).all(axis=1)
+    change = duplication_change(mesh.points, mesh.tets, model.capsule_triangles, faces[plane])
+    before = model_state(model)
+
+    def broken(*args, **kwargs):  # LiverModel._set_mesh calls it after taking the new mesh and node state
+        raise RuntimeError("injected")
+
+    monkeypatch.setattr(model_module, "build_springs", broken)
+    with pytest.raises(RuntimeError, match="injected"):
+        model.apply_topology_change(change)
+    assert_same_state(dict(before, arrays=list(before["arrays"])), model)
+    with pytest.raises(ValueError, match="node_sources"):  # checked before the model is touched
+        model.apply_topology_change(dataclasses.replace(change, node_sources=change.node_sources[:-1]))
+    assert_same_state(before, model)
+    monkeypatch.undo()
+    model.apply_topology_change(change)
+    assert model.topology_version == 1 and len(model.positions) == len(change.rest_points)
 
 
 @pytest.mark.parametrize("integrator", ["implicit_euler", "symplectic_euler"])

@@ -15,11 +15,20 @@ import numpy as np
 
 from liver_sim.base.geometry.rotations import quaternion_to_matrix
 from liver_sim.base.local_model import LocalModel
-from liver_sim.physics import kernels
+from liver_sim.physics.contact_kernels import (
+    TOOL_BOX,
+    TOOL_CAPSULE,
+    TOOL_NONE,
+    TOOL_SPHERE,
+    ToolState,
+    contact_elements,
+    near_triangles,
+    probe_geometry,
+)
 from liver_sim.physics.implicit import Contacts
 from liver_sim.physics.model_params import ModelParams
 
-TOOL_KINDS = {"sphere": kernels.TOOL_SPHERE, "capsule": kernels.TOOL_CAPSULE, "box": kernels.TOOL_BOX}
+TOOL_KINDS = {"sphere": TOOL_SPHERE, "capsule": TOOL_CAPSULE, "box": TOOL_BOX}
 
 
 @dataclass(frozen=True)
@@ -87,7 +96,7 @@ def candidate_triangles(points: np.ndarray, skin: np.ndarray, shape: ToolShape, 
     """Sorted skin triangles that may come within `reach_m` of the tool: centroid within the tool's bounding
     radius + the largest circumradius + `reach_m` of its core midpoint."""
     a, b = tool_core(shape, pose)
-    return kernels.near_triangles(points, skin, (a + b) / 2.0, shape.bounding_radius_m + reach_m)
+    return near_triangles(points, skin, (a + b) / 2.0, shape.bounding_radius_m + reach_m)
 
 
 def fit_sphere(points: np.ndarray) -> tuple[np.ndarray, float]:
@@ -128,8 +137,8 @@ def tool_probes(shape: ToolShape, pose: ToolPose) -> tuple[np.ndarray, float]:
 
 
 def tool_state(shape: ToolShape, pose: ToolPose | None, previous: ToolPose | None, params: ModelParams,
-               reach_m: float, positions: np.ndarray, skin: np.ndarray) -> kernels.ToolState:
-    """The tool over one frame for kernels.run_frame (pose None: no tool).
+               reach_m: float, positions: np.ndarray, skin: np.ndarray) -> ToolState:
+    """The tool over one frame for explicit_kernels.run_frame (pose None: no tool).
 
     Its probes (tool_probes) move at constant velocity (tip − previous tip)/frame period from where
     `previous` held them to where `pose` holds them; a jump beyond TOOL_JUMP_M is a re-placed tool, at rest
@@ -137,7 +146,7 @@ def tool_state(shape: ToolShape, pose: ToolPose | None, previous: ToolPose | Non
     contact law: params.contact_stiffness_n_per_m, params.contact_damping_ns_per_m (Eq. 3).
     """
     velocity = np.zeros(3)
-    kind = kernels.TOOL_NONE
+    kind = TOOL_NONE
     probes, radius = np.zeros((0, 3)), 0.0
     triangles = np.zeros(0, dtype=np.int64)
     if pose is not None:
@@ -151,31 +160,31 @@ def tool_state(shape: ToolShape, pose: ToolPose | None, previous: ToolPose | Non
         triangles = candidate_triangles(positions, skin, shape, pose, reach_m + float(np.linalg.norm(velocity))
                                         / params.frame_rate_hz)
     rows = len(probes) * len(triangles)
-    return kernels.ToolState(kind, np.ascontiguousarray(probes), radius, velocity, params.contact_stiffness_n_per_m,
-                             params.contact_damping_ns_per_m, np.ascontiguousarray(skin, dtype=np.int64), triangles,
-                             np.zeros((rows, 3), dtype=np.int64), np.zeros((rows, 3)), np.zeros((rows, 3)),
-                             np.full(rows, -np.inf), np.zeros(rows), np.zeros((rows, 3)))
+    return ToolState(kind, np.ascontiguousarray(probes), radius, velocity, params.contact_stiffness_n_per_m,
+                     params.contact_damping_ns_per_m, np.ascontiguousarray(skin, dtype=np.int64), triangles,
+                     np.zeros((rows, 3), dtype=np.int64), np.zeros((rows, 3)), np.zeros((rows, 3)),
+                     np.full(rows, -np.inf), np.zeros(rows), np.zeros((rows, 3)))
 
 
-def probe_contacts(x: np.ndarray, v: np.ndarray, tool: kernels.ToolState, shift: np.ndarray, dt: float) -> None:
-    """The tool's contact rows (kernels.probe_geometry) with its probes moved by `shift`, in its arrays."""
-    kernels.probe_geometry(x, v, tool.skin, tool.triangles, tool.probes, shift, tool.radius_m, tool.velocity_m_s, dt,
-                           tool.nodes, tool.weights, tool.normal, tool.depth, tool.share, tool.point)
+def probe_contacts(x: np.ndarray, v: np.ndarray, tool: ToolState, shift: np.ndarray, dt: float) -> None:
+    """The tool's contact rows (contact_kernels.probe_geometry) with its probes moved by `shift`, in its arrays."""
+    probe_geometry(x, v, tool.skin, tool.triangles, tool.probes, shift, tool.radius_m, tool.velocity_m_s, dt,
+                   tool.nodes, tool.weights, tool.normal, tool.depth, tool.share, tool.point)
 
 
-def surface_contacts(x: np.ndarray, v: np.ndarray, tool: kernels.ToolState, shift: np.ndarray, dt: float) -> Contacts:
+def surface_contacts(x: np.ndarray, v: np.ndarray, tool: ToolState, shift: np.ndarray, dt: float) -> Contacts:
     """The tool's contacts with the skin triangles for implicit.ImplicitEuler, its probes moved by `shift`
-    (where they are at the end of the step): the rows of kernels.probe_geometry with a share, λ and μ scaled
-    by it, linearised about the skin where its velocity takes it in `dt` (x̂ = x + dt·v, so the contacts that
+    (where they are at the end of the step): the rows of contact_kernels.probe_geometry with a share, λ and μ
+    scaled by it, linearised about the skin where its velocity takes it in `dt` (x̂ = x + dt·v, so the contacts that
     touch at the end of the step are those that act): o = δ(x̂) + n·Σ w_a·x̂_a so that δ = o − n·Σ w_a·x_a,
     s = n·v_tool (Eq. 3)."""
     ahead = x + dt * v
     probe_contacts(ahead, v, tool, shift, 0.0)
-    return Contacts(*kernels.contact_elements(ahead, tool.nodes, tool.weights, tool.normal, tool.depth, tool.share,
-                                              tool.velocity_m_s, tool.stiffness_n_per_m, tool.damping_ns_per_m))
+    return Contacts(*contact_elements(ahead, tool.nodes, tool.weights, tool.normal, tool.depth, tool.share,
+                                      tool.velocity_m_s, tool.stiffness_n_per_m, tool.damping_ns_per_m))
 
 
-def force_local_model(shape: ToolShape, pose: ToolPose, tool: kernels.ToolState, force_on_tool_n: np.ndarray,
+def force_local_model(shape: ToolShape, pose: ToolPose, tool: ToolState, force_on_tool_n: np.ndarray,
                       stiffness_n_per_m: float, reach_m: float, kind: str, positions: np.ndarray) -> LocalModel:
     """The local model of the end of a frame, consistent with its contact force F (paper §2.5, P11): in
     contact, the plane with normal F/|F| that the tool sphere (radius r) penetrates by |F|/K, so that the

@@ -9,7 +9,7 @@ geometric stiffness is dropped, so every block is positive semi-definite and the
 symmetric positive definite (the usual safeguard; the residual check corrects what it omits).
 The viscous tension's own x-derivative (non-symmetric) is omitted likewise.  Environment damping
 a −= c_env·v gives D = −c_env·M.  Held nodes (inv_mass 0: fixed or grasped) keep Δv = 0 and do
-not move (as `kernels.integrate`): their rows and columns are replaced by the identity.
+not move (as `explicit_kernels.integrate`): their rows and columns are replaced by the identity.
 
 Support (physics.support): a supported node n with stiffness k_n and damping c_n gets
 f_n = −k_n·(x_n − x_rest,n) − c_n·v_n, so K gets −k_n·I and D −c_n·I on its diagonal block, which

@@ -3,7 +3,7 @@
 `LiverModel.step_frame(pose)` advances one frame (1/frame_rate_hz s, `substeps` steps) with the
 tool at `pose`, and returns the contact force on the tool and the local model for the haptic loop.
 The integrator (params.integrator): linearised backward Euler (physics.implicit, one step per frame
-by default), or the explicit kernels (physics.kernels.run_frame: symplectic Euler, or Eq. 2).
+by default), or the explicit kernels (physics.explicit_kernels.run_frame: symplectic Euler, or Eq. 2).
 """
 from __future__ import annotations
 
@@ -15,7 +15,6 @@ import numpy as np
 
 from liver_sim.base.local_model import LocalModel
 from liver_sim.mesh.tetmesh import TetMesh
-from liver_sim.physics import kernels
 from liver_sim.physics.contact import (
     ToolPose,
     ToolShape,
@@ -25,13 +24,17 @@ from liver_sim.physics.contact import (
     surface_contacts,
     tool_state,
 )
+from liver_sim.physics.contact_kernels import TOOL_NONE, ToolState
 from liver_sim.physics.cutting import cut_along_path
+from liver_sim.physics.explicit_kernels import StepSettings, WorkArrays, max_speed, run_frame
 from liver_sim.physics.implicit import ImplicitEuler
 from liver_sim.physics.local_stiffness import LocalStiffness
 from liver_sim.physics.model_params import ModelParams
+from liver_sim.physics.spring_kernels import SpringArrays, spring_forces_serial, support_forces
 from liver_sim.physics.springs import build_springs, estimate_stable_time_step, stable_time_step
 from liver_sim.physics.support import build_support
-from liver_sim.physics.topology import NodeState, TearDetector, TopologyChange, apply_change, carry_over, tear
+from liver_sim.physics.tearing import TearDetector, tear
+from liver_sim.physics.topology import NodeState, TopologyChange, carry_over
 
 #: Above this many springs the parallel kernel is used (below it thread start-up costs more).
 PARALLEL_MIN_EDGES = 20_000
@@ -75,7 +78,8 @@ class LiverModel:
 
     `external_forces_n` (N, 3) are applied to the nodes at every step (zero by default).
     `capsule_triangles` are the skin triangles carrying capsule springs (the whole skin until a tear
-    or a cut opens faces); `apply_topology` replaces the mesh and increments `topology_version`.
+    or a cut opens faces); `apply_topology` replaces the mesh and increments `topology_version`,
+    `apply_topology_change` does so all or nothing (how tears and cuts are applied).
     `held_nodes` (see `hold`) are moved by the tool, like the fixed nodes by the scene, not integrated.
     `local_stiffness` (physics.local_stiffness) gives the local model's K under the tool.
     `support` (physics.support) ties the supported capsule nodes to their rest positions; with
@@ -119,13 +123,12 @@ class LiverModel:
         self.positions, self.velocities, self.external_forces_n, self.masses_kg, self.fixed_nodes = state
         self.springs = springs = build_springs(mesh, self.params, capsule_triangles=self.capsule_triangles)
         self.support = build_support(mesh, self.capsule_triangles, self.params)
-        self._spring_arrays = kernels.SpringArrays(springs.node_i, springs.node_j, springs.rest_length_m,
-                                                   springs.lambda1_n, springs.lambda2_n, springs.mu_ns_per_m)
+        self._spring_arrays = SpringArrays(springs.node_i, springs.node_j, springs.rest_length_m,
+                                           springs.lambda1_n, springs.lambda2_n, springs.mu_ns_per_m)
         if self.parallel is None:  # chosen once, for the first mesh
             self.parallel = springs.edges >= PARALLEL_MIN_EDGES
         threads = numba.get_num_threads() if self.parallel else 1
-        self._work = kernels.WorkArrays(np.zeros_like(mesh.points), np.zeros((threads, len(mesh.points), 3)),
-                                        self.parallel)
+        self._work = WorkArrays(np.zeros_like(mesh.points), np.zeros((threads, len(mesh.points), 3)), self.parallel)
         self._skin = np.ascontiguousarray(mesh.skin, dtype=np.int64)
         self._solver = ImplicitEuler(springs, len(mesh.points), support=self.support)
         self.local_stiffness = LocalStiffness(self._solver, len(mesh.points))
@@ -153,14 +156,31 @@ class LiverModel:
             self.params = self.params.with_changes(substeps=min(needed, 10_000))
         self.topology_version += 1  # the tear detector is keyed by it
 
+    def apply_topology_change(self, change: TopologyChange) -> None:
+        """`apply_topology(change)` all or nothing: the change is checked (carry_over: check_change) before
+        the model is touched; if applying raises midway, every attribute of the model is put back, with the
+        contents of its arrays, and the error re-raised: positions, velocities, masses, mesh, springs, fixed
+        and held nodes, topology_version are then as they were."""
+        saved = dict(vars(self))
+        contents = {name: value.copy() for name, value in saved.items() if isinstance(value, np.ndarray)}
+        try:
+            self.apply_topology(change)
+        except BaseException:
+            for name, value in contents.items():
+                if saved[name].flags.writeable:
+                    np.copyto(saved[name], value)
+            vars(self).clear()
+            vars(self).update(saved)
+            raise
+
     def cut(self, path_m: np.ndarray, depth_m: float) -> bool:
         """Cut along the blade's path (P, 3) m, deformed frame, down to `depth_m` under it (P14, §3.5;
-        see cutting.cut_along_path); True when the mesh changed.  All or nothing (topology.apply_change):
+        see cutting.cut_along_path); True when the mesh changed.  All or nothing (apply_topology_change):
         when it raises, the model is as it was."""
         change = cut_along_path(self.mesh.points, self.mesh.tets, self.positions, self.capsule_triangles,
                                 path_m, depth_m)
         if change is not None:
-            apply_change(self, change)
+            self.apply_topology_change(change)
         return change is not None
 
     def hold(self, nodes: np.ndarray) -> None:
@@ -238,7 +258,7 @@ class LiverModel:
                                             self.local_model_reach_m, self.local_model_kind, self.positions)
         return FrameResult(self.time_s, -liver_force, local_model, None, torn, failure)
 
-    def _stiffness_under(self, tool: kernels.ToolState) -> float:
+    def _stiffness_under(self, tool: ToolState) -> float:
         """K of the local model under the tool (physics.local_stiffness)."""
         return self.local_stiffness.stiffness_n_per_m(tool, self.positions, self.inv_mass,
                                                       self.params.contact_stiffness_n_per_m,
@@ -253,19 +273,19 @@ class LiverModel:
         return self._tear_detector[1]
 
     def _tear(self) -> tuple[bool, str | None]:
-        """Open the faces stretched beyond the tearing thresholds, all or nothing (topology.apply_change):
+        """Open the faces stretched beyond the tearing thresholds, all or nothing (apply_topology_change):
         (True when the mesh changed, why the tear failed or None)."""
         params = self.params
         try:
             change = tear(self.mesh.points, self.mesh.tets, self.positions, self.capsule_triangles,
                           params.tear_strain_parenchyma, params.tear_strain_capsule, detector=self._detector())
             if change is not None:
-                apply_change(self, change)
+                self.apply_topology_change(change)
         except Exception as exc:  # the model is as it was; the frame goes on
             return False, f"tear failed, the mesh is unchanged: {type(exc).__name__}: {exc}"
         return change is not None, None
 
-    def _advance(self, pose: ToolPose | None, substeps: int) -> tuple[np.ndarray, kernels.ToolState]:
+    def _advance(self, pose: ToolPose | None, substeps: int) -> tuple[np.ndarray, ToolState]:
         """Run `substeps` steps with the tool moving from the previous pose to `pose` (contact.tool_state).
         Returns the contact force on the liver (N) and the tool's state (its candidates' contact geometry)."""
         params = self.params
@@ -273,18 +293,18 @@ class LiverModel:
         self._previous_pose = pose
         if self.implicit:
             return self._implicit_frame(tool, substeps), tool
-        settings = kernels.StepSettings(params.dt_s, substeps, params.environment_damping_per_s,
-                                        np.asarray(params.gravity_m_s2, dtype=np.float64),
-                                        params.integrator == "symplectic_euler")
-        liver_force = kernels.run_frame(self.positions, self.velocities, self.inv_mass, self.external_forces_n,
-                                        self._spring_arrays, self.support, settings, tool, self._work)
+        settings = StepSettings(params.dt_s, substeps, params.environment_damping_per_s,
+                                np.asarray(params.gravity_m_s2, dtype=np.float64),
+                                params.integrator == "symplectic_euler")
+        liver_force = run_frame(self.positions, self.velocities, self.inv_mass, self.external_forces_n,
+                                self._spring_arrays, self.support, settings, tool, self._work)
         return liver_force, tool
 
-    def _tool_state(self, pose: ToolPose | None) -> kernels.ToolState:
+    def _tool_state(self, pose: ToolPose | None) -> ToolState:
         return tool_state(self.tool, pose, self._previous_pose, self.params, self.local_model_reach_m,
                           self.positions, self._skin)
 
-    def _implicit_frame(self, tool: kernels.ToolState, substeps: int) -> np.ndarray:
+    def _implicit_frame(self, tool: ToolState, substeps: int) -> np.ndarray:
         """`substeps` backward-Euler steps with the tool's contacts with the skin triangles taken where its
         probes are at the end of each step (contact.surface_contacts); the probes' geometry at the end is
         left in the tool's arrays (as run_frame does).  Returns the contact force on the liver at the end (N)."""
@@ -294,11 +314,11 @@ class LiverModel:
         x, v = self.positions, self.velocities
         liver_force = np.zeros(3)
         for step in range(substeps):
-            contacts = None if tool.kind == kernels.TOOL_NONE else surface_contacts(
+            contacts = None if tool.kind == TOOL_NONE else surface_contacts(
                 x, v, tool, tool.velocity_m_s * ((step + 1) * dt), dt)
             liver_force = self._solver.step(x, v, self.inv_mass, self.external_forces_n, dt,
                                             params.environment_damping_per_s, gravity, contacts)
-        if tool.kind != kernels.TOOL_NONE:  # the contact geometry the local model is fitted to
+        if tool.kind != TOOL_NONE:  # the contact geometry the local model is fitted to
             probe_contacts(x, v, tool, tool.velocity_m_s * (substeps * dt), dt)
         return liver_force
 
@@ -307,15 +327,15 @@ class LiverModel:
         f = self._work.force
         f[:] = self.external_forces_n
         s = self._spring_arrays
-        kernels.spring_forces_serial(self.positions, self.velocities, s.node_i, s.node_j, s.rest_m, s.lambda1_n,
-                                     s.lambda2_n, s.mu_ns_per_m, f)
+        spring_forces_serial(self.positions, self.velocities, s.node_i, s.node_j, s.rest_m, s.lambda1_n, s.lambda2_n,
+                             s.mu_ns_per_m, f)
         support = self.support
-        kernels.support_forces(self.positions, self.velocities, support.nodes, support.rest_m,
-                               support.stiffness_n_per_m, support.damping_ns_per_m, f)
+        support_forces(self.positions, self.velocities, support.nodes, support.rest_m, support.stiffness_n_per_m,
+                       support.damping_ns_per_m, f)
 
     def _check_divergence(self) -> str | None:
         """None, or the cause when the state is non-finite or a node outruns max_node_speed_m_s."""
-        speed = kernels.max_speed(self.positions, self.velocities)
+        speed = max_speed(self.positions, self.velocities)
         if math.isfinite(speed):
             if speed <= self.params.max_node_speed_m_s:
                 return None

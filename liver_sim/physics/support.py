@@ -10,7 +10,7 @@ diaphragm, the inferior vena cava, its ligaments and the viscera it rests on:
 
 A_n a third of the area of the capsule triangles around node n at rest (m²), the sum over the regions
 holding n, and τ `support_damping_s` (the ties' Kelvin–Voigt time constant, s).  Its Jacobian
-is −k_n·I (∂f/∂x) and −c_n·I (∂f/∂v) on the node's diagonal block (physics.implicit_kernels, physics.kernels).
+is −k_n·I (∂f/∂x) and −c_n·I (∂f/∂v) on the node's diagonal block (physics.implicit_kernels, physics.spring_kernels).
 The default regions sit on the default liver (liver_sim.mesh.liver_shape, DICOM LPS axes); on a mesh
 where they hold no capsule node the scene is the paper's (physics.model).
 """

@@ -5,10 +5,13 @@ a weighted sum of old nodes' states (`node_sources`, `node_weights`): a node dup
 has one source with weight 1, a node created on an edge by a cut has two.  The capsule (Glisson's
 capsule) keeps only the skin triangles that came from the original skin; faces opened by a tear or
 a cut are parenchyma surface.
+
+physics.tearing and physics.cutting build the changes; what both rely on is here: checking a change
+(`check_change`), carrying the node state and masses onto the new nodes (`carry_over`), and opening
+interior faces by node duplication while keeping the skin manifold (`separate_faces`, `separate_pairs`).
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -17,13 +20,11 @@ import numpy as np
 
 from liver_sim.mesh.tetmesh import (
     TET_FACES,
-    TRIANGLE_EDGES,
     TetMesh,
     edge_keys,
     face_keys,
     isin_keys,
     key_groups,
-    unique_edges,
 )
 
 
@@ -89,24 +90,6 @@ def check_change(change: TopologyChange, old_node_count: int, source: str = "top
                          or not isin_keys(face_keys(capsule, count), face_keys(mesh.skin, count)).all()):
         raise ValueError("topology change: capsule_triangles must be skin triangles of the new mesh")
     return mesh
-
-
-def apply_change(model, change: TopologyChange) -> None:
-    """Apply `change` to `model` (its apply_topology) all or nothing: the change is checked (carry_over:
-    check_change) before the model is touched; if applying raises midway, every attribute of the model
-    is put back, with the contents of its arrays, and the error re-raised: positions, velocities,
-    masses, mesh, springs, fixed and held nodes, topology_version are then as they were."""
-    saved = dict(vars(model))
-    contents = {name: value.copy() for name, value in saved.items() if isinstance(value, np.ndarray)}
-    try:
-        model.apply_topology(change)
-    except BaseException:
-        for name, value in contents.items():
-            if saved[name].flags.writeable:
-                np.copyto(saved[name], value)
-        vars(model).clear()
-        vars(model).update(saved)
-        raise
 
 
 def carry_over(change: TopologyChange, state: NodeState, source: str, density_kg_m3: float,
@@ -297,120 +280,3 @@ def separate_pairs(tets: np.ndarray, n: int, slot_a: np.ndarray, slot_b: np.ndar
                 closed = True
         if not closed:  # no cut face to close around an over-shared edge: open nothing
             cut[:] = False
-
-
-@numba.njit(cache=True)
-def _face_stretches(x, corners, weights, out):
-    """out[f] = mean over the face's two tets of |Σ_c weights[f, s, c]·x[corners[f, s, c]]| − 1."""
-    for f in range(corners.shape[0]):
-        total = 0.0
-        for side in range(2):
-            gx = gy = gz = 0.0
-            for c in range(4):
-                node = corners[f, side, c]
-                w = weights[f, side, c]
-                gx += w * x[node, 0]
-                gy += w * x[node, 1]
-                gz += w * x[node, 2]
-            total += math.sqrt(gx * gx + gy * gy + gz * gz)
-        out[f] = 0.5 * total - 1.0
-
-
-class TearDetector:
-    """The interior faces of one rest mesh and their thresholds, precomputed for `stretches`/`faces`.
-
-    Stretch across an interior face with rest unit normal n: s = ½·Σ_t |F_t·n| − 1 over its two tets
-    t, F_t = D_t·R_t⁻¹ the tet's deformation gradient (D, R: edge matrices [b−a, c−a, d−a] now and at
-    rest), i.e. the mean normal strain of the two tets across the face (0 at rest, > 0 opened).
-    F_t·n = Σ_c w_tc·x_c is linear in the four corner positions, so w is precomputed.  A face with an
-    edge on a capsule triangle tears above `capsule_threshold`, any other above `parenchyma_threshold`.
-    """
-
-    def __init__(self, rest_points: np.ndarray, tets: np.ndarray, capsule_triangles: np.ndarray,
-                 parenchyma_threshold: float, capsule_threshold: float):
-        rest_points = np.asarray(rest_points, dtype=np.float64)
-        tets = np.asarray(tets, dtype=np.int64)
-        n = max(int(tets.max()) + 1, len(rest_points))
-        slot_a, slot_b, _ = interior_face_pairs(tets, n)
-        self.faces = np.take_along_axis(tets[slot_a // 4], TET_FACES[slot_a % 4], axis=1)
-        a, b, c = (rest_points[self.faces[:, k]] for k in range(3))
-        normal = np.cross(b - a, c - a)
-        normal /= np.linalg.norm(normal, axis=1, keepdims=True)
-        corners = np.stack([tets[slot_a // 4], tets[slot_b // 4]], axis=1)  # (F, 2, 4)
-        p = rest_points[corners]
-        e1, e2, e3 = (p[:, :, k] - p[:, :, 0] for k in (1, 2, 3))  # R = [e1 e2 e3]
-        rows = np.stack([np.cross(e2, e3), np.cross(e3, e1), np.cross(e1, e2)], axis=2)  # rows of det·R⁻¹
-        det = np.einsum("fsi,fsi->fs", e1, rows[:, :, 0])
-        g = np.einsum("fski,fi->fsk", rows, normal) / det[:, :, None]  # R⁻¹·n
-        self.corners = np.ascontiguousarray(corners)
-        self.weights = np.ascontiguousarray(np.concatenate([-g.sum(axis=2, keepdims=True), g], axis=2))
-        capsule = np.asarray(capsule_triangles, dtype=np.int64).reshape(-1, 3)
-        capsule_edges = edge_keys(unique_edges(capsule, TRIANGLE_EDGES), n) if len(capsule) else np.zeros(0, int)
-        face_edges = edge_keys(self.faces[:, TRIANGLE_EDGES], n)
-        on_capsule = isin_keys(face_edges, capsule_edges).any(axis=1)
-        self.thresholds = np.where(on_capsule, float(capsule_threshold), float(parenchyma_threshold))
-        self._stretch = np.zeros(len(self.faces))
-        self._futile: np.ndarray | None = None
-
-    def stretches(self, positions: np.ndarray) -> np.ndarray:
-        """Stretch (dimensionless) of every interior face at `positions` (N, 3) m."""
-        _face_stretches(np.ascontiguousarray(positions, dtype=np.float64), self.corners, self.weights,
-                        self._stretch)
-        return self._stretch
-
-    def over_threshold(self, positions: np.ndarray) -> np.ndarray:
-        """Mask over `faces`: stretch above the face's threshold."""
-        return self.stretches(positions) > self.thresholds
-
-    def torn_faces(self, positions: np.ndarray) -> np.ndarray:
-        """The interior faces (F, 3) whose stretch exceeds their threshold."""
-        return self.faces[self.over_threshold(positions)]
-
-
-def duplication_change(rest_points: np.ndarray, tets: np.ndarray, capsule_triangles: np.ndarray,
-                       cut_faces: np.ndarray) -> TopologyChange | None:
-    """The change that opens `cut_faces` by duplicating nodes (separate_faces); None if nothing opens."""
-    tets = np.asarray(tets, dtype=np.int64)
-    new_tets, parent, opened = separate_faces(tets, cut_faces)
-    if opened == 0:
-        return None
-    return TopologyChange(
-        rest_points=np.ascontiguousarray(np.asarray(rest_points, dtype=np.float64)[parent]),
-        tets=new_tets,
-        capsule_triangles=_carry_triangles(tets, new_tets, capsule_triangles, int(tets.max()) + 1),
-        node_sources=parent[:, None].copy(),
-        node_weights=np.ones((len(parent), 1)),
-        separated_faces=opened,
-    )
-
-
-def tear(rest_points: np.ndarray, tets: np.ndarray, positions: np.ndarray, capsule_triangles: np.ndarray,
-         parenchyma_threshold: float, capsule_threshold: float,
-         detector: TearDetector | None = None) -> TopologyChange | None:
-    """Open the faces stretched beyond their threshold (TearDetector, separate_faces); None if none opens.
-
-    `detector`, when given, must be the TearDetector of these rest_points, tets and capsule_triangles;
-    it remembers the last set of faces that opened nothing (no node to split) or whose separation
-    raised, so that the same set on the next frames costs no further separation attempt.
-    """
-    detector = detector or TearDetector(rest_points, tets, capsule_triangles, parenchyma_threshold,
-                                        capsule_threshold)
-    over = detector.over_threshold(positions)
-    if not over.any() or (detector._futile is not None and np.array_equal(over, detector._futile)):
-        return None
-    detector._futile = over.copy()
-    change = duplication_change(rest_points, tets, capsule_triangles, detector.faces[over])
-    if change is not None:
-        detector._futile = None
-    return change
-
-
-def _carry_triangles(tets: np.ndarray, new_tets: np.ndarray, triangles: np.ndarray, n: int) -> np.ndarray:
-    """Skin triangles of `tets` renumbered as in `new_tets` (same tets, nodes split), order kept."""
-    triangles = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
-    keys = face_keys(tets[:, TET_FACES].reshape(-1, 3), n)
-    order = np.argsort(keys, kind="stable")
-    slots = order[np.searchsorted(keys[order], face_keys(triangles, n))]
-    owner = slots // 4
-    local = np.argmax(tets[owner][:, None, :] == triangles[:, :, None], axis=2)  # (K, 3)
-    return np.take_along_axis(new_tets[owner], local, axis=1)

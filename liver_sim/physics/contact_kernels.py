@@ -1,15 +1,17 @@
-"""numba kernels of one physics frame: springs (Eq. 1), penalty contact (Eq. 3), integration (Eq. 2).
+"""numba kernels of the tool's contact with the skin triangles (Eq. 3), shared by both integrators.
 
-Array conventions: positions `x` and velocities `v` are (N, 3) float64 in m and m/s;
-forces accumulate in `f` (N, 3) in newtons.  The serial and the parallel spring
-kernels are separate functions (a cached dispatcher must never be shared between
-a `parallel=True` and a serial build).  `liver_sim.physics.reference` is the
-plain-NumPy oracle of the spring and integration kernels.
+The tool over one frame (`ToolState`, kind TOOL_*) is a set of probes p, balls of radius r moving at v_tool;
+`near_triangles` picks its candidate skin triangles.  `probe_geometry` gives, per probe and candidate
+triangle, the closest point q of the triangle to p (Ericson), its barycentric weights w_a, the unit
+normal n pushing the liver, the depth δ = r − |p − q| (m, negative apart; a probe inside the liver exits
+through q) and the row's share of its probe's contact (shares of a probe sum to 1 or all vanish, so an
+edge or corner is never counted twice).  Eq. 3 per row: F = share·max(0, λ·δ + μ·δ̇)·n, δ̇ = n·(v_tool −
+Σ w_a·v_a), spread over the triangle's nodes as w_a·F; the tool feels the sum's opposite.
+`surface_contacts` applies it (the explicit frame: physics.explicit_kernels.add_forces);
+`contact_elements` hands the same rows, linearised, to the implicit integrator (implicit.Contacts).
 
-`run_frame` takes the state arrays and five named tuples (numba reads their fields as
-compile-time attributes, at no cost): the spring network (`SpringArrays`), the support
-(`physics.support.SupportArrays`), the integration settings (`StepSettings`), the tool and its
-contact candidates (`ToolState`) and the work arrays (`WorkArrays`).
+Array conventions: positions `x` and velocities `v` are (N, 3) float64 in m and m/s; forces accumulate
+in `f` (N, 3) in newtons.
 """
 from __future__ import annotations
 
@@ -20,34 +22,11 @@ import numba
 import numpy as np
 
 from liver_sim.base.geometry.closest_point import closest_point_on_triangle
-from liver_sim.physics.pairs import add_pair
 
 TOOL_NONE = 0
 TOOL_SPHERE = 1
 TOOL_CAPSULE = 2
 TOOL_BOX = 3
-
-
-class SpringArrays(NamedTuple):
-    """One Eq. 1 connector per edge: node pairs (E,) int64, rest lengths (m), λ1 (N), λ2 (N), μ (N·s/m)."""
-
-    node_i: np.ndarray
-    node_j: np.ndarray
-    rest_m: np.ndarray
-    lambda1_n: np.ndarray
-    lambda2_n: np.ndarray
-    mu_ns_per_m: np.ndarray
-
-
-class StepSettings(NamedTuple):
-    """Integration of one frame: `substeps` steps of `dt_s` (s), environmental damping c (1/s), gravity
-    (3,) m/s², symplectic (True) or explicit Euler (False)."""
-
-    dt_s: float
-    substeps: int
-    environment_damping_per_s: float
-    gravity_m_s2: np.ndarray
-    symplectic: bool
 
 
 class ToolState(NamedTuple):
@@ -75,144 +54,6 @@ class ToolState(NamedTuple):
     depth: np.ndarray
     share: np.ndarray
     point: np.ndarray
-
-
-class WorkArrays(NamedTuple):
-    """Scratch of one model: `force` (N, 3) N; with `parallel`, the spring kernel's per-thread
-    `partial` sums (threads, N, 3)."""
-
-    force: np.ndarray
-    partial: np.ndarray
-    parallel: bool
-
-
-@numba.njit(cache=True, inline="always")
-def _spring_tension(x, v, i, j, rest, lambda1, lambda2, mu):
-    """Eq. 1 tension (N) and unit axis i→j; tension 0 for a collapsed spring."""
-    dx = x[j, 0] - x[i, 0]
-    dy = x[j, 1] - x[i, 1]
-    dz = x[j, 2] - x[i, 2]
-    length = math.sqrt(dx * dx + dy * dy + dz * dz)
-    if length <= 1e-12 * rest:
-        return 0.0, 0.0, 0.0, 0.0
-    ux, uy, uz = dx / length, dy / length, dz / length
-    strain = (length - rest) / rest
-    rate = (v[j, 0] - v[i, 0]) * ux + (v[j, 1] - v[i, 1]) * uy + (v[j, 2] - v[i, 2]) * uz
-    tension = lambda1 * strain * strain * strain + lambda2 * strain + mu * rate
-    return tension, ux, uy, uz
-
-
-@numba.njit(cache=True, inline="always")
-def _accumulate_springs(x, v, node_i, node_j, rest, lambda1, lambda2, mu, first, last, f):
-    """Add the Eq. 1 forces of springs first..last−1 to f: +T·u on node i, −T·u on node j."""
-    for s in range(first, last):
-        i = node_i[s]
-        j = node_j[s]
-        t, ux, uy, uz = _spring_tension(x, v, i, j, rest[s], lambda1[s], lambda2[s], mu[s])
-        add_pair(f, i, j, t * ux, t * uy, t * uz)
-
-
-@numba.njit(cache=True)
-def spring_forces_serial(x, v, node_i, node_j, rest, lambda1, lambda2, mu, f):
-    """Add every spring's Eq. 1 force to f (one thread)."""
-    _accumulate_springs(x, v, node_i, node_j, rest, lambda1, lambda2, mu, 0, node_i.shape[0], f)
-
-
-@numba.njit(cache=True, parallel=True)
-def spring_forces_parallel(x, v, node_i, node_j, rest, lambda1, lambda2, mu, partial, f):
-    """As spring_forces_serial, on all threads: each of the len(partial) chunks of springs
-    accumulates into its own (N, 3) slice of `partial`, then the slices are summed into f."""
-    chunks = partial.shape[0]
-    springs = node_i.shape[0]
-    for c in numba.prange(chunks):
-        own = partial[c]
-        own[:] = 0.0
-        _accumulate_springs(x, v, node_i, node_j, rest, lambda1, lambda2, mu,
-                            c * springs // chunks, (c + 1) * springs // chunks, own)
-    for n in numba.prange(f.shape[0]):
-        for c in range(chunks):
-            f[n, 0] += partial[c, n, 0]
-            f[n, 1] += partial[c, n, 1]
-            f[n, 2] += partial[c, n, 2]
-
-
-@numba.njit(cache=True)
-def support_forces(x, v, nodes, rest, stiffness, damping, f):
-    """Add the support's spring-dampers to f: −k_n·(x_n − rest_n) − c_n·v_n on each supported node n
-    (physics.support)."""
-    for s in range(nodes.shape[0]):
-        n = nodes[s]
-        for a in range(3):
-            f[n, a] -= stiffness[s] * (x[n, a] - rest[s, a]) + damping[s] * v[n, a]
-
-
-@numba.njit(cache=True)
-def integrate(x, v, f, inv_mass, dt, environment_damping, gravity, symplectic):
-    """One step of every free node (inv_mass > 0); fixed nodes (inv_mass = 0) do not move.
-
-    a = f/m + g − c_env·v.  Explicit Euler (Eq. 2): v ← v + Δt·a, x ← x + Δt·v_old.
-    Symplectic Euler: v ← v + Δt·a, x ← x + Δt·v_new.
-    """
-    for n in range(x.shape[0]):
-        w = inv_mass[n]
-        if w == 0.0:
-            continue
-        for k in range(3):
-            a = f[n, k] * w + gravity[k] - environment_damping * v[n, k]
-            if symplectic:
-                v[n, k] += dt * a
-                x[n, k] += dt * v[n, k]
-            else:
-                x[n, k] += dt * v[n, k]
-                v[n, k] += dt * a
-
-
-@numba.njit(cache=True)
-def contact_elements(x, nodes, weights, normal, depth, share, tool_velocity, stiffness, damping):
-    """The contact rows with a share, as penalty elements linearised about the skin at x (implicit.Contacts'
-    fields): their nodes, weights and normal; offset o = δ + n·Σ w_a·x_a (so that δ = o − n·Σ w_a·x_a);
-    speed n·v_tool; stiffness share·λ and damping share·μ (Eq. 3)."""
-    count = 0
-    for r in range(share.shape[0]):
-        if share[r] > 0.0:
-            count += 1
-    nodes_out = np.empty((count, 3), dtype=np.int64)
-    weights_out = np.empty((count, 3))
-    normal_out = np.empty((count, 3))
-    offset = np.empty(count)
-    speed = np.empty(count)
-    k = np.empty(count)
-    c = np.empty(count)
-    e = 0
-    for r in range(share.shape[0]):
-        if not share[r] > 0.0:
-            continue
-        along = 0.0
-        for a in range(3):
-            n = nodes[r, a]
-            nodes_out[e, a] = n
-            weights_out[e, a] = weights[r, a]
-            normal_out[e, a] = normal[r, a]
-            if n >= 0:
-                along += weights[r, a] * (normal[r, 0] * x[n, 0] + normal[r, 1] * x[n, 1] + normal[r, 2] * x[n, 2])
-        offset[e] = depth[r] + along
-        speed[e] = normal[r, 0] * tool_velocity[0] + normal[r, 1] * tool_velocity[1] + normal[r, 2] * tool_velocity[2]
-        k[e] = share[r] * stiffness
-        c[e] = share[r] * damping
-        e += 1
-    return nodes_out, weights_out, normal_out, offset, speed, k, c
-
-
-@numba.njit(cache=True)
-def max_speed(x, v):
-    """The largest node speed |v| (m/s); NaN when a position or velocity is not finite."""
-    top = 0.0
-    for n in range(x.shape[0]):
-        s2 = v[n, 0] * v[n, 0] + v[n, 1] * v[n, 1] + v[n, 2] * v[n, 2]
-        if not (math.isfinite(s2) and math.isfinite(x[n, 0] + x[n, 1] + x[n, 2])):
-            return math.nan
-        top = max(top, s2)
-    return math.sqrt(top)
 
 
 @numba.njit(cache=True)
@@ -413,39 +254,37 @@ def surface_contacts(x, v, tool, shift, dt, f):
     return np.array([tx, ty, tz])
 
 
-@numba.njit(cache=True, inline="always")
-def add_forces(x, v, external_force, springs, support, tool, work, shift, dt, contact):
-    """work.force ← external force + Eq. 1 spring forces + the support + Eq. 3 contact of the tool's probes moved
-    by `shift`; the contact force on the liver (N) goes to `contact` (left alone without a tool)."""
-    f = work.force
-    f[:] = external_force
-    s = springs
-    if work.parallel:
-        spring_forces_parallel(x, v, s.node_i, s.node_j, s.rest_m, s.lambda1_n, s.lambda2_n, s.mu_ns_per_m,
-                               work.partial, f)
-    else:
-        spring_forces_serial(x, v, s.node_i, s.node_j, s.rest_m, s.lambda1_n, s.lambda2_n, s.mu_ns_per_m, f)
-    support_forces(x, v, support.nodes, support.rest_m, support.stiffness_n_per_m, support.damping_ns_per_m, f)
-    if tool.kind != TOOL_NONE:
-        contact[:] = surface_contacts(x, v, tool, shift, dt, f)
-
-
-@numba.njit(cache=True, nogil=True)
-def run_frame(x, v, inv_mass, external_force, springs, support, settings, tool, work):
-    """`settings.substeps` steps of the model; the tool core moves at `tool.velocity_m_s` from its start.
-
-    Runs without the GIL, so a node's executor thread keeps delivering messages meanwhile.
-    `external_force` (N, 3) is added to every node each step.  Returns the contact force on the liver
-    at the last substep (N); the tool's reaction is its opposite.  The probes' contact geometry of the
-    last substep is left in the tool's arrays.
-    """
-    contact = np.zeros(3)
-    shift = np.zeros(3)
-    dt = settings.dt_s
-    for step in range(settings.substeps):
-        for k in range(3):
-            shift[k] = tool.velocity_m_s[k] * ((step + 1) * dt)
-        add_forces(x, v, external_force, springs, support, tool, work, shift, dt, contact)
-        integrate(x, v, work.force, inv_mass, dt, settings.environment_damping_per_s, settings.gravity_m_s2,
-                  settings.symplectic)
-    return contact
+@numba.njit(cache=True)
+def contact_elements(x, nodes, weights, normal, depth, share, tool_velocity, stiffness, damping):
+    """The contact rows with a share, as penalty elements linearised about the skin at x (implicit.Contacts'
+    fields): their nodes, weights and normal; offset o = δ + n·Σ w_a·x_a (so that δ = o − n·Σ w_a·x_a);
+    speed n·v_tool; stiffness share·λ and damping share·μ (Eq. 3)."""
+    count = 0
+    for r in range(share.shape[0]):
+        if share[r] > 0.0:
+            count += 1
+    nodes_out = np.empty((count, 3), dtype=np.int64)
+    weights_out = np.empty((count, 3))
+    normal_out = np.empty((count, 3))
+    offset = np.empty(count)
+    speed = np.empty(count)
+    k = np.empty(count)
+    c = np.empty(count)
+    e = 0
+    for r in range(share.shape[0]):
+        if not share[r] > 0.0:
+            continue
+        along = 0.0
+        for a in range(3):
+            n = nodes[r, a]
+            nodes_out[e, a] = n
+            weights_out[e, a] = weights[r, a]
+            normal_out[e, a] = normal[r, a]
+            if n >= 0:
+                along += weights[r, a] * (normal[r, 0] * x[n, 0] + normal[r, 1] * x[n, 1] + normal[r, 2] * x[n, 2])
+        offset[e] = depth[r] + along
+        speed[e] = normal[r, 0] * tool_velocity[0] + normal[r, 1] * tool_velocity[1] + normal[r, 2] * tool_velocity[2]
+        k[e] = share[r] * stiffness
+        c[e] = share[r] * damping
+        e += 1
+    return nodes_out, weights_out, normal_out, offset, speed, k, c
