@@ -43,7 +43,7 @@ def force_message_type(fmt: str) -> type:
     """
     if fmt == "omni_feedback":
         try:
-            from omni_msgs.msg import OmniFeedback
+            from omni_msgs.msg import OmniFeedback  # optional: the user's Geomagic Touch driver workspace
         except ImportError as exc:
             raise ValueError("force_output 'omni_feedback' needs omni_msgs (Geomagic Touch ROS 2 driver workspace) "
                              "sourced; it is not installed") from exc

@@ -124,7 +124,7 @@ def windowed_rate(t: np.ndarray, window_s: float = 1.0) -> tuple[np.ndarray, np.
 
 
 def _plots():
-    import matplotlib
+    import matplotlib  # heavy, and only for the commands that draw
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 

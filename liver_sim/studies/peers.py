@@ -64,7 +64,7 @@ class FlexSettings:
 def import_mujoco():
     """The mujoco module, or ImportError saying how to install it."""
     try:
-        import mujoco
+        import mujoco  # optional: the `peers` extra, for bench physics --peers only
     except ImportError as exc:
         raise ImportError(f"the peers comparison needs MuJoCo, which is not installed: {INSTALL_HINT}") from exc
     return mujoco

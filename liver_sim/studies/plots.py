@@ -13,7 +13,7 @@ from liver_sim.tool.scripts import ScriptSettings
 def plot_press_release(data: dict, script: ScriptSettings, name: str, path: Path) -> None:
     """force.png of the offline demo: the force on the tool and the largest displacement over time, the press
     and hold shaded."""
-    import matplotlib
+    import matplotlib  # heavy, and only for the commands that draw
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
@@ -39,7 +39,7 @@ def plot_liver(rest_m: np.ndarray, skin: np.ndarray, positions_m: np.ndarray, to
                title: str, path: Path, wounds: np.ndarray | None = None) -> None:
     """A 3D picture of the deformed skin coloured by displacement, with the tool sphere in red, and the lips
     of the skin triangles marked in `wounds` (opened by a tear or a cut) as red lines."""
-    import matplotlib
+    import matplotlib  # heavy, and only for the commands that draw
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from mpl_toolkits.mplot3d.art3d import Poly3DCollection

@@ -143,7 +143,7 @@ def run_traction(law: SpringLaw = FIG2_LAW, mesh: TetMesh | None = None, progres
 
 def write_traction(result: TractionResult, out_dir: Path) -> tuple[Path, Path]:
     """Write traction.csv (force_N, elongation, law_force_N) and traction.png (Fig. 5) to out_dir."""
-    import matplotlib
+    import matplotlib  # heavy, and only for the commands that draw
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 

@@ -228,7 +228,7 @@ def figures_json(figures: list[Figure]) -> dict:
 
 def write_plots(data: dict, out_dir: Path) -> list[Path]:
     """One PNG per behaviour (b1.png, b2_b3.png, b4_continuity.png, traction_materials.png) in out_dir."""
-    import matplotlib
+    import matplotlib  # heavy, and only for the commands that draw
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
