@@ -45,7 +45,7 @@ from msg_defs.local_model import local_model_from_bytes
 from msg_defs.poses import pose_from_bytes
 from msg_defs.topics import TOPICS
 
-#: How long (s) close waits for the driver to acknowledge the last zero.
+#: How long (s) close waits for the driver to acknowledge the last zero (and a recorder the last diagnostics).
 ZERO_ACK_TIMEOUT_S = 1.0
 
 
@@ -114,14 +114,18 @@ class BridgeShell:
         self.supervisor.start()
 
     def stop(self, cause: str) -> None:
-        """Zero force as the last command (nothing after it), the loop stopped, the zero acknowledged."""
+        """Zero force as the last command (nothing after it), the loop stopped, the zero acknowledged, and the
+        last diagnostics too: `destroy` would take messages not yet acknowledged with their publisher (a recorded
+        demo lost the bridge's last /diagnostics). Both within ZERO_ACK_TIMEOUT_S, the zero first."""
         if self.supervisor is not None and not self.supervisor.closed:
             self.supervisor.close(cause)
             self._loop.stop()
-            try:
-                self._publisher.wait_for_all_acked(Duration(seconds=ZERO_ACK_TIMEOUT_S))
-            except Exception:  # noqa: BLE001 — a context already gone: nothing more can be done here
-                pass
+            deadline = time.monotonic() + ZERO_ACK_TIMEOUT_S
+            for publisher in (self._publisher, self._diagnostics):
+                try:
+                    publisher.wait_for_all_acked(Duration(seconds=max(0.0, deadline - time.monotonic())))
+                except Exception:  # noqa: BLE001 — a context already gone: nothing more can be done here
+                    pass
 
     def destroy(self) -> None:
         self._inputs.destroy()

@@ -119,6 +119,9 @@ class NetworkRun(NetworkSnapshot):
     process_costs: dict
     #: (K, 2) start and end (monotonic s) of each stall of the machine itself within the window
     machine_stalls: np.ndarray
+    #: when the nodes were asked to stop (ns since the epoch: the system clock of DDS source times); a stop keeps
+    #: every message a node published before it (docs/contract.md, "Processes of a run")
+    stop_requested_ns: int
 
 
 def run_network(plan: NetworkPlan, duration_s: float, log_dir: Path, progress=print,
@@ -186,6 +189,7 @@ def run_network(plan: NetworkPlan, duration_s: float, log_dir: Path, progress=pr
         for load in loads:
             load.kill()
             load.wait()
+        stop_requested_ns = time.time_ns()
         if processes is not None:
             processes.stop([label for label in plan.commands if label in processes.processes])
             if plan.observers:
@@ -197,7 +201,7 @@ def run_network(plan: NetworkPlan, duration_s: float, log_dir: Path, progress=pr
         listener.destroy_node()
     processes.check_exit_codes()
     return NetworkRun(**{f.name: getattr(snapshot, f.name) for f in fields(NetworkSnapshot)}, window_s=window,
-                      process_costs=costs, machine_stalls=sentinels.stalls(window))
+                      process_costs=costs, machine_stalls=sentinels.stalls(window), stop_requested_ns=stop_requested_ns)
 
 
 def wire_rates(run: NetworkRun, label: str = "local_model") -> dict:

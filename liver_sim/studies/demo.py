@@ -90,6 +90,7 @@ def run_demo(out_dir: Path, duration_s: float | None = None, progress=print, rec
         "surface_nodes": [len(s[1]) if s is not None else 0
                           for s in (run.initial_surface, run.surface)],
         "diagnostics": run.diagnostics,
+        "stop_requested_unix_s": run.stop_requested_ns * 1e-9,
     }
     if len(last_nodes) == len(mesh.points):
         summary["peak_displacement_m"] = float(np.linalg.norm(peak_nodes - mesh.points, axis=1).max())
