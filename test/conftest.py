@@ -13,6 +13,10 @@
   duration of the test, so that no two tests -- in this session, in
   pytest-xdist workers, or in another checkout's test run on the same machine
   -- ever share one.
+* One closed-loop run for the tests that watch one: ``recorded_demo`` runs
+  ``liver-sim demo --record`` once per session, beside a core-bound process
+  and an independent subscriber, and several tests assert on its summary,
+  pictures, recording and what the subscriber saw.
 * Test tiers: every test that takes ``ros_domain_id`` (directly, through
   ``ros_env`` or through another fixture), or is listed in
   ``ROS_WITHOUT_FIXTURE``, is marked ``ros``: it starts node processes or an
@@ -24,7 +28,10 @@ rclpy or matplotlib.
 """
 import fcntl
 import os
+import subprocess
+import sys
 import tempfile
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -104,7 +111,7 @@ def pytest_unconfigure(config):
 
 
 #: Fixtures that give a test a ROS domain of its own: what starting ROS processes or contexts takes.
-ROS_FIXTURES = frozenset({"ros_domain_id", "ros_env"})
+ROS_FIXTURES = frozenset({"ros_domain_id", "ros_env", "recorded_demo"})
 #: Tests (name prefixes, parameters included) that open an rclpy context in this process without those
 #: fixtures: `liver-sim replay` on a bag that is found damaged only once its publishers are up.
 ROS_WITHOUT_FIXTURE = ("test_a_damaged_bag_is_refused_with_a_clear_error[replay-",)
@@ -157,3 +164,49 @@ def ros_env(ros_domain_id):
 def rng():
     """A seeded random generator: the same draws on every run."""
     return np.random.default_rng(7)
+
+
+#: The shared run's length (s): the press demo's own (DemoMesh.press: press, slide, release and rest).
+RECORDED_DEMO_S = 14.0
+
+
+@dataclass(frozen=True)
+class RecordedDemo:
+    """What the shared run left: `out` (summary.json/.md, pictures, logs/, the bag in session/), the demo's
+    `summary`, and `tally`, the independent subscriber's numbering of every writer (network_clients.Tally)."""
+
+    out: Path
+    summary: dict
+    tally: object
+
+
+@pytest.fixture(scope="session")
+def recorded_demo(tmp_path_factory):
+    """`liver-sim demo --record` (the press scenario, RECORDED_DEMO_S) run once per session in a ROS domain of
+    its own, beside one more core-bound process at normal priority and an independent subscriber, as a rig
+    with a busy machine would run it. The tests that watch a closed loop share it instead of each starting
+    its own network."""
+    # rclpy loads here, for the tests of the ros tier only: the ROS-free tier never starts this fixture
+    from network_clients import Tally
+
+    from liver_sim.studies.demo import run_demo
+
+    out = tmp_path_factory.mktemp("recorded_demo")
+    domain_id, handle = claim_domain_id(exclude={SESSION_DOMAIN_ID})
+    busy = None
+    try:
+        with pytest.MonkeyPatch.context() as patch:
+            patch.setenv("ROS_DOMAIN_ID", str(domain_id))
+            busy = subprocess.Popen([sys.executable, "-c", "while True: pass"])
+            tally = Tally()
+            try:
+                summary = run_demo(out, duration_s=RECORDED_DEMO_S, progress=lambda line: None,
+                                   record_storage="mcap")
+            finally:
+                tally.close()
+    finally:
+        if busy is not None:
+            busy.kill()
+            busy.wait()
+        handle.close()
+    return RecordedDemo(out, summary, tally)

@@ -7,15 +7,15 @@ import time
 import numpy as np
 import pytest
 import rclpy
+from network_clients import read_bag
 from rclpy.experimental import EventsExecutor
 from sensor_msgs.msg import PointCloud2
 
 from liver_sim.base.process_settings import command_line
-from liver_sim.mesh.liver_shape import default_liver
 from liver_sim.nodes.run import spin
 from liver_sim.running.launcher import NodeProcesses
 from liver_sim.running.listener import NetworkListener
-from liver_sim.running.network import closed_loop_plan, default_anchor, run_network
+from liver_sim.running.network import default_anchor
 from msg_defs.point_cloud import nodes_to_pointcloud2
 from msg_defs.poses import pose_stamped
 from msg_defs.topics import TOPICS
@@ -28,20 +28,17 @@ def assert_safe(forces):
     assert np.linalg.norm(forces, axis=1).max() <= MAX_FORCE_N + 1e-9
 
 
-def test_closed_loop_press_deforms_the_liver_and_it_returns(ros_domain_id, tmp_path):
-    script = {"script": "press_release", "depth_m": 0.02, "rest_s": 6.0}
-    run = run_network(closed_loop_plan(extra={"phantom_sim": script}), 11.0, tmp_path, progress=lambda s: None)
-    _, forces = run.forces["local_model"]
+def test_closed_loop_press_deforms_the_liver_and_it_returns(recorded_demo):
+    commands = read_bag(recorded_demo.out / "session")["/phantom/servo_cf"]
+    forces = np.array([[m.wrench.force.x, m.wrench.force.y, m.wrench.force.z] for _, _, m in commands])
     norms = np.linalg.norm(forces, axis=1)
     assert_safe(forces)
     assert norms.max() > 0.1                      # felt in contact
     assert (norms[:50] == 0.0).all()              # nothing before the press
     assert (norms[-200:] == 0.0).all()            # nothing once the tool is up again
-    rest = default_liver().points
-    peak = np.linalg.norm(run.peak_nodes - rest, axis=1).max()
-    final = np.linalg.norm(run.last_nodes - rest, axis=1).max()
-    assert peak > 0.002
-    assert final < 0.3 * peak
+    summary = recorded_demo.summary               # node positions as the demo's listener received them
+    assert summary["peak_displacement_m"] > 0.002
+    assert summary["final_displacement_m"] < 0.3 * summary["peak_displacement_m"]
 
 
 class Network:
@@ -148,25 +145,24 @@ def test_out_of_range_parameter_is_refused_by_name(ros_env, executable, paramete
     assert parameter in result.stderr
 
 
-def test_demo_runs_the_network_and_writes_its_report(ros_domain_id, tmp_path):
-    from liver_sim.studies.demo import run_demo
+def test_demo_runs_the_network_and_writes_its_report(recorded_demo):
     from liver_sim.studies.demo_offline import PLOTTED_FIGURES
 
-    summary = run_demo(tmp_path, duration_s=3.0, progress=lambda line: None)
+    summary, out = recorded_demo.summary, recorded_demo.out
     for name in PLOTTED_FIGURES + ("summary.json", "summary.md"):
-        assert (tmp_path / name).stat().st_size > 0
+        assert (out / name).stat().st_size > 0
     assert summary["physics"]["samples"] > 100 and summary["haptic"]["samples"] > 1000
     assert summary["peak_haptic_force_n"] <= MAX_FORCE_N
     assert {"liver_physics: loop", "haptic_bridge: loop", "liver_tool: loop", "phantom_sim: loop"} <= set(
         summary["diagnostics"])
-    logs = {p.name for p in (tmp_path / "logs").iterdir()}
+    logs = {p.name for p in (out / "logs").iterdir()}
     assert {"liver_physics.log", "haptic_bridge.log", "liver_tool.log", "phantom_sim.log"} <= logs
     # the machine's own stalls, measured beside the network, and every command gap over 5 ms with its share of them
     assert {f"machine_stalls_cpu{cpu}.jsonl" for cpu in os.sched_getaffinity(0)} <= logs
     assert summary["machine_stalls"]["count"] >= 0 and summary["machine_stalls"]["sentinel"]
     assert all(gap["gap_s"] > 0.005 and 0.0 <= gap["machine_s"] <= gap["gap_s"]
                for gap in summary["haptic_gaps_over_5ms"])
-    assert "during a stall of the machine itself" in (tmp_path / "summary.md").read_text()
+    assert "during a stall of the machine itself" in (out / "summary.md").read_text()
 
 
 def test_demo_on_a_users_mesh_in_centimetres_presses_it_where_it_lies(ros_env, tmp_path):

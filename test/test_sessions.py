@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from network_clients import read_bag
 from rclpy.serialization import serialize_message
 
 from liver_sim.analysis import largest_force_jump_n
@@ -29,20 +30,6 @@ PUBLISHER = Path(__file__).with_name("session_publisher.py")
 POSE = "geometry_msgs/msg/PoseStamped"
 WRENCH = "geometry_msgs/msg/WrenchStamped"
 PNG = b"\x89PNG\r\n\x1a\n"
-
-
-def rosbags_read(path):
-    """{topic: [(msgtype, log time ns, deserialized message)]} read by rosbags alone."""
-    from rosbags.rosbag2 import Reader
-    from rosbags.typesys import Stores, get_typestore
-
-    store = get_typestore(Stores.ROS2_JAZZY)
-    read = {}
-    with Reader(path) as reader:
-        for connection, timestamp, data in reader.messages():
-            read.setdefault(connection.topic, []).append(
-                (connection.msgtype, timestamp, store.deserialize_cdr(data, connection.msgtype)))
-    return read
 
 
 def start_recorder(bag, ros_env, storage):
@@ -67,7 +54,7 @@ def test_recorded_bag_holds_every_published_message_read_back_by_rosbags(ros_env
         status, output = stop(recorder, signal.SIGINT)
     assert status == 0, output
     sent = json.loads(published.stdout.splitlines()[-1])
-    read = rosbags_read(bag)
+    read = read_bag(bag)
     assert {topic: len(messages) for topic, messages in read.items()} == sent
     assert {read[t][0][0] for t in read} == {WRENCH, POSE, "sensor_msgs/msg/PointCloud2"}
     forces = [m.wrench.force.z for _, _, m in read["/phantom/servo_cf"]]
@@ -91,7 +78,7 @@ def test_a_recording_stopped_mid_stream_by_sigterm_is_a_complete_sqlite3_bag(ros
         publisher.wait()
     assert status == 0, output
     assert (bag / "metadata.yaml").is_file()
-    read = rosbags_read(bag)
+    read = read_bag(bag)
     written = {t: len(m) for t, m in read.items()}
     assert 0 < written["/phantom/servo_cf"] < 5000
     from rosbags.rosbag2 import Reader
@@ -121,7 +108,7 @@ def test_resimulation_is_deterministic_and_follows_changed_parameters(tmp_path):
     second = resimulate(source, tmp_path / "b", storage="sqlite3", progress=lambda line: None, compare=True)
     stiffer = resimulate(source, tmp_path / "c", ["contact_stiffness_n_per_m:=900"], progress=lambda line: None)
     assert messages(tmp_path / "a") == messages(tmp_path / "b")  # byte-identical, whatever the storage
-    read = rosbags_read(tmp_path / "a")
+    read = read_bag(tmp_path / "a")
     assert {t: read[t][0][0] for t in read} == {
         "/tool/pose": POSE, "/phantom/servo_cf": WRENCH, "/liver/tool_wrench": WRENCH,
         "/liver/nodes": "sensor_msgs/msg/PointCloud2", "/liver/contact_plane": "visualization_msgs/msg/Marker",
@@ -133,7 +120,7 @@ def test_resimulation_is_deterministic_and_follows_changed_parameters(tmp_path):
     assert held == pytest.approx(max(m.wrench.force.z for _, _, m in read["/liver/tool_wrench"]), abs=0.02)
     assert first["frames"] == 240 and first["divergences"] == 0
     assert first["peak_command_n"] == second["peak_command_n"] > 0.1  # the press is felt
-    physics = lambda result: [m.wrench.force.z for _, _, m in rosbags_read(result)["/liver/tool_wrench"]]  # noqa
+    physics = lambda result: [m.wrench.force.z for _, _, m in read_bag(result)["/liver/tool_wrench"]]  # noqa
     assert max(physics(tmp_path / "c")) > max(physics(tmp_path / "a"))  # a stiffer contact pushes back harder
     stamps = [m.header.stamp.sec + m.header.stamp.nanosec * 1e-9 for _, _, m in read["/liver/tool_wrench"]]
     np.testing.assert_allclose(np.diff(stamps), 1 / 150, atol=1e-8)  # simulation time at the frame rate
@@ -144,7 +131,7 @@ def test_resimulation_cuts_in_cut_mode_and_records_the_new_surface(tmp_path):
     source = pose_bag(tmp_path / "poses", duration_s=4.0, depth_m=0.012, script_name="press_slide_release",
                       slide_m=0.06)
     resimulate(source, tmp_path / "cut", ["tool_mode:=cut", "cut_depth_m:=0.008"], progress=lambda line: None)
-    read = rosbags_read(tmp_path / "cut")
+    read = read_bag(tmp_path / "cut")
     surfaces = [m for _, _, m in read["/liver/surface"]]
     assert len(surfaces) == 2 and len(surfaces[1].vertices) > len(surfaces[0].vertices)
     widths = [m.width for _, _, m in read["/liver/nodes"]]
@@ -277,12 +264,10 @@ def test_a_damaged_bag_is_refused_with_a_clear_error(tmp_path, capsys, kind, say
     assert not (tmp_path / "out").exists() or command == "report"
 
 
-def test_demo_records_its_run_and_the_report_reads_it(ros_domain_id, tmp_path):
-    from liver_sim.studies.demo import run_demo
-
-    summary = run_demo(tmp_path, duration_s=8.0, progress=lambda line: None, record_storage="mcap")
-    bag = tmp_path / "session"
-    read = rosbags_read(bag)
+def test_demo_records_its_run_and_the_report_reads_it(recorded_demo, tmp_path):
+    summary = recorded_demo.summary
+    bag = recorded_demo.out / "session"
+    read = read_bag(bag)
     assert {"/liver/nodes", "/liver/surface", "/liver/contact_plane", "/liver/tool_wrench", "/tool/pose",
             "/phantom/measured_cp", "/phantom/servo_cf", "/diagnostics"} <= set(read)
     assert "/liver/marker" not in read  # only with --marker
@@ -290,7 +275,7 @@ def test_demo_records_its_run_and_the_report_reads_it(ros_domain_id, tmp_path):
     writers = json.loads(bag_info(bag).custom_data["writers"])
     assert all(w["before_match"] + w["gaps"] == 0 for w in writers if w["topic"] == "/liver/nodes"), writers
     assert len(read["/liver/nodes"]) >= summary["physics"]["samples"]
-    domain_line, recording_line = (tmp_path / "logs" / "recorder.log").read_text().splitlines()[:2]
+    domain_line, recording_line = (recorded_demo.out / "logs" / "recorder.log").read_text().splitlines()[:2]
     assert domain_line.startswith("liver-sim: ROS_DOMAIN_ID=") and recording_line.startswith("recording to")
     report = write_report(bag, tmp_path / "report", progress=lambda line: None)
     assert report["topics"]["/liver/nodes"]["messages"] == len(read["/liver/nodes"])
@@ -310,7 +295,7 @@ def test_recorder_follows_the_published_type_and_records_other_topics(ros_env, t
     finally:
         status, output = stop(recorder, signal.SIGINT)
     assert status == 0, output
-    read = rosbags_read(bag)
+    read = read_bag(bag)
     assert {t: len(m) for t, m in read.items()} == json.loads(published.stdout.splitlines()[-1])
     assert read["/phantom/servo_cf"][0][0] == "geometry_msgs/msg/Vector3"  # a bridge with force_output: vector3
     assert [m.data for _, _, m in read["/custom/topic"]] == [str(k) for k in range(300)]
