@@ -63,6 +63,10 @@ class Tally:
                         self.sent.setdefault((topic, message.gid.hex()), []).append(
                             (message.sequence, message.source_ns))
 
+    def subscribers(self, topic: str, node_name: str) -> int:
+        """How many subscriptions of node `node_name` to `topic` the ROS graph shows."""
+        return sum(info.node_name == node_name for info in self.node.get_subscriptions_info_by_topic(topic))
+
     def count(self, topic: str) -> int:
         """Messages of `topic` seen so far, from every writer."""
         with self._lock:

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from network_clients import read_bag
+from network_clients import Tally, read_bag, wait_for
 from rclpy.serialization import serialize_message
 
 from liver_sim.analysis import largest_force_jump_n
@@ -19,6 +19,7 @@ from liver_sim.base.process_settings import cli_command_line
 from liver_sim.cli.main import main
 from liver_sim.sessions.bag import BagWriter, QosSpec, bag_info, read_messages
 from liver_sim.sessions.parameters import node_parameters
+from liver_sim.sessions.record import RECORDER_NODE
 from liver_sim.sessions.report import write_report
 from liver_sim.sessions.resimulate import resimulate
 from liver_sim.tool.scripts import ScriptSettings, make_script
@@ -69,11 +70,13 @@ def test_a_recording_stopped_mid_stream_by_sigterm_is_a_complete_sqlite3_bag(ros
     recorder = start_recorder(bag, ros_env, "sqlite3")
     publisher = subprocess.Popen([sys.executable, str(PUBLISHER), "5000"], env=ros_env, stdout=subprocess.PIPE,
                                  text=True)
+    tally = Tally(["/phantom/servo_cf"])
     try:
-        assert publisher.stdout.readline().strip() == "publishing"
-        time.sleep(1.0)
-        status, output = stop(recorder, signal.SIGTERM)
+        assert publisher.stdout.readline().strip() == "publishing"  # it waits for the recorder's subscriptions
+        wait_for(lambda: tally.count("/phantom/servo_cf") >= 500, 60.0, "500 commands published", tally.counts)
+        status, output = stop(recorder, signal.SIGTERM)  # mid-stream: the publisher sends 5000
     finally:
+        tally.close(linger_s=0.0)
         publisher.kill()
         publisher.wait()
     assert status == 0, output
@@ -319,15 +322,21 @@ while time.monotonic() < end:
 def test_a_recorder_started_mid_run_counts_nothing_lost_of_a_running_publisher(ros_env, tmp_path):
     publisher = subprocess.Popen([sys.executable, "-c", RUNNING_PUBLISHER, "60"], env=ros_env,
                                  stdout=subprocess.PIPE, text=True)
+    tally = Tally(["/liver/tool_wrench"])
     try:
-        assert publisher.stdout.readline().strip() == "publishing"
-        time.sleep(5.0)  # ~1000 messages published before the recorder starts: more than its history holds
+        published = lambda: max(tally.last().values(), default=0)  # noqa: E731
+        # more messages published before the recorder starts than its history holds
+        wait_for(lambda: published() >= 1000, 60.0, "1000 messages of the running publisher", tally.counts)
         recorder = subprocess.Popen(cli_command_line("record", "--out", str(tmp_path / "session"), "--topics",
                                                      "/liver/tool_wrench"),
                                     env=ros_env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-        time.sleep(4.0)
+        wait_for(lambda: tally.subscribers("/liver/tool_wrench", RECORDER_NODE), 60.0, "the recorder's subscription")
+        at_match = published()
+        wait_for(lambda: published() >= at_match + 500, 60.0, "500 messages published while it records",
+                 tally.counts)
         status, output = stop(recorder, signal.SIGINT)
     finally:
+        tally.close(linger_s=0.0)
         publisher.kill()
         publisher.wait()
     # what the running writer published before the recording began is not wanted, whether the graph showed
