@@ -3,7 +3,6 @@ from __future__ import annotations
 
 import signal
 import sys
-import threading
 import time
 
 import rclpy
@@ -13,6 +12,7 @@ from rclpy.experimental import EventsExecutor
 from rclpy.signals import SignalHandlerOptions
 
 from liver_sim.base.process_settings import use_dds_profile
+from liver_sim.base.stop_request import StopRequest
 from liver_sim.nodes.garbage import FULL_COLLECTION_PERIOD_S, collect_garbage, freeze_garbage
 
 #: How often (s) a thread holding the GIL is asked to hand it over.
@@ -21,8 +21,8 @@ GIL_SWITCH_INTERVAL_S = 0.0002
 CLOSE_ACK_TIMEOUT_S = 1.0
 
 
-def spin(executor, context=None, stop: threading.Event | None = None) -> None:
-    """Run the executor until its context shuts down or `stop` is set.
+def spin(executor, context=None, stop=None) -> None:
+    """Run the executor until its context shuts down or `stop` (a StopRequest or threading.Event) is set.
 
     `EventsExecutor.spin()` of the rclpy 7.1 wheels neither runs callbacks nor returns on SIGINT
     here, so the executor is driven with spin_once.
@@ -51,9 +51,9 @@ def run_node(make_node, args=None) -> int:
     sys.setswitchinterval(GIL_SWITCH_INTERVAL_S)
     dds_profile = use_dds_profile()
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
-    stop = threading.Event()
+    stop = StopRequest()
     for signum in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(signum, lambda *_: stop.set())
+        signal.signal(signum, stop.set)
     node = None
     try:
         node = make_node()

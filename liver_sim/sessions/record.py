@@ -14,8 +14,6 @@ closes the bag (metadata.yaml included).
 from __future__ import annotations
 
 import importlib
-import signal
-import threading
 import time
 from pathlib import Path
 
@@ -25,6 +23,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rclpy.signals import SignalHandlerOptions
 
 from liver_sim.base.process_settings import cli_command_line, set_realtime_priority
+from liver_sim.base.stop_request import StopRequest, stop_on_signals
 from liver_sim.base.topic_names import BASELINE_FORCE_TOPIC
 from liver_sim.sessions.bag import BagWriter, QosSpec
 from liver_sim.sessions.gaps import SequenceGaps
@@ -223,7 +222,7 @@ class Recorder:
             self.writer.write(topic, name, received, data, spec)
         return len(taken)
 
-    def run(self, stop: threading.Event, duration_s: float | None = None) -> None:
+    def run(self, stop: StopRequest, duration_s: float | None = None) -> None:
         """Drain every DRAIN_PERIOD_S until `stop` is set (or `duration_s` has passed), then once more."""
         start = time.monotonic()
         next_drain = next_progress = next_flush = start
@@ -272,22 +271,22 @@ class Recorder:
 def run_record(out: Path, topics: list[str], storage: str = "mcap", duration_s: float | None = None,
                progress=print, realtime_priority: int = REALTIME_PRIORITY) -> tuple[dict[str, int], int]:
     """Record `topics` into a new bag at `out` until SIGINT/SIGTERM (or `duration_s`); return the counts per
-    topic and whether the recording failed (Recorder.failures: it lost what it must not).  The process runs
-    SCHED_FIFO at `realtime_priority` (0: as it is; refused: a warning, normal scheduling).
+    topic and whether the recording failed (Recorder.failures: it lost what it must not).  Its
+    drain loop runs SCHED_FIFO at `realtime_priority` (0: as it is; refused: a warning, normal scheduling); the DDS
+    threads stay at normal priority.
 
     metadata.yaml's custom_data gets the recorder's CPU and wall time (s), its history depth and deepest
     backlog, and the lost messages (SequenceGaps.custom_data).
     """
 
-    refused = set_realtime_priority(realtime_priority)  # before rclpy starts its threads: they inherit it
-    stop = threading.Event()
-    previous = {sig: signal.signal(sig, lambda *_: stop.set()) for sig in (signal.SIGINT, signal.SIGTERM)}
     context = rclpy.Context()
     rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
     cpu0, wall0 = time.process_time(), time.monotonic()
     try:
-        with BagWriter(out, storage) as writer:
+        with stop_on_signals() as stop, BagWriter(out, storage) as writer:
             recorder = Recorder(writer, topics, context, progress)
+            # the drain loop (this thread) only, once DDS has started its own threads: they stay at normal priority
+            refused = set_realtime_priority(realtime_priority)
             progress(f"recording to {out} ({storage}): {', '.join(topics)}; stop with Ctrl-C")
             if refused:
                 progress(f"warning: {refused}")
@@ -307,8 +306,6 @@ def run_record(out: Path, topics: list[str], storage: str = "mcap", duration_s: 
             counts = dict(writer.counts)
     finally:
         context.try_shutdown()
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
     progress(f"wrote {out}: " + (", ".join(f"{t} {n}" for t, n in sorted(counts.items())) or "no messages"))
     lost = recorder.gaps.lost_by_topic()
     progress(f"lost: {recorder.gaps.lost}" + "".join(f", {t} {n}" for t, n in sorted(lost.items()) if n)

@@ -12,14 +12,13 @@ rig would drive its device past the bridge's clamp, rate limit and watchdog.  Th
 from __future__ import annotations
 
 import itertools
-import signal
-import threading
 import time
 from pathlib import Path
 
 import rclpy
 from rclpy.signals import SignalHandlerOptions
 
+from liver_sim.base.stop_request import stop_on_signals
 from liver_sim.base.topic_names import BASELINE_FORCE_TOPIC
 from liver_sim.sessions.bag import bag_info, read_messages
 from liver_sim.sessions.record import _rclpy_qos, known_topics, message_class
@@ -66,42 +65,39 @@ def run_replay(bag: Path, rate: float = 1.0, topics: list[str] | None = None, de
     first = next(messages, None)
     if first is None:
         raise ValueError(f"{bag}: holds no messages on {', '.join(out_topics.values())}")
-    stop = threading.Event()
-    previous = {sig: signal.signal(sig, lambda *_: stop.set()) for sig in (signal.SIGINT, signal.SIGTERM)}
     context = rclpy.Context()
     rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
     sent = dict.fromkeys(wanted, 0)
-    try:
-        node = rclpy.create_node(REPLAY_NODE, context=context, start_parameter_services=False)
-        known = known_topics()
-        publishers = {}
-        for topic in wanted:
-            msgtype = info.topics[topic][0]
-            spec = known[topic][1] if topic in known else None
-            qos = _rclpy_qos(spec, spec.depth) if spec else 10
-            publishers[topic] = node.create_publisher(message_class(msgtype), out_topics[topic], qos)
-        t0 = first.timestamp_ns
-        span = (info.start_ns + info.duration_ns - t0) * 1e-9 / rate
-        progress(f"replaying {sum(info.topics[t][1] for t in wanted)} messages of {bag} ({span:.1f} s at rate "
-                 f"{rate:g}) on {', '.join(out_topics.values())}")
-        stop.wait(delay_s)
-        start = time.monotonic()
-        next_progress = start + 5.0
-        for message in itertools.chain([first], messages):
-            due = start + (message.timestamp_ns - t0) * 1e-9 / rate
-            if stop.wait(max(0.0, due - time.monotonic())):
-                break
-            publishers[message.topic].publish(message.data)
-            sent[message.topic] += 1
-            if time.monotonic() >= next_progress:
-                next_progress += 5.0
-                progress(f"  {time.monotonic() - start:6.1f} / {span:.1f} s")
-        stop.wait(0.5)  # let reliable messages reach their subscribers before the publishers go
-        node.destroy_node()
-    finally:
-        messages.close()
-        context.try_shutdown()
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
+    with stop_on_signals() as stop:
+        try:
+            node = rclpy.create_node(REPLAY_NODE, context=context, start_parameter_services=False)
+            known = known_topics()
+            publishers = {}
+            for topic in wanted:
+                msgtype = info.topics[topic][0]
+                spec = known[topic][1] if topic in known else None
+                qos = _rclpy_qos(spec, spec.depth) if spec else 10
+                publishers[topic] = node.create_publisher(message_class(msgtype), out_topics[topic], qos)
+            t0 = first.timestamp_ns
+            span = (info.start_ns + info.duration_ns - t0) * 1e-9 / rate
+            progress(f"replaying {sum(info.topics[t][1] for t in wanted)} messages of {bag} ({span:.1f} s at rate "
+                     f"{rate:g}) on {', '.join(out_topics.values())}")
+            stop.wait(delay_s)
+            start = time.monotonic()
+            next_progress = start + 5.0
+            for message in itertools.chain([first], messages):
+                due = start + (message.timestamp_ns - t0) * 1e-9 / rate
+                if stop.wait(max(0.0, due - time.monotonic())):
+                    break
+                publishers[message.topic].publish(message.data)
+                sent[message.topic] += 1
+                if time.monotonic() >= next_progress:
+                    next_progress += 5.0
+                    progress(f"  {time.monotonic() - start:6.1f} / {span:.1f} s")
+            stop.wait(0.5)  # let reliable messages reach their subscribers before the publishers go
+            node.destroy_node()
+        finally:
+            messages.close()
+            context.try_shutdown()
     progress("published " + ", ".join(f"{t} {n}" for t, n in sent.items()))
     return sent
