@@ -16,6 +16,7 @@ import os
 import signal
 import subprocess
 import tempfile
+import threading
 import time
 from contextlib import contextmanager
 from pathlib import Path
@@ -86,6 +87,31 @@ def die_with_parent(parent_pid: int):
         if os.getppid() != parent_pid:
             os.kill(os.getpid(), signal.SIGTERM)
     return preexec
+
+
+#: The signals that end a command (liver_sim.cli.main): SIGINT, SIGTERM, SIGHUP.
+ENDING_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+
+
+@contextmanager
+def ending_signals_deferred():
+    """Run the block with the ending signals held, then act on the first that came. A command ends by an
+    exception its handler raises wherever the main thread is; raised inside subprocess.Popen after the fork, or
+    before the child is noted, it left a node the command then never stopped (a SIGTERM to `liver-sim demo` as a
+    node started). Only the main thread sets handlers; elsewhere the block runs as it is."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    caught = []
+    previous = {signum: signal.signal(signum, lambda signum, _frame: caught.append(signum))
+                for signum in ENDING_SIGNALS}
+    try:
+        yield
+    finally:
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
+        if caught:
+            signal.raise_signal(caught[0])
 
 
 class RunFile:
@@ -179,18 +205,18 @@ class NodeProcesses:
         """Start one node; its output goes to <log_dir>/<label>.log. A `patient` one (a recorder) is given
         the time it needs to stop while it still works (_wait_gone)."""
         self.log_dir.mkdir(parents=True, exist_ok=True)
-        with open(self.log_dir / f"{label}.log", "w") as log:
+        with ending_signals_deferred(), open(self.log_dir / f"{label}.log", "w") as log:
             process = subprocess.Popen(args, stdout=log, stderr=subprocess.STDOUT, env=dict(os.environ),
                                        start_new_session=True, preexec_fn=die_with_parent(os.getpid()))
-        self.processes[label] = process
-        self.exit_codes.pop(label, None)
-        with self._run_file.edit() as runs:
-            run = next((r for r in runs if r["owner"] == self._identity and r["log_dir"] == str(self.log_dir)),
-                       None)
-            if run is None:
-                run = {"owner": self._identity, "log_dir": str(self.log_dir), "processes": []}
-                runs.append(run)
-            run["processes"].append([label, process.pid, _process_start(process.pid), patient])
+            self.processes[label] = process
+            self.exit_codes.pop(label, None)
+            with self._run_file.edit() as runs:
+                run = next((r for r in runs if r["owner"] == self._identity and r["log_dir"] == str(self.log_dir)),
+                           None)
+                if run is None:
+                    run = {"owner": self._identity, "log_dir": str(self.log_dir), "processes": []}
+                    runs.append(run)
+                run["processes"].append([label, process.pid, _process_start(process.pid), patient])
         return process
 
     def stop(self, label: str | list[str] | None = None) -> dict[str, int]:
