@@ -23,6 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from liver_sim.base.checks import positive
+from liver_sim.base.process_settings import set_realtime_priority
 
 #: How many stall/error/stop events the supervisor keeps for diagnostics.
 EVENT_HISTORY = 32
@@ -77,7 +78,7 @@ class Supervisor:
     """
 
     def __init__(self, bound_s: float, period_s: float, publish, zero_message, loop_alive=lambda: True,
-                 clock=time.monotonic):
+                 clock=time.monotonic, realtime_priority: int = 0):
         self.bound_s = positive(bound_s, "bound_s")
         self._publish, self._zero_message, self._loop_alive, self._clock = publish, zero_message, loop_alive, clock
         self._lock = threading.Lock()
@@ -86,6 +87,7 @@ class Supervisor:
         self._closed = False
         self._stopping = threading.Event()
         self._thread = None
+        self.realtime_priority = realtime_priority
         self.tripped: Event | None = None
         self.events: deque[Event] = deque(maxlen=EVENT_HISTORY)
         self.counts = {"stall": 0, "error": 0, "stop": 0}
@@ -162,6 +164,7 @@ class Supervisor:
         return self._closed
 
     def _run(self) -> None:
+        set_realtime_priority(self.realtime_priority)  # as the loop: a refusal is the loop's to report
         while not self._stopping.wait(self.bound_s / 2.0):
             self.check(self._clock())
 

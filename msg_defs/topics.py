@@ -77,6 +77,14 @@ def batch_qos(topic: Topic, depth: int = 1000):
     return Topic(topic.name, topic.type, depth, topic.reliable, topic.transient_local).qos
 
 
+def loop_input_qos(topic: Topic):
+    """The QoS a node takes an input with (the tool pose, the local model, the physics wrench, the device's
+    samples): best effort, volatile, the newest message only. It matches every publisher, one with ROS's default
+    QoS (reliable, volatile) included, and a publisher's transient-local history is never delivered when it
+    (re)matches: an old local model received now would look fresh to the watchdog."""
+    return Topic(topic.name, topic.type, 1, reliable=False, transient_local=False).qos
+
+
 def device_command_qos(topic: Topic):
     """The QoS a device (driver or phantom_sim) subscribes to force commands with: `topic`'s reliability and
     depth, but VOLATILE. The bridge's publisher keeps transient-local history for a recorder that matches

@@ -1,6 +1,7 @@
-"""The product's Fast DDS profile (config/fastdds.xml, liver_sim.running.launcher.use_dds_profile): every process loads
-it unless the environment names another, and under it a participant's shared-memory ports make an opener's
-health check wait at most 33 ms instead of Fast DDS's 333 ms (the check holds the opener's send lock)."""
+"""The product's Fast DDS profiles (config/fastdds.xml, config/fastdds_network.xml;
+liver_sim.base.process_settings.use_dds_profile): every process loads the one of its discovery range unless the
+environment names another, and under it a participant's shared-memory ports make an opener's health check wait at
+most 33 ms instead of Fast DDS's 333 ms (the check holds the opener's send lock)."""
 from __future__ import annotations
 
 import json
@@ -47,10 +48,13 @@ def _probe(env: dict) -> dict:
 
 
 def test_every_process_loads_the_product_profile_unless_the_environment_names_one():
-    env = {}
-    line = use_dds_profile(env)
-    assert Path(env[DDS_PROFILE_VARIABLE]) == config_dir() / "fastdds.xml" and Path(env[DDS_PROFILE_VARIABLE]).is_file()
-    assert line.endswith("(liver-sim default)")
+    for discovery_range, profile in (("LOCALHOST", "fastdds.xml"), ("OFF", "fastdds.xml"),
+                                     ("SUBNET", "fastdds_network.xml"), ("SYSTEM_DEFAULT", "fastdds_network.xml"),
+                                     ("", "fastdds_network.xml")):  # unset: ROS's default, SUBNET
+        env = {"ROS_AUTOMATIC_DISCOVERY_RANGE": discovery_range}
+        line = use_dds_profile(env)
+        assert Path(env[DDS_PROFILE_VARIABLE]) == config_dir() / profile and Path(env[DDS_PROFILE_VARIABLE]).is_file()
+        assert line.endswith("(liver-sim default)")
     env = {DDS_PROFILE_VARIABLE: "/etc/rig/dds.xml"}
     assert use_dds_profile(env) == f"{DDS_PROFILE_VARIABLE}=/etc/rig/dds.xml (environment)"
     assert env[DDS_PROFILE_VARIABLE] == "/etc/rig/dds.xml"

@@ -7,7 +7,6 @@ import time
 import numpy as np
 import pytest
 import rclpy
-from network_clients import read_bag
 from rclpy.experimental import EventsExecutor
 from sensor_msgs.msg import PointCloud2
 
@@ -29,7 +28,7 @@ def assert_safe(forces):
 
 
 def test_closed_loop_press_deforms_the_liver_and_it_returns(recorded_demo):
-    commands = read_bag(recorded_demo.out / "session")["/phantom/servo_cf"]
+    commands = recorded_demo.bag["/phantom/servo_cf"]
     forces = np.array([[m.wrench.force.x, m.wrench.force.y, m.wrench.force.z] for _, _, m in commands])
     norms = np.linalg.norm(forces, axis=1)
     assert_safe(forces)
@@ -145,6 +144,28 @@ def test_out_of_range_parameter_is_refused_by_name(ros_env, executable, paramete
     assert parameter in result.stderr
 
 
+#: A stamp is the ROS time at which the state holds: a client receives a message at most this long after its stamp
+#: (s), in every STAMP_WINDOW_S of the run, however long it runs (it was 0.5 s after 14 s with a private clock).
+STAMP_LAG_S = 0.010
+STAMP_WINDOW_S = 2.0
+
+
+@pytest.mark.parametrize("topic", ["/liver/nodes", "/liver/contact_plane", "/liver/tool_wrench",
+                                   "/phantom/measured_cp", "/tool/pose", "/phantom/servo_cf"])
+def test_stamps_are_the_ros_time_of_the_state_and_do_not_drift(recorded_demo, topic):
+    """From the recording (reception times on the system clock): in each window the smallest reception − stamp
+    is small and does not grow over the run."""
+    messages = recorded_demo.bag[topic]
+    received = np.array([log_ns for _, log_ns, _ in messages]) * 1e-9
+    stamped = np.array([m.header.stamp.sec + m.header.stamp.nanosec * 1e-9 for _, _, m in messages])
+    late = received - stamped
+    windows = np.floor((received - received[0]) / STAMP_WINDOW_S)
+    smallest = [late[windows == w].min() for w in np.unique(windows)[:-1]]  # the last window may be a few ms
+    assert len(smallest) >= 5, f"{topic}: {len(messages)} messages"
+    assert max(smallest) <= STAMP_LAG_S, f"{topic}: smallest reception − stamp per window (s): {smallest}"
+    assert min(smallest) > -0.001, f"{topic}: stamped in the future: {smallest}"
+
+
 def test_demo_runs_the_network_and_writes_its_report(recorded_demo):
     from liver_sim.studies.demo_offline import PLOTTED_FIGURES
 
@@ -169,9 +190,9 @@ def test_demo_on_a_users_mesh_in_centimetres_presses_it_where_it_lies(ros_env, t
     import json
     import sys
 
-    from meshes import write_sphere_surface
-
     from liver_sim.studies.demo_offline import PLOTTED_FIGURES
+
+    from meshes import write_sphere_surface
 
     # 12 cm across, 0.37 m from the liver frame's origin: the default liver's press point misses it
     mesh = write_sphere_surface(tmp_path / "organ_cm.stl", 6.0, centre=(30.0, -20.0, 10.0), subdivisions=2)

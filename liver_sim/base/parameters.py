@@ -24,10 +24,10 @@ class Param:
 
 def realtime_priority_parameter(default: int) -> Param:
     """The `realtime_priority` parameter of a node whose loop keeps a rate."""
-    return Param(default, "SCHED_FIFO priority (1-99) of the node's threads (its rate loop and the DDS threads "
-                 "that feed it), as haptic and control loops run; 0 = normal scheduling. Needs CAP_SYS_NICE or "
-                 "an rtprio limit (limits.conf); without it the node warns and runs with normal scheduling",
-                 0, 99)
+    return Param(default, "SCHED_FIFO priority (1-99) of the node's rate loop thread (and the bridge's supervisor), "
+                 "as haptic and control loops run; DDS, executor and diagnostics threads stay at normal priority "
+                 "beside the rig's own processes; 0 = normal scheduling. Needs CAP_SYS_NICE or an rtprio limit "
+                 "(limits.conf); without it the node warns and its loop runs with normal scheduling", 0, 99)
 
 
 def check_parameter(name: str, spec: Param, value):

@@ -22,16 +22,18 @@ NODE_MODULES = {"liver_physics": "liver_sim.nodes.physics_node", "haptic_bridge"
 
 
 def set_realtime_priority(priority: int) -> str | None:
-    """Schedule every thread of this process SCHED_FIFO at `priority` (0: leave them as they are).
+    """Schedule the calling thread SCHED_FIFO at `priority` (0: leave it as it is).
 
-    All of them: a node's rate loop and the DDS threads that deliver its inputs, a recorder's drain loop;
-    threads started later inherit it. Returns None when done (or not asked), else why the system refused.
+    Only a thread that keeps a rate calls it, first thing, in itself: a node's rate loop, the bridge's
+    supervisor, a recorder's drain loop, a machine-stall sentinel. Every other thread — DDS's, the executor's,
+    diagnostics — stays at normal priority beside the rig's own processes (a viewer, a recorder, controllers),
+    which real-time threads that never sleep long would starve. Threads the caller starts afterwards inherit
+    the priority. Returns None when done (or not asked), else why the system refused.
     """
     if priority <= 0:
         return None
     try:
-        for thread_id in os.listdir("/proc/self/task"):
-            os.sched_setscheduler(int(thread_id), os.SCHED_FIFO, os.sched_param(priority))
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))  # 0: this thread, on Linux
     except OSError as exc:
         return (f"realtime_priority {priority} refused ({exc.strerror}): normal scheduling; grant CAP_SYS_NICE "
                 f"or an rtprio limit to keep the rate under load")
@@ -57,18 +59,27 @@ def keep_dds_local(discovery_range: str | None = None, environ=os.environ) -> st
 
 #: The environment variable naming the Fast DDS XML profile every participant of the process loads.
 DDS_PROFILE_VARIABLE = "FASTRTPS_DEFAULT_PROFILES_FILE"
-#: The product's Fast DDS profile (config/): shared-memory ports whose health check waits at most 33 ms
-#: instead of 333 ms while holding the participant's send lock (the file says why).
-DDS_PROFILE_FILE = "fastdds.xml"
+#: The product's Fast DDS profiles (config/), by discovery range: shared-memory ports whose health check waits
+#: at most 33 ms instead of 333 ms while holding the participant's send lock (the files say why), and UDP on
+#: loopback only (LOCALHOST, OFF) or on every interface (SUBNET, ROS's default, and SYSTEM_DEFAULT), so that the
+#: physics and the bridge can run on two hosts.
+DDS_PROFILE_FILES = {"LOCALHOST": "fastdds.xml", "OFF": "fastdds.xml", "SUBNET": "fastdds_network.xml",
+                     "SYSTEM_DEFAULT": "fastdds_network.xml"}
+
+
+def dds_profile_file(environ=os.environ) -> str:
+    """The name of the product's profile for the discovery range `environ` gives (unset: SUBNET, ROS's default)."""
+    return DDS_PROFILE_FILES.get(environ.get("ROS_AUTOMATIC_DISCOVERY_RANGE") or "SUBNET", "fastdds_network.xml")
 
 
 def use_dds_profile(environ=os.environ) -> str:
-    """Point DDS_PROFILE_VARIABLE at the product's Fast DDS profile (config_dir() / DDS_PROFILE_FILE) for this
-    process and every process it starts, unless the environment already names a profile (the user's choice
-    stands). Call it before rclpy creates a participant. Returns the line to log: the profile, and who chose it."""
+    """Point DDS_PROFILE_VARIABLE at the product's Fast DDS profile for the process's discovery range
+    (config_dir() / dds_profile_file()) for this process and every process it starts, unless the environment
+    already names a profile (the user's choice stands). Call it after the range is settled (keep_dds_local) and
+    before rclpy creates a participant. Returns the line to log: the profile, and who chose it."""
     if environ.get(DDS_PROFILE_VARIABLE):
         return f"{DDS_PROFILE_VARIABLE}={environ[DDS_PROFILE_VARIABLE]} (environment)"
-    environ[DDS_PROFILE_VARIABLE] = str(config_dir() / DDS_PROFILE_FILE)
+    environ[DDS_PROFILE_VARIABLE] = str(config_dir() / dds_profile_file(environ))
     return f"{DDS_PROFILE_VARIABLE}={environ[DDS_PROFILE_VARIABLE]} (liver-sim default)"
 
 

@@ -37,13 +37,13 @@ from haptic_bridge.tick import BridgeTick, check_passivity, checked_change, pass
 from liver_sim.nodes.diagnostics import diagnostic_status, on_rate, publish_diagnostics
 from liver_sim.nodes.inputs import Latest, LoopInputs
 from liver_sim.nodes.parameters import declare_parameters, on_parameter_changes
-from liver_sim.nodes.rate_loop import RateLoop, apply_realtime_priority
+from liver_sim.nodes.rate_loop import RateLoop, warn
 from liver_sim.nodes.run import run_node
 from msg_defs.device_map import device_map_from_message
 from msg_defs.forces import force_from_message, force_message_bytes, force_message_type
 from msg_defs.local_model import local_model_from_bytes
 from msg_defs.poses import pose_from_bytes
-from msg_defs.topics import TOPICS
+from msg_defs.topics import TOPICS, loop_input_qos
 
 #: How long (s) close waits for the driver to acknowledge the last zero (and a recorder the last diagnostics).
 ZERO_ACK_TIMEOUT_S = 1.0
@@ -89,15 +89,18 @@ class BridgeShell:
                                                           self._on_device_map, TOPICS["device_map"].qos)
         self._inputs = LoopInputs(node)  # read by the 1 kHz loop itself, not by the executor
         self._pose_input = self._inputs.subscribe(TOPICS["tool_pose"].type, p["tool_pose_topic"],
-                                                  TOPICS["tool_pose"].qos, self._on_pose, raw=True, received=True)
+                                                  loop_input_qos(TOPICS["tool_pose"]), self._on_pose, raw=True,
+                                                  received=True)
         if self.mode == "none":
             self.source_topic = p["tool_wrench_topic"]
             self._source_input = self._inputs.subscribe(TOPICS["tool_wrench"].type, self.source_topic,
-                                                        TOPICS["tool_wrench"].qos, self._on_wrench, received=True)
+                                                        loop_input_qos(TOPICS["tool_wrench"]), self._on_wrench,
+                                                        received=True)
         else:
             self.source_topic = p["local_model_topic"]
             self._source_input = self._inputs.subscribe(TOPICS["contact_plane"].type, self.source_topic,
-                                                        TOPICS["contact_plane"].qos, self._on_marker, raw=True,
+                                                        loop_input_qos(TOPICS["contact_plane"]), self._on_marker,
+                                                        raw=True,
                                                         received=True)
         self._timer = node.create_timer(1.0, self._publish_diagnostics)
 
@@ -106,10 +109,11 @@ class BridgeShell:
         """A new loop and supervisor; the force starts from zero (soft start)."""
         p = self.p
         self.tick.restart()
-        self._loop = RateLoop(p["rate_hz"], self._step, "haptic_bridge", on_error=self._on_error)
+        self._loop = RateLoop(p["rate_hz"], self._step, "haptic_bridge", on_error=self._on_error,
+                              realtime_priority=p["realtime_priority"], on_refused=warn(self.node))
         self.supervisor = Supervisor(p["stall_bound_s"], self._loop.period_s, self._publisher.publish,
-                                     self._zero_message, self._loop.is_alive)
-        apply_realtime_priority(self.node, p["realtime_priority"])  # before the threads start: they inherit it
+                                     self._zero_message, self._loop.is_alive,
+                                     realtime_priority=p["realtime_priority"])
         self._loop.start()
         self.supervisor.start()
 

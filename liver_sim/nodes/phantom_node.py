@@ -20,14 +20,13 @@ from liver_sim.base.geometry.device_map import DeviceMap
 from liver_sim.nodes.diagnostics import loop_status, publish_diagnostics
 from liver_sim.nodes.inputs import Latest, LoopInputs
 from liver_sim.nodes.parameters import declare_parameters, on_parameter_changes, read_at_start
-from liver_sim.nodes.rate_loop import RateLoop, apply_realtime_priority
+from liver_sim.nodes.rate_loop import RateLoop, warn
 from liver_sim.nodes.run import run_node
 from liver_sim.phantom.device import PhantomSim, StylusParams
 from liver_sim.phantom.parameters import PARAMETERS
 from liver_sim.tool.scripts import IDENTITY_XYZW, script_from
 from msg_defs.forces import force_from_bytes, force_message_type
 from msg_defs.poses import pose_stamped_bytes
-from msg_defs.stamps import stamp_from_seconds
 from msg_defs.topics import TOPICS, device_command_qos
 
 _ZERO = np.zeros(3)
@@ -54,9 +53,9 @@ class PhantomNode(Node):
         self.create_timer(1.0, self._publish_diagnostics)
         self._refuse = read_at_start("phantom_sim", {"command_timeout_s"})
         on_parameter_changes(self, PARAMETERS, self._apply)
-        self._loop = RateLoop(p["rate_hz"], self._step, "phantom_sim")
+        self._loop = RateLoop(p["rate_hz"], self._step, "phantom_sim", realtime_priority=p["realtime_priority"],
+                              on_refused=warn(self))
         self._start = None
-        self._clock_origin_s = 0.0
         self.get_logger().info(
             f"phantom_sim: {p['rate_hz']:g} Hz stylus ({p['stylus_mass_kg']:g} kg, hand "
             f"{p['hand_stiffness_n_per_m']:g} N/m, {p['hand_damping_ns_per_m']:g} N·s/m) playing "
@@ -64,7 +63,6 @@ class PhantomNode(Node):
             f"anchored at {list(p['anchor_m'])} m in the liver frame; in: {p['servo_cf_topic']} "
             f"({p['force_output']}, clamp {p['max_force_n']:g} N, timeout {p['command_timeout_s']:g} s); "
             f"out: {p['measured_cp_topic']} (frame {p['frame_id']})")
-        apply_realtime_priority(self, p["realtime_priority"])  # before the loop starts: it inherits it
         self._loop.start()
 
     def close(self) -> None:
@@ -90,13 +88,12 @@ class PhantomNode(Node):
         self._inputs.poll()
         if self._start is None:
             self._start = now
-            self._clock_origin_s = self.get_clock().now().nanoseconds * 1e-9
         force, received = self._command.get()
         if now - received > self.p["command_timeout_s"]:
             force = _ZERO
         if self.sim.advance_to(now - self._start, force, self._loop.period_s) == 0 and self.sim.time_s > 0.0:
             return  # a late tick already caught up with this one's sample
-        stamp = stamp_from_seconds(self._clock_origin_s + self.sim.time_s)
+        stamp = self.get_clock().now().seconds_nanoseconds()  # the sample holds now: the stylus is advanced to it
         self._publisher.publish(pose_stamped_bytes(self.sim.position, IDENTITY_XYZW, stamp,
                                                    self.p["frame_id"]))
 

@@ -19,7 +19,7 @@ from liver_sim.base.parameters import check_parameter
 from liver_sim.nodes.diagnostics import loop_status, publish_diagnostics
 from liver_sim.nodes.inputs import Latest, LoopInputs
 from liver_sim.nodes.parameters import declare_parameters
-from liver_sim.nodes.rate_loop import RateLoop, apply_realtime_priority
+from liver_sim.nodes.rate_loop import RateLoop, warn
 from liver_sim.nodes.run import run_node
 from liver_sim.physics.parameters import PARAMETERS, build_model
 from liver_sim.physics.pipeline import Frame, FramePipeline
@@ -28,8 +28,7 @@ from msg_defs.local_model import local_model_marker
 from msg_defs.point_cloud import nodes_to_pointcloud2
 from msg_defs.poses import pose_from_bytes
 from msg_defs.skin import skin_marker_serialized, skin_mesh_msg
-from msg_defs.stamps import stamp_from_seconds
-from msg_defs.topics import TOPICS
+from msg_defs.topics import TOPICS, loop_input_qos
 
 
 class PhysicsNode(Node):
@@ -52,14 +51,14 @@ class PhysicsNode(Node):
                                                   TOPICS["diagnostics"].qos)
         # 1 kHz of poses for a 150 Hz consumer: the loop takes the newest bytes each frame
         self._inputs = LoopInputs(self)
-        self._inputs.subscribe(TOPICS["tool_pose"].type, p["tool_pose_topic"], TOPICS["tool_pose"].qos,
+        self._inputs.subscribe(TOPICS["tool_pose"].type, p["tool_pose_topic"], loop_input_qos(TOPICS["tool_pose"]),
                                self._pose.set, raw=True)
         self._last_pose_bytes = None
-        self._clock_origin_s = self.get_clock().now().nanoseconds * 1e-9
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.publish_surface()
         self.create_timer(1.0, self._publish_diagnostics)
-        self._loop = RateLoop(p["rate_hz"], self._step, "liver_physics")
+        self._loop = RateLoop(p["rate_hz"], self._step, "liver_physics", realtime_priority=p["realtime_priority"],
+                              on_refused=warn(self))
         self.get_logger().info(
             f"liver_physics: mesh '{mesh.source}' ({len(mesh.points)} nodes, {len(mesh.tets)} tets, "
             f"{len(mesh.skin)} skin triangles), {p['rate_hz']:g} Hz × {self.model.params.substeps} "
@@ -68,7 +67,6 @@ class PhysicsNode(Node):
             f"in: {p['tool_pose_topic']}; out: {p['nodes_topic']}, {p['surface_topic']}, {p['marker_topic']} "
             f"({p['marker_rate_hz']:g} Hz), {p['contact_plane_topic']} ({p['local_model']}), {p['tool_wrench_topic']}; "
             f"tool {p['tool_shape']} in mode {p['tool_mode']}, tearing {'on' if p['tearing'] else 'off'}")
-        apply_realtime_priority(self, p["realtime_priority"])  # before the loop starts: it inherits it
         self._loop.start()
 
     def close(self) -> None:
@@ -123,6 +121,7 @@ class PhysicsNode(Node):
 
     def _step(self, now: float) -> None:
         started = time.perf_counter()
+        stamp = self.get_clock().now().seconds_nanoseconds()  # ROS time at which this frame's state holds
         self._inputs.poll()
         self._receive_pose()
         frame = self._pipeline.step(now)
@@ -130,7 +129,6 @@ class PhysicsNode(Node):
         if frame.surface_changed:
             self.publish_surface()
         result = frame.result
-        stamp = stamp_from_seconds(self._clock_origin_s + self.model.time_s)
         frame_id = self.p["frame_id"]
         self._outputs["nodes"].publish(nodes_to_pointcloud2(self.model.positions, stamp, frame_id))
         self._outputs["contact_plane"].publish(local_model_marker(

@@ -69,7 +69,9 @@ class RateLoop(threading.Thread):
     """Calls `step(now_monotonic_s)` at `rate_hz` on absolute deadlines in its own thread.
 
     Deadline k is start + k·period: the thread sleeps until SPIN_MARGIN_S before it, then spins
-    (a SCHED_FIFO thread wakes on time, and sleeps to the deadline itself).
+    (a SCHED_FIFO thread wakes on time, and sleeps to the deadline itself). The thread runs SCHED_FIFO at
+    `realtime_priority` (0: as it is; set_realtime_priority, this thread only), a refusal handed to
+    `on_refused(reason)`.
     A step that starts more than a period late is an overrun; a gap over `gap_bound_s` (GAP_CAUSE_S, or two
     periods of a slower loop) gets its cause named (`gaps`, GapCauses), knowing how long the step before it
     took. Starting the loop freezes the garbage collector (:func:`freeze_garbage`; not with `freeze` false):
@@ -81,7 +83,7 @@ class RateLoop(threading.Thread):
     """
 
     def __init__(self, rate_hz: float, step, name: str, clock=time.monotonic, sleep=time.sleep, on_error=None,
-                 freeze: bool = True):
+                 freeze: bool = True, realtime_priority: int = 0, on_refused=print):
         super().__init__(name=name, daemon=True)
         self.period_s = 1.0 / rate_hz
         self.step = step
@@ -92,6 +94,8 @@ class RateLoop(threading.Thread):
         self._clock, self._sleep = clock, sleep
         self._on_error = on_error
         self._freeze = freeze
+        self.realtime_priority = realtime_priority
+        self._on_refused = on_refused
         self._stopping = threading.Event()
 
     def report(self) -> dict:
@@ -112,6 +116,9 @@ class RateLoop(threading.Thread):
             self.join(timeout=1.0)
 
     def run(self) -> None:
+        refused = set_realtime_priority(self.realtime_priority)  # this thread only
+        if refused:
+            self._on_refused(refused)
         clock, sleep = self._clock, self._sleep
         margin = 0.0 if os.sched_getscheduler(0) == os.SCHED_FIFO else SPIN_MARGIN_S
         start = clock()
@@ -154,8 +161,6 @@ class RateLoop(threading.Thread):
                 tick = due
 
 
-def apply_realtime_priority(node, priority: int) -> None:
-    """set_realtime_priority, with a refusal logged as the node's warning."""
-    refused = set_realtime_priority(priority)
-    if refused:
-        node.get_logger().warning(refused)
+def warn(node):
+    """A RateLoop's `on_refused`: a refused real-time priority logged as the node's warning."""
+    return lambda refused: node.get_logger().warning(refused)

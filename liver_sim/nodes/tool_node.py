@@ -25,13 +25,13 @@ from liver_sim.base.geometry.device_map import DeviceMap
 from liver_sim.base.parameters import quaternion_parameter, vector_parameter
 from liver_sim.nodes.diagnostics import loop_status, publish_diagnostics
 from liver_sim.nodes.parameters import declare_parameters, on_parameter_changes, read_at_start
-from liver_sim.nodes.rate_loop import LoopStats, RateLoop, apply_realtime_priority
+from liver_sim.nodes.rate_loop import LoopStats, RateLoop, warn
 from liver_sim.nodes.run import run_node
 from liver_sim.tool.parameters import PARAMETERS
 from liver_sim.tool.scripts import IDENTITY_XYZW, ScriptedTrajectory, script_from
 from msg_defs.device_map import device_map_message
 from msg_defs.poses import pose_from_bytes, pose_stamped_bytes
-from msg_defs.topics import TOPICS
+from msg_defs.topics import TOPICS, loop_input_qos
 
 
 class ToolNode(Node):
@@ -59,7 +59,7 @@ class ToolNode(Node):
             self._arrivals = LoopStats(1.0 / p["rate_hz"])
             self._last_arrival = None
             self.create_subscription(TOPICS["measured_cp"].type, p["measured_cp_topic"], self._on_device,
-                                     TOPICS["measured_cp"].qos, raw=True)
+                                     loop_input_qos(TOPICS["measured_cp"]), raw=True)
             origin = (f"device {p['measured_cp_topic']} mapped by R={list(p['device_rotation_xyzw'])}, "
                       f"t={list(p['device_translation_m'])} m, scale {p['device_scale']:g}")
         else:
@@ -72,14 +72,14 @@ class ToolNode(Node):
                 self._orientation = static_orientation
                 origin = f"static {static_position.tolist()} m"
             self._start = None
-            self._loop = RateLoop(p["rate_hz"], self._step, "liver_tool")
+            self._loop = RateLoop(p["rate_hz"], self._step, "liver_tool", realtime_priority=p["realtime_priority"],
+                              on_refused=warn(self))
         self.create_timer(1.0, self._publish_diagnostics)
         self._refuse = read_at_start("liver_tool", {"workspace_radius_m"})
         on_parameter_changes(self, PARAMETERS, self._apply)
         rate = "as the device" if self._loop is None else f"{p['rate_hz']:g} Hz"
         self.get_logger().info(f"liver_tool: {origin} → {p['tool_pose_topic']} (frame {p['frame_id']}, {rate}); "
                                f"device map latched on {p['device_map_topic']}")
-        apply_realtime_priority(self, p["realtime_priority"])  # before the loop starts: it inherits it
         if self._loop is not None:
             self._loop.start()
 
