@@ -105,9 +105,11 @@ check-domain:
 lint: venv
 	$(VENV)/bin/ruff check .
 
+# Two pytest-xdist workers: the ROS tests run in order on one (one xdist group, test/conftest.py), the ROS-free
+# ones on the other, so the ROS tests' waiting overlaps the physics tests' computing.
 test: venv check-domain lint
 	@echo "ROS_DOMAIN_ID=$(ROS_DOMAIN_ID) ROS_AUTOMATIC_DISCOVERY_RANGE=$(ROS_AUTOMATIC_DISCOVERY_RANGE)"
-	$(VENV_PY) -m pytest -q $(PYTEST_ARGS) test
+	$(VENV_PY) -m pytest -q -n 2 --dist loadgroup $(PYTEST_ARGS) test
 
 # The tiers are pytest markers (setup.cfg, applied in test/conftest.py): `ros`
 # marks the tests that start node processes or an rclpy context.

@@ -17,6 +17,9 @@
   ``liver-sim demo --record`` once per session, beside a core-bound process
   and an independent subscriber, and several tests assert on its summary,
   pictures, recording and what the subscriber saw.
+* Two workers: ``make test`` runs pytest-xdist with two workers; the ``ros``
+  tests form one group, run in order on one worker (their processes keep the
+  timing they would have alone), the ROS-free tests fill the other.
 * Test tiers: every test that takes ``ros_domain_id`` (directly, through
   ``ros_env`` or through another fixture), or is listed in
   ``ROS_WITHOUT_FIXTURE``, is marked ``ros``: it starts node processes or an
@@ -32,6 +35,7 @@ import subprocess
 import sys
 import tempfile
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -118,11 +122,14 @@ ROS_WITHOUT_FIXTURE = ("test_a_damaged_bag_is_refused_with_a_clear_error[replay-
 
 
 def pytest_collection_modifyitems(config, items):
-    """Mark ``ros`` every test whose fixture closure holds one of ROS_FIXTURES, or named in ROS_WITHOUT_FIXTURE."""
+    """Mark ``ros`` every test whose fixture closure holds one of ROS_FIXTURES, or named in ROS_WITHOUT_FIXTURE, and
+    put them in one xdist group: under ``pytest -n 2 --dist loadgroup`` (``make test``) they run one after the
+    other on one worker, sharing its session fixtures, while the other worker takes the ROS-free tests."""
     for item in items:
         if (ROS_FIXTURES.intersection(getattr(item, "fixturenames", ()))
                 or item.name.startswith(ROS_WITHOUT_FIXTURE)):
             item.add_marker(pytest.mark.ros)
+            item.add_marker(pytest.mark.xdist_group("ros"))
 
 
 def pytest_report_header(config):
@@ -179,6 +186,13 @@ class RecordedDemo:
     summary: dict
     tally: object
 
+    @cached_property
+    def bag(self) -> dict:
+        """The recording, read once by rosbags alone (network_clients.read_bag)."""
+        from network_clients import read_bag
+
+        return read_bag(self.out / "session")
+
 
 @pytest.fixture(scope="session")
 def recorded_demo(tmp_path_factory):
@@ -187,9 +201,9 @@ def recorded_demo(tmp_path_factory):
     with a busy machine would run it. The tests that watch a closed loop share it instead of each starting
     its own network."""
     # rclpy loads here, for the tests of the ros tier only: the ROS-free tier never starts this fixture
-    from network_clients import Tally
-
     from liver_sim.studies.demo import run_demo
+
+    from network_clients import Tally
 
     out = tmp_path_factory.mktemp("recorded_demo")
     domain_id, handle = claim_domain_id(exclude={SESSION_DOMAIN_ID})
@@ -210,3 +224,21 @@ def recorded_demo(tmp_path_factory):
             busy.wait()
         handle.close()
     return RecordedDemo(out, summary, tally)
+
+
+@pytest.fixture
+def rig_factory(ros_domain_id):
+    """Makes bridge_rig.Rig test sides (the physics and tool of a haptic_bridge process) in the test's domain,
+    closed after the test."""
+    from bridge_rig import Rig  # rclpy loads here, for the ros tier only
+
+    rigs = []
+
+    def make(**kwargs) -> Rig:
+        rigs.append(Rig(**kwargs))
+        return rigs[-1]
+    try:
+        yield make
+    finally:
+        for rig in rigs:
+            rig.close()

@@ -2,13 +2,14 @@
 import json
 
 import pytest
-from meshes import write_sphere_surface
 
 from liver_sim.bench.physics import run_physics_bench
 from liver_sim.bench.topology import TOPOLOGY_TARGETS, run_topology_bench
 from liver_sim.mesh.tetmesh import MeshError
 from liver_sim.studies.demo_liver import DemoMesh
 from liver_sim.studies.demo_offline import PLOTTED_FIGURES, run_offline_demo
+
+from meshes import write_sphere_surface
 
 PNG = b"\x89PNG\r\n\x1a\n"
 

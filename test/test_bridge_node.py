@@ -5,201 +5,33 @@ does), refreshes a local model (or a physics wrench) and the tool pose every 10 
 force command. Every wait is bounded; nothing asserts on timing. The bridge is stopped (SIGINT, then
 SIGKILL) in `finally`.
 """
-import math
 import signal
 import subprocess
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
 import pytest
-import rclpy
-from geometry_msgs.msg import PoseStamped
-from rclpy.executors import SingleThreadedExecutor
-from rclpy.signals import SignalHandlerOptions
 
-from liver_sim.base.geometry.device_map import DeviceMap
-from liver_sim.base.geometry.rotations import quaternion_to_matrix
 from liver_sim.base.local_model import LocalModel
-from msg_defs.device_map import device_map_message
-from msg_defs.forces import force_from_message, force_message_type, wrench_stamped
-from msg_defs.local_model import local_model_marker
-from msg_defs.poses import pose_stamped
-from msg_defs.topics import TOPICS
 
-ROOT = Path(__file__).resolve().parent.parent
-CONFIG = ROOT / "config" / "haptic_bridge.yaml"
-WAIT_S = 15.0
-PUBLISH_PERIOD_S = 0.01
-TOOL_RADIUS_M = 0.015
-STIFFNESS_N_PER_M = 300.0
-MAX_FORCE_N = 2.0
-#: Device → liver rotation: a quarter turn about x (liver +z is device +y).
-QUARTER_TURN_X = [math.sin(math.pi / 4), 0.0, 0.0, math.cos(math.pi / 4)]
-ROTATION = quaternion_to_matrix(QUARTER_TURN_X)
-UP = np.array([0.0, 0.0, 1.0])
-#: Tool tip heights (m) over the surface z = 0: 5 mm clear of it, 5 mm and 10 mm into it.
-ABOVE = np.array([0.0, 0.0, TOOL_RADIUS_M + 0.005])
-INSIDE = np.array([0.0, 0.0, TOOL_RADIUS_M - 0.005])
-DEEP = np.array([0.0, 0.0, TOOL_RADIUS_M - 0.010])
-EXPECTED_INSIDE = ROTATION.T @ (STIFFNESS_N_PER_M * 0.005 * UP)  # 1.5 N along the normal, in the device frame
-LOOP = "haptic_bridge: loop"
-
-
-def local_model(kind: str) -> LocalModel:
-    """The surface z = 0 with outward normal +z: a plane, or a sphere of radius 0.1 m under it."""
-    origin = np.zeros(3)
-    if kind == "plane":
-        return LocalModel("plane", True, origin, UP, origin, 0.0, 0.0, True)
-    return LocalModel("sphere", True, origin, UP, np.array([0.0, 0.0, -0.1]), 0.1, 0.0, True)
-
-
-def start_bridge(env: dict, program: list[str] | None = None, **params) -> subprocess.Popen:
-    args = (program or [sys.executable, "-m", "liver_sim.nodes.bridge_node"]) + ["--ros-args", "--params-file",
-                                                                               str(CONFIG)]
-    for name, v in params.items():
-        text = ("[" + ",".join(repr(float(x)) for x in v) + "]" if isinstance(v, list)
-                else str(v).lower() if isinstance(v, bool) else str(v))
-        args += ["-p", f"{name}:={text}"]
-    return subprocess.Popen(args, cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            start_new_session=True)
-
-
-def stop(process: subprocess.Popen) -> None:
-    if process.poll() is None:
-        process.send_signal(signal.SIGINT)
-    try:
-        process.communicate(timeout=2.0)
-    except subprocess.TimeoutExpired:
-        process.kill()
-        process.communicate()
-
-
-class Rig:
-    """The test side: a node in its own context publishing the inputs every 10 ms and keeping the forces."""
-
-    def __init__(self, force_output: str = "wrench_stamped", rotation_xyzw=(0.0, 0.0, 0.0, 1.0)):
-        self.context = rclpy.Context()
-        rclpy.init(context=self.context, signal_handler_options=SignalHandlerOptions.NO)
-        self.node = rclpy.create_node("test_haptic_bridge", context=self.context)
-        self.executor = SingleThreadedExecutor(context=self.context)
-        self.executor.add_node(self.node)
-        self.force_output = force_output
-        self.forces, self.stamps, self.pose_stamps, self.diagnostics = [], [], set(), []
-        self.arrivals = []    # monotonic s at which each force command arrived
-        self.tool = None      # tip position (m) published as the tool pose, or None
-        self.nan_pose = False
-        self.model = None     # a LocalModel published as the contact marker, or None
-        self.zero_quaternion = False
-        self.wrench = None    # a force (N) published as the physics wrench, or None
-        self._publishers = {key: self.node.create_publisher(TOPICS[key].type, TOPICS[key].name, TOPICS[key].qos)
-                            for key in ("tool_pose", "contact_plane", "tool_wrench")}
-        self.node.create_subscription(force_message_type(force_output), TOPICS["servo_cf"].name,
-                                      self._on_force, TOPICS["servo_cf"].qos)
-        self.node.create_subscription(TOPICS["diagnostics"].type, TOPICS["diagnostics"].name,
-                                      self.diagnostics.append, TOPICS["diagnostics"].qos)
-        self.node.create_timer(PUBLISH_PERIOD_S, self._publish)
-        self._map = self.node.create_publisher(TOPICS["device_map"].type, TOPICS["device_map"].name,
-                                               TOPICS["device_map"].qos)
-        self._map.publish(device_map_message(DeviceMap(rotation_xyzw)))
-
-    def _on_force(self, message) -> None:
-        self.arrivals.append(time.monotonic())
-        self.forces.append(force_from_message(self.force_output, message))
-        if self.force_output == "wrench_stamped":
-            self.stamps.append((message.header.stamp.sec, message.header.stamp.nanosec))
-
-    def _publish(self) -> None:
-        stamp = self.node.get_clock().now().to_msg()
-        if self.tool is not None:
-            pose = pose_stamped(self.tool, (0.0, 0.0, 0.0, 1.0), stamp, "liver")
-            if self.nan_pose:
-                pose = PoseStamped(header=pose.header)
-                pose.pose.position.z = math.nan
-            self.pose_stamps.add((stamp.sec, stamp.nanosec))
-            self._publishers["tool_pose"].publish(pose)
-        if self.model is not None:
-            marker = local_model_marker(self.model, stamp, "liver", 0.05)
-            if self.zero_quaternion:
-                marker.pose.orientation.w = 0.0
-            self._publishers["contact_plane"].publish(marker)
-        if self.wrench is not None:
-            self._publishers["tool_wrench"].publish(wrench_stamped(self.wrench, stamp, "liver"))
-
-    def wait_until(self, condition, what: str, bridge: subprocess.Popen) -> None:
-        """Spin (publishing and receiving) until `condition()`; fail if the bridge exits or WAIT_S passes."""
-        deadline = time.monotonic() + WAIT_S
-        while not condition():
-            if bridge.poll() is not None:
-                pytest.fail(f"the bridge exited ({bridge.returncode}) while waiting for {what}: "
-                            f"{bridge.stderr.read()}")
-            if time.monotonic() > deadline:
-                last = self.forces[-1].tolist() if self.forces else None
-                pytest.fail(f"timed out waiting for {what} (last force {last}, {len(self.forces)} received)")
-            self.executor.spin_once(timeout_sec=0.005)
-
-    def wait_for_force(self, expected, bridge: subprocess.Popen, count: int = 20) -> None:
-        """Wait until the last `count` force commands equal `expected` (N) within 1 mN."""
-        self.wait_until(lambda: len(self.forces) >= count and all(
-            np.allclose(f, expected, atol=1e-3, rtol=0.0) for f in self.forces[-count:]),
-            f"force {np.round(expected, 4).tolist()} N", bridge)
-
-    def loop_status(self) -> dict | None:
-        """The bridge's newest diagnostics key/values, or None."""
-        for array in reversed(self.diagnostics):
-            for status in array.status:
-                if status.name == LOOP:
-                    return {kv.key: kv.value for kv in status.values}
-        return None
-
-    def loop_level(self) -> tuple[int, str] | None:
-        """(level, message) of the bridge's newest loop status, or None."""
-        for array in reversed(self.diagnostics):
-            for status in array.status:
-                if status.name == LOOP:
-                    return int.from_bytes(status.level, "little") if isinstance(status.level, bytes) \
-                        else int(status.level), status.message
-        return None
-
-    def spin_for(self, seconds: float) -> None:
-        end = time.monotonic() + seconds
-        while time.monotonic() < end:
-            self.executor.spin_once(timeout_sec=0.005)
-
-    def call(self, client, request, bridge: subprocess.Popen):
-        """The response of a service of the bridge."""
-        assert client.wait_for_service(timeout_sec=WAIT_S), f"no service {client.srv_name}"
-        future = client.call_async(request)
-        self.wait_until(future.done, f"the answer of {client.srv_name}", bridge)
-        return future.result()
-
-    def close(self) -> None:
-        self.executor.shutdown()
-        self.node.destroy_node()
-        rclpy.shutdown(context=self.context)
-
-
-@pytest.fixture
-def rig_factory(ros_domain_id):
-    rigs = []
-
-    def make(**kwargs) -> Rig:
-        rigs.append(Rig(**kwargs))
-        return rigs[-1]
-    try:
-        yield make
-    finally:
-        for rig in rigs:
-            rig.close()
-
-
-def assert_safe(forces: list, max_force: float = MAX_FORCE_N) -> None:
-    """Every command finite and within the clamp."""
-    assert forces, "no force command received"
-    stacked = np.array(forces)
-    assert np.isfinite(stacked).all()
-    assert np.linalg.norm(stacked, axis=1).max() <= max_force + 1e-9
+from bridge_rig import (
+    ABOVE,
+    DEEP,
+    EXPECTED_INSIDE,
+    INSIDE,
+    MAX_FORCE_N,
+    QUARTER_TURN_X,
+    ROTATION,
+    STIFFNESS_N_PER_M,
+    UP,
+    WAIT_S,
+    Rig,
+    assert_safe,
+    local_model,
+    start_bridge,
+    stop,
+)
 
 
 @pytest.mark.parametrize("kind", ["plane", "sphere"])
@@ -431,10 +263,12 @@ def test_a_lowered_clamp_through_the_parameter_service_is_obeyed(rig_factory, ro
     try:
         rig.wait_for_force(CONTACT, bridge)
         result = rig.call(client, request("max_force_n", 0.05), bridge).results[0]
-        answered = time.monotonic()
+        answered = rig.node.get_clock().now().seconds_nanoseconds()
         assert result.successful, result.reason
         rig.spin_for(0.5)
-        after = [f for f, t in zip(rig.forces, rig.arrivals) if t > answered + 0.01]
+        # the commands computed from tool poses published after the answer: the bridge received those poses after
+        # it had taken the change (by their stamps, not by when this busy test side got to read the commands)
+        after = [f for f, stamp in zip(rig.forces, rig.stamps) if stamp > answered]
         assert len(after) > 20 and max(np.linalg.norm(after, axis=1)) <= 0.05 + 1e-9
         refused = rig.call(client, request("rate_hz", 500.0), bridge).results[0]
         assert not refused.successful and "restart" in refused.reason

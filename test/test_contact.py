@@ -3,12 +3,13 @@ import math
 
 import numpy as np
 import pytest
-from meshes import box_mesh
 
 from liver_sim.base.local_model import penetration
 from liver_sim.physics.contact import ToolPose, ToolShape, candidate_nodes, candidate_triangles, fit_sphere
 from liver_sim.physics.model import LiverModel
 from liver_sim.physics.model_params import ModelParams
+
+from meshes import box_mesh
 
 STIFFNESS = 250.0
 DEPTH = 0.002

@@ -2,7 +2,6 @@
 sound."""
 import numpy as np
 import pytest
-from meshes import assert_sound, box_mesh, components, kinetic_energy_j
 
 from liver_sim.base.local_model import LocalModel
 from liver_sim.mesh import TetMesh
@@ -14,6 +13,8 @@ from liver_sim.physics.model import LiverModel
 from liver_sim.physics.model_params import ModelParams
 from liver_sim.physics.springs import stable_time_step
 from liver_sim.physics.tool_use import ToolUse
+
+from meshes import assert_sound, box_mesh, components, kinetic_energy_j
 
 DOWN = np.array([0.0, 0.0, -1.0])
 SLAB_SPACING_M = 0.01

@@ -2,7 +2,6 @@
 held nodes, the contact Jacobian, and a press and release against symplectic Euler at 72 substeps."""
 import numpy as np
 import pytest
-from meshes import box_mesh
 
 from liver_sim.mesh.landmarks import press_anchor
 from liver_sim.mesh.liver_shape import default_liver
@@ -13,6 +12,8 @@ from liver_sim.physics.model import LiverModel
 from liver_sim.physics.model_params import ModelParams
 from liver_sim.physics.springs import build_springs
 from liver_sim.tool.scripts import ScriptSettings, make_script
+
+from meshes import box_mesh
 
 FRAME_S = 1.0 / 150.0
 

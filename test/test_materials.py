@@ -4,7 +4,6 @@ import math
 
 import numpy as np
 import pytest
-from meshes import box_mesh
 
 from liver_sim.mesh.liver_shape import build_liver, default_liver
 from liver_sim.physics import reference
@@ -13,6 +12,8 @@ from liver_sim.physics.materials import edge_measures, equivalent_properties, ne
 from liver_sim.physics.model_params import CUBIC_RATIO, ModelParams, TissueProperties
 from liver_sim.physics.springs import build_springs
 from liver_sim.studies.traction import cylinder_mesh
+
+from meshes import box_mesh
 
 
 def material_springs(mesh, tissue=TissueProperties()):

@@ -6,11 +6,12 @@ import meshio
 import numpy as np
 import pytest
 import trimesh
-from meshes import write_sphere_surface
 
 from liver_sim.mesh import io as mesh_io
 from liver_sim.mesh.io import SurfaceSignedDistance, load_mesh, write_mesh
 from liver_sim.mesh.tetmesh import MeshError, TetMesh, signed_volumes
+
+from meshes import write_sphere_surface
 
 EDGE = 0.1  # m, cube side
 SPHERE_RADIUS = 0.05  # m

@@ -4,10 +4,11 @@ import sys
 
 import numpy as np
 import pytest
-from meshes import box_mesh
 
 from liver_sim.cli import main as cli
 from liver_sim.studies import peers
+
+from meshes import box_mesh
 
 E_PA, NU, RHO, DAMPING_S = 5000.0, 0.25, 1060.0, 0.1
 

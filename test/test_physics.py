@@ -3,13 +3,14 @@ import math
 
 import numpy as np
 import pytest
-from meshes import box_mesh, kinetic_energy_j
 
 from liver_sim.physics import explicit_kernels, reference, spring_kernels
 from liver_sim.physics.contact import ToolPose
 from liver_sim.physics.model import LiverModel, default_fixed_nodes
 from liver_sim.physics.model_params import FIG2_LAW, ModelParams, SpringLaw
 from liver_sim.physics.springs import build_springs
+
+from meshes import box_mesh, kinetic_energy_j
 
 
 @pytest.mark.parametrize("strain, expected", [(0.0, 0.0), (0.1, 0.085), (0.2, 0.47), (-0.1, -0.085), (0.3, 1.455)])

@@ -4,7 +4,6 @@ import sys
 
 import numpy as np
 import pytest
-from meshes import assert_same_state, model_state
 
 from liver_sim.mesh.io import load_mesh
 from liver_sim.mesh.landmarks import press_anchor
@@ -14,6 +13,8 @@ from liver_sim.physics.model import LiverModel
 from liver_sim.physics.parameters import PARAMETERS, build_model
 from liver_sim.physics.pipeline import FramePipeline
 from liver_sim.tool.scripts import ScriptSettings, make_script
+
+from meshes import assert_same_state, model_state
 
 
 def values(**changes):

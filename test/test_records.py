@@ -7,12 +7,13 @@ import sys
 import time
 
 import pytest
-from network_clients import Tally, wait_for
 
 from liver_sim.base.process_settings import cli_command_line
 from liver_sim.running.launcher import RunFile, _process_start, stop_leftovers
 from liver_sim.sessions.bag import BagError, BagWriter, bag_info, check_bag
 from liver_sim.sessions.gaps import SequenceGaps
+
+from network_clients import Tally, wait_for
 
 GID_A, GID_B = bytes(range(16)), bytes(range(1, 17))
 

@@ -10,7 +10,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from network_clients import Tally, read_bag, wait_for
 from rclpy.serialization import serialize_message
 
 from liver_sim.analysis import largest_force_jump_n
@@ -26,6 +25,8 @@ from liver_sim.tool.scripts import ScriptSettings, make_script
 from msg_defs.forces import wrench_stamped
 from msg_defs.local_model import local_model_marker
 from msg_defs.poses import pose_stamped
+
+from network_clients import Tally, read_bag, wait_for
 
 PUBLISHER = Path(__file__).with_name("session_publisher.py")
 POSE = "geometry_msgs/msg/PoseStamped"
@@ -270,7 +271,7 @@ def test_a_damaged_bag_is_refused_with_a_clear_error(tmp_path, capsys, kind, say
 def test_demo_records_its_run_and_the_report_reads_it(recorded_demo, tmp_path):
     summary = recorded_demo.summary
     bag = recorded_demo.out / "session"
-    read = read_bag(bag)
+    read = recorded_demo.bag
     assert {"/liver/nodes", "/liver/surface", "/liver/contact_plane", "/liver/tool_wrench", "/tool/pose",
             "/phantom/measured_cp", "/phantom/servo_cf", "/diagnostics"} <= set(read)
     assert "/liver/marker" not in read  # only with --marker

@@ -5,7 +5,6 @@ import math
 
 import numpy as np
 import pytest
-from meshes import assert_same_state, assert_sound, box_mesh, components, model_state
 
 from liver_sim.base.local_model import penetration
 from liver_sim.mesh.landmarks import press_anchor
@@ -18,6 +17,8 @@ from liver_sim.physics.model_params import ModelParams
 from liver_sim.physics.tearing import TearDetector, duplication_change
 from liver_sim.physics.tool_use import ToolUse
 from liver_sim.physics.topology import separate_faces
+
+from meshes import assert_same_state, assert_sound, box_mesh, components, model_state
 
 SPACING_M = 0.02
 NX, NY, NZ = 10, 3, 3
