@@ -40,6 +40,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from _pytest.nodeid import coerce_node_id  # pytest 9's node ids: see XdistGroupIds
 
 from liver_sim.base.process_settings import use_dds_profile
 
@@ -121,6 +122,7 @@ ROS_FIXTURES = frozenset({"ros_domain_id", "ros_env", "recorded_demo"})
 ROS_WITHOUT_FIXTURE = ("test_a_damaged_bag_is_refused_with_a_clear_error[replay-",)
 
 
+@pytest.hookimpl(tryfirst=True)  # before pytest-xdist reads the groups off the markers
 def pytest_collection_modifyitems(config, items):
     """Mark ``ros`` every test whose fixture closure holds one of ROS_FIXTURES, or named in ROS_WITHOUT_FIXTURE, and
     put them in one xdist group: under ``pytest -n 2 --dist loadgroup`` (``make test``) they run one after the
@@ -130,6 +132,23 @@ def pytest_collection_modifyitems(config, items):
                 or item.name.startswith(ROS_WITHOUT_FIXTURE)):
             item.add_marker(pytest.mark.ros)
             item.add_marker(pytest.mark.xdist_group("ros"))
+
+
+class XdistGroupIds:
+    """pytest-xdist 3.8 puts a test in its group by suffixing ``item._nodeid`` with ``@group``, which pytest 9 no
+    longer reads (a node keeps its id in ``_id``): carry the suffix over, so that ``--dist loadgroup`` keeps the
+    ros tests on one worker. Without it they spread over both workers, two closed loops at once."""
+
+    @pytest.hookimpl(trylast=True)
+    def pytest_collection_modifyitems(self, items):
+        for item in items:
+            suffixed = item.__dict__.get("_nodeid")
+            if suffixed and suffixed != item.nodeid:
+                item._id = coerce_node_id(suffixed)
+
+
+def pytest_configure(config):
+    config.pluginmanager.register(XdistGroupIds(), "liver_sim_xdist_group_ids")
 
 
 def pytest_report_header(config):

@@ -228,8 +228,8 @@ class BridgeShell:
         source_age = now - source_received if self._source_input.get_publisher_count() else math.inf
         command = self.tick.step(now, tip, pose_age, source, source_age)
         self._last_force = command
-        if stamp is None:
-            stamp = self.node.get_clock().now().to_msg()
+        if stamp is None or (source_age if self.mode == "none" else pose_age) > self.p["lifetime_s"]:
+            stamp = self.node.get_clock().now().seconds_nanoseconds()  # no fresh input: the command holds now
         self.supervisor.send(force_message_bytes(self.p["force_output"], command, stamp,
                                                  self.p["device_frame_id"]))
 
