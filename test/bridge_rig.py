@@ -84,7 +84,6 @@ class Rig:
         self.executor.add_node(self.node)
         self.force_output = force_output
         self.forces, self.stamps, self.pose_stamps, self.diagnostics = [], [], set(), []
-        self.arrivals = []    # monotonic s at which each force command arrived
         self.tool = None      # tip position (m) published as the tool pose, or None
         self.nan_pose = False
         self.model = None     # a LocalModel published as the contact marker, or None
@@ -103,7 +102,6 @@ class Rig:
         self._map.publish(device_map_message(DeviceMap(rotation_xyzw)))
 
     def _on_force(self, message) -> None:
-        self.arrivals.append(time.monotonic())
         self.forces.append(force_from_message(self.force_output, message))
         if self.force_output == "wrench_stamped":
             self.stamps.append((message.header.stamp.sec, message.header.stamp.nanosec))
