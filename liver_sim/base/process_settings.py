@@ -25,7 +25,8 @@ def set_realtime_priority(priority: int) -> str | None:
     """Schedule the calling thread SCHED_FIFO at `priority` (0: leave it as it is).
 
     Only a thread that keeps a rate calls it, first thing, in itself: a node's rate loop, the bridge's
-    supervisor, a recorder's drain loop, a machine-stall sentinel. Every other thread — DDS's, the executor's,
+    supervisor, a machine-stall sentinel (and `liver-sim record` before rclpy starts, so that its DDS threads
+    inherit it: a recording keeps every message). Every other thread — DDS's, the executor's,
     diagnostics — stays at normal priority beside the rig's own processes (a viewer, a recorder, controllers),
     which real-time threads that never sleep long would starve. Threads the caller starts afterwards inherit
     the priority. Returns None when done (or not asked), else why the system refused.

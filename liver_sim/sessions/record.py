@@ -272,21 +272,23 @@ def run_record(out: Path, topics: list[str], storage: str = "mcap", duration_s: 
                progress=print, realtime_priority: int = REALTIME_PRIORITY) -> tuple[dict[str, int], int]:
     """Record `topics` into a new bag at `out` until SIGINT/SIGTERM (or `duration_s`); return the counts per
     topic and whether the recording failed (Recorder.failures: it lost what it must not).  Its
-    drain loop runs SCHED_FIFO at `realtime_priority` (0: as it is; refused: a warning, normal scheduling); the DDS
-    threads stay at normal priority.
+    drain loop and its DDS threads run SCHED_FIFO at `realtime_priority` (0: as they are; refused: a warning, normal
+    scheduling), below the nodes' loops.
 
     metadata.yaml's custom_data gets the recorder's CPU and wall time (s), its history depth and deepest
     backlog, and the lost messages (SequenceGaps.custom_data).
     """
 
+    # before rclpy starts its threads: they inherit it. The recorder's DDS threads run real-time too, below the
+    # nodes: with them at normal priority, a recorder beside the closed loop and two core-bound processes received
+    # the physics' last two /diagnostics only after the node had gone, and lost them.
+    refused = set_realtime_priority(realtime_priority)
     context = rclpy.Context()
     rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
     cpu0, wall0 = time.process_time(), time.monotonic()
     try:
         with stop_on_signals() as stop, BagWriter(out, storage) as writer:
             recorder = Recorder(writer, topics, context, progress)
-            # the drain loop (this thread) only, once DDS has started its own threads: they stay at normal priority
-            refused = set_realtime_priority(realtime_priority)
             progress(f"recording to {out} ({storage}): {', '.join(topics)}; stop with Ctrl-C")
             if refused:
                 progress(f"warning: {refused}")
