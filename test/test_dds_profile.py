@@ -41,7 +41,19 @@ rclpy.shutdown()
 """
 
 
+def _forget_ports(domain: int) -> None:
+    """Remove the shared-memory port files of `domain`'s port range that earlier participants left in /dev/shm: a
+    port keeps the health-check timeout of its creator, so a probe reusing one would read that creator's profile.
+    The test holds the domain's lock (conftest), so no live participant of another test uses them."""
+    first = 7400 + 250 * domain
+    for path in Path("/dev/shm").glob("fastrtps_port*"):
+        digits = "".join(c for c in path.name[len("fastrtps_port"):] if c.isdigit())
+        if digits and first <= int(digits) < first + 250:
+            path.unlink(missing_ok=True)
+
+
 def _probe(env: dict) -> dict:
+    _forget_ports(int(env["ROS_DOMAIN_ID"]))
     done = subprocess.run([sys.executable, "-c", PROBE], env=env, capture_output=True, text=True, timeout=60)
     assert done.returncode == 0, done.stderr
     return json.loads(done.stdout.strip().splitlines()[-1])
