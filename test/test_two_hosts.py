@@ -13,16 +13,20 @@ import pytest
 from liver_sim.base.process_settings import DDS_PROFILE_VARIABLE, command_line, config_dir
 
 HOSTS = {"a": "192.0.2.1", "b": "192.0.2.2"}
-#: How long (s) the clients on host B listen.
+#: How long (s) a client on host B listens at most; the control, which must hear nothing, listens this long.
 LISTEN_S = 10.0
+#: What the client on host B must hear of host A: physics frames, and a rendered press (N).
+FRAMES, PRESS_N = 150, 0.1
 
-#: A client on host B: counts /liver/nodes frames and the largest force command it receives, prints them as JSON.
+#: A client on host B: counts /liver/nodes frames and the largest force command it receives until it has heard
+#: FRAMES frames and a PRESS_N force (argv[2] "until"), or for argv[1] s; prints them as JSON.
 CLIENT = r"""
 import json, sys, time
 from liver_sim.base.process_settings import use_dds_profile
 use_dds_profile()
 import numpy as np, rclpy
 from msg_defs.topics import TOPICS
+FRAMES, PRESS_N = %d, %r
 rclpy.init()
 node = rclpy.create_node("host_b_client")
 seen = {"nodes": 0, "max_force_n": 0.0}
@@ -34,7 +38,8 @@ def on_force(message):
 node.create_subscription(TOPICS["nodes"].type, TOPICS["nodes"].name, on_nodes, 10)
 node.create_subscription(TOPICS["tool_wrench"].type, TOPICS["servo_cf"].name, on_force, 10)
 end = time.monotonic() + float(sys.argv[1])
-while time.monotonic() < end:
+heard = lambda: seen["nodes"] > FRAMES and seen["max_force_n"] > PRESS_N
+while time.monotonic() < end and not (sys.argv[2:] == ["until"] and heard()):
     rclpy.spin_once(node, timeout_sec=0.05)
 print(json.dumps(seen), flush=True)
 """
@@ -88,8 +93,10 @@ def test_the_bridge_on_another_host_renders_the_physics_with_the_products_profil
         start("a", command_line("liver_tool", {"source": "device"}))
         start("a", command_line("phantom_sim", {"loop_script": True}))
         start("b", command_line("haptic_bridge"))
-        client = start("b", [sys.executable, "-c", CLIENT, str(LISTEN_S)], label="client")
-        control = start("b", [sys.executable, "-c", CLIENT, str(LISTEN_S)], loopback_only, label="control")
+        client = start("b", [sys.executable, "-c", CLIENT % (FRAMES, PRESS_N), str(LISTEN_S), "until"],
+                       label="client")
+        control = start("b", [sys.executable, "-c", CLIENT % (FRAMES, PRESS_N), str(LISTEN_S)], loopback_only,
+                        label="control")
         client.wait(timeout=LISTEN_S + 60)
         control.wait(timeout=LISTEN_S + 60)
     finally:
@@ -103,6 +110,6 @@ def test_the_bridge_on_another_host_renders_the_physics_with_the_products_profil
                 process.kill()
     heard = json.loads((tmp_path / "client.log").read_text().splitlines()[-1])
     unheard = json.loads((tmp_path / "control.log").read_text().splitlines()[-1])
-    assert heard["nodes"] > 150, heard                # host A's physics frames reach host B
-    assert heard["max_force_n"] > 0.1, heard          # and the bridge there renders the press of host A's hand
+    assert heard["nodes"] > FRAMES, heard                # host A's physics frames reach host B
+    assert heard["max_force_n"] > PRESS_N, heard          # and the bridge there renders the press of host A's hand
     assert unheard["nodes"] == 0, unheard             # with UDP on loopback only, host B hears nothing of host A
