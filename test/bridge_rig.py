@@ -163,6 +163,17 @@ class Rig:
         while time.monotonic() < end:
             self.executor.spin_once(timeout_sec=0.005)
 
+    def drain(self, quiet_s: float = 0.5) -> None:
+        """Spin until no force command has arrived for `quiet_s`: a test side starved of CPU reads the commands
+        seconds after they were sent, and the newest one it has read is not yet the last one on the wire."""
+        deadline = time.monotonic() + WAIT_S
+        count, quiet_since = len(self.forces), time.monotonic()
+        while time.monotonic() - quiet_since < quiet_s:
+            assert time.monotonic() < deadline, f"force commands still arriving after {WAIT_S} s"
+            self.executor.spin_once(timeout_sec=0.005)
+            if len(self.forces) != count:
+                count, quiet_since = len(self.forces), time.monotonic()
+
     def call(self, client, request, bridge: subprocess.Popen):
         """The response of a service of the bridge."""
         assert client.wait_for_service(timeout_sec=WAIT_S), f"no service {client.srv_name}"

@@ -185,12 +185,12 @@ sys.exit(main())
 
 
 def wait_for_exit(rig: Rig, bridge: subprocess.Popen) -> None:
-    """Spin until the bridge has exited, then half a second more for anything still in flight."""
+    """Spin until the bridge has exited, then until every command it sent has been read."""
     deadline = time.monotonic() + WAIT_S
     while bridge.poll() is None:
         assert time.monotonic() < deadline, "the bridge did not exit"
         rig.executor.spin_once(timeout_sec=0.005)
-    rig.spin_for(0.5)
+    rig.drain()
 
 
 def terminate_to_zero(rig: Rig, bridge: subprocess.Popen) -> None:
@@ -268,11 +268,11 @@ def test_a_lowered_clamp_through_the_parameter_service_is_obeyed(rig_factory, ro
         result = rig.call(client, request("max_force_n", 0.05), bridge).results[0]
         answered = rig.node.get_clock().now().seconds_nanoseconds()
         assert result.successful, result.reason
-        rig.spin_for(0.5)
         # the commands computed from tool poses published after the answer: the bridge received those poses after
         # it had taken the change (by their stamps, not by when this busy test side got to read the commands)
+        rig.wait_until(lambda: sum(stamp > answered for stamp in rig.stamps[-30:]) > 20, "commands after", bridge)
         after = [f for f, stamp in zip(rig.forces, rig.stamps) if stamp > answered]
-        assert len(after) > 20 and max(np.linalg.norm(after, axis=1)) <= 0.05 + 1e-9
+        assert max(np.linalg.norm(after, axis=1)) <= 0.05 + 1e-9
         refused = rig.call(client, request("rate_hz", 500.0), bridge).results[0]
         assert not refused.successful and "restart" in refused.reason
         unsafe = rig.call(client, request("stiffness_n_per_m", 5000.0), bridge).results[0]
@@ -314,7 +314,7 @@ def test_a_managed_bridge_zeroes_the_force_on_deactivate(rig_factory, ros_env):
         change(Transition.TRANSITION_ACTIVATE)
         rig.wait_for_force(CONTACT, bridge)
         change(Transition.TRANSITION_DEACTIVATE)
-        rig.spin_for(0.5)
+        rig.drain()
         assert not rig.forces[-1].any(), "deactivate leaves zero on the wire"
         count = len(rig.forces)
         rig.spin_for(0.3)
