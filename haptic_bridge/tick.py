@@ -50,18 +50,33 @@ def check_passivity(p: dict, scale: float = 1.0) -> None:
 #: Parameters a running bridge takes from its next tick on (each change checked like a start-up value).
 RUNTIME_PARAMETERS = frozenset({
     "max_force_n", "max_force_rate_n_per_s", "lifetime_s", "ramp_time_s", "soft_start_s", "stiffness_n_per_m",
-    "damping_ns_per_m", "device_damping_ns_per_m", "depth_rate_cutoff_hz", "model_glide_s",
-    "contact_stiffness_n_per_m", "contact_damping_ns_per_m"})
+    "damping_ns_per_m", "depth_rate_cutoff_hz", "model_glide_s", "contact_stiffness_n_per_m",
+    "contact_damping_ns_per_m"})
+
+#: The safety envelope: run-time parameters whose start value bounds every later one, from above ("at most")
+#: or from below ("at least"). A run-time change may tighten the envelope, and loosen it back up to where it
+#: started, never beyond (device_damping_ns_per_m, the workspace and the rate are read at start only).
+ENVELOPE = {"max_force_n": "at most", "max_force_rate_n_per_s": "at most", "lifetime_s": "at most",
+            "ramp_time_s": "at most", "stiffness_n_per_m": "at most", "damping_ns_per_m": "at most",
+            "contact_stiffness_n_per_m": "at most", "contact_damping_ns_per_m": "at most",
+            "soft_start_s": "at least"}
 
 
-def checked_change(p: dict, changes: dict, scale: float = 1.0) -> dict:
+def checked_change(p: dict, changes: dict, scale: float = 1.0, start: dict | None = None) -> dict:
     """The parameters `p` with `changes` applied, checked as a start would check them (passivity with the
-    device map's `scale` unless `drives_device` is false, the rate limit against the clamp); ValueError with
-    the reason for a name outside RUNTIME_PARAMETERS or an unsafe combination."""
+    device map's `scale` unless `drives_device` is false, the rate limit against the clamp) and against the
+    ENVELOPE of the `start` parameters (default `p`); ValueError with the reason for a name outside
+    RUNTIME_PARAMETERS, a value outside the envelope or an unsafe combination."""
     fixed = sorted(set(changes) - RUNTIME_PARAMETERS)
     if fixed:
         raise ValueError(f"{', '.join(fixed)}: read at start only; restart haptic_bridge to change "
                          f"{'it' if len(fixed) == 1 else 'them'}")
+    start = p if start is None else start
+    for name, value in sorted(changes.items()):
+        bound = ENVELOPE.get(name)
+        if (bound == "at most" and value > start[name]) or (bound == "at least" and value < start[name]):
+            raise ValueError(f"{name}={value:g} would loosen the safety envelope fixed at start: at run time it "
+                             f"may only be {bound} {start[name]:g}; restart haptic_bridge to loosen it")
     candidate = {**p, **changes}
     if candidate.get("drives_device", True):
         check_passivity(candidate, scale)

@@ -251,7 +251,7 @@ def test_a_loop_that_raises_or_stalls_yields_zero_and_an_error_diagnostic(rig_fa
     assert_safe(rig.forces)
 
 
-def test_a_lowered_clamp_through_the_parameter_service_is_obeyed(rig_factory, ros_env):
+def test_the_parameter_service_lowers_the_clamp_and_never_loosens_the_envelope(rig_factory, ros_env):
     from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
     from rcl_interfaces.srv import SetParameters
 
@@ -275,8 +275,14 @@ def test_a_lowered_clamp_through_the_parameter_service_is_obeyed(rig_factory, ro
         assert max(np.linalg.norm(after, axis=1)) <= 0.05 + 1e-9
         refused = rig.call(client, request("rate_hz", 500.0), bridge).results[0]
         assert not refused.successful and "restart" in refused.reason
-        unsafe = rig.call(client, request("stiffness_n_per_m", 5000.0), bridge).results[0]
-        assert not unsafe.successful and "passive" in unsafe.reason
+        for name, looser in (("stiffness_n_per_m", 10000.0), ("lifetime_s", 10.0), ("max_force_n", 3.0)):
+            loosened = rig.call(client, request(name, looser), bridge).results[0]
+            assert not loosened.successful and "would loosen the safety envelope" in loosened.reason, name
+        damping = rig.call(client, request("device_damping_ns_per_m", 100.0), bridge).results[0]
+        assert not damping.successful and "read at start only" in damping.reason
+        restored = rig.call(client, request("max_force_n", 2.0), bridge).results[0]  # back to the start's clamp
+        assert restored.successful, restored.reason
+        rig.wait_for_force(CONTACT, bridge)
     finally:
         stop(bridge)
     assert_safe(rig.forces)

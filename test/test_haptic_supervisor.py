@@ -186,11 +186,31 @@ def test_passivity_is_checked_for_every_mode():
     BridgeTick(none)  # an offline baseline drives no device: not refused by the tick
 
 
+@pytest.mark.parametrize("name, looser", [("max_force_n", 2.5), ("max_force_rate_n_per_s", 500.0), ("lifetime_s", 10.0),
+                                          ("ramp_time_s", 0.02), ("stiffness_n_per_m", 350.0),
+                                          ("damping_ns_per_m", 0.1), ("contact_stiffness_n_per_m", 400.0),
+                                          ("contact_damping_ns_per_m", 2.0), ("soft_start_s", 0.15)])
+def test_run_time_changes_never_loosen_the_envelope_fixed_at_start(name, looser):
+    with pytest.raises(ValueError, match=f"{name}=.* would loosen the safety envelope"):
+        checked_change(DEFAULTS, {name: looser})
+    tighter = {"soft_start_s": 0.5}.get(name, DEFAULTS[name] * 0.5)
+    tightened = checked_change(DEFAULTS, {name: tighter})
+    assert tightened[name] == tighter
+    with pytest.raises(ValueError, match="would loosen"):  # the envelope is the start's, not the current value's
+        checked_change(tightened, {name: looser}, start=DEFAULTS)
+    assert checked_change(tightened, {name: DEFAULTS[name]}, start=DEFAULTS)[name] == DEFAULTS[name]
+
+
+def test_the_device_damping_is_read_at_start_only():
+    with pytest.raises(ValueError, match="device_damping_ns_per_m: read at start only"):
+        checked_change(DEFAULTS, {"device_damping_ns_per_m": 100.0})
+
+
 def test_run_time_changes_are_checked_or_refused_with_a_reason():
     lowered = checked_change(DEFAULTS, {"max_force_n": 0.05, "stiffness_n_per_m": 100.0})
     assert lowered["max_force_n"] == 0.05 and DEFAULTS["max_force_n"] == 2.0
-    with pytest.raises(ValueError, match="not passive"):
-        checked_change(DEFAULTS, {"stiffness_n_per_m": 5000.0})
+    with pytest.raises(ValueError, match="not passive"):  # within the envelope, not with a device map's scale 4
+        checked_change(DEFAULTS, {"max_force_n": 1.0}, scale=4.0)
     with pytest.raises(ValueError, match="restart haptic_bridge"):
         checked_change(DEFAULTS, {"rate_hz": 500.0})
     with pytest.raises(ValueError, match="max_force_rate_n_per_s"):

@@ -64,7 +64,7 @@ class BridgeShell:
     def __init__(self, node, p: dict):
         if p["drives_device"]:
             check_passivity(p)  # every mode; again with the device map's scale when it arrives
-        self.node, self.p = node, p
+        self.node, self.p, self.start_p = node, p, p
         self.tick = BridgeTick(p, device_map=None)
         self.checks = InputCheck(p["workspace_centre_m"], p["workspace_radius_m"])
         self.mode = p["local_model"]
@@ -141,7 +141,7 @@ class BridgeShell:
     # -- run-time parameters (executor thread)
     def apply(self, changes: dict) -> str | None:
         """Check `changes` as at start; the loop takes them at its next tick. Refusal: ValueError with the reason."""
-        self.p = checked_change(self.p, changes, self.scale)
+        self.p = checked_change(self.p, changes, self.scale, self.start_p)
         self._pending = (self._pending[0] + 1, self.p)
         return None
 
