@@ -200,7 +200,7 @@ def terminate_to_zero(rig: Rig, bridge: subprocess.Popen) -> None:
     assert bridge.returncode == 0 and not rig.forces[-1].any()
 
 
-@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT, signal.SIGHUP, signal.SIGQUIT, signal.SIGPIPE])
 def test_a_signal_in_contact_leaves_zero_as_the_last_command_after_a_soft_start(rig_factory, ros_env, sig):
     rig = rig_factory()
     rig.model, rig.tool = local_model("plane"), INSIDE
@@ -222,6 +222,41 @@ def test_a_signal_in_contact_leaves_zero_as_the_last_command_after_a_soft_start(
     assert bridge.returncode == 0
     assert np.linalg.norm(rig.forces[in_contact - 1]) > 1.4, "in contact when the signal came"
     assert not rig.forces[-1].any(), f"last command on the wire {rig.forces[-1].tolist()} N, not zero"
+    assert_safe(rig.forces)
+
+
+def seconds_of(stamp) -> float:
+    return stamp[0] + stamp[1] * 1e-9
+
+
+def test_ctrl_z_is_ignored_and_a_stop_and_continue_resumes_with_a_soft_start(rig_factory, ros_env):
+    rig = rig_factory()
+    rig.model, rig.tool = local_model("plane"), INSIDE
+    bridge = start_bridge(ros_env)
+    try:
+        rig.wait_for_force(CONTACT, bridge)
+        bridge.send_signal(signal.SIGTSTP)  # Ctrl-Z: ignored, the loop goes on
+        count = len(rig.forces)
+        rig.wait_until(lambda: len(rig.forces) > count + 200, "commands after SIGTSTP", bridge)
+        assert bridge.poll() is None
+        rig.wait_for_force(CONTACT, bridge)
+        bridge.send_signal(signal.SIGSTOP)  # cannot be caught: the process freezes whole
+        time.sleep(0.3)
+        bridge.send_signal(signal.SIGCONT)
+
+        def resumed() -> int | None:
+            """The first command after the freeze: the first stamped 0.2 s after the one before it."""
+            seconds = [seconds_of(stamp) for stamp in rig.stamps]
+            return next((i for i in range(1, len(seconds)) if seconds[i] - seconds[i - 1] > 0.2), None)
+
+        rig.wait_until(lambda: resumed() is not None, "commands after SIGCONT", bridge)
+        rig.wait_for_force(CONTACT, bridge)
+        seconds, resumed = [seconds_of(stamp) for stamp in rig.stamps], resumed()
+        assert np.linalg.norm(rig.forces[resumed]) < 0.1, "the first command after the freeze starts from zero"
+        full = next(i for i in range(resumed, len(rig.forces)) if np.linalg.norm(rig.forces[i]) > 0.95 * 1.5)
+        assert seconds[full] - seconds[resumed] >= 0.1, "soft start after the freeze"
+    finally:
+        stop(bridge)
     assert_safe(rig.forces)
 
 

@@ -1,4 +1,4 @@
-"""How a process's main loop learns it must stop (SIGINT, SIGTERM): a StopRequest, set by the signal handler and
+"""How a process's main loop learns it must stop (ENDING_SIGNALS): a StopRequest, set by the signal handler and
 waited on by the loop, standard library only.
 
 The handler takes no lock. threading.Event.set() in a handler can deadlock the process for good: Python runs a
@@ -12,6 +12,13 @@ import os
 import select
 import signal
 from contextlib import contextmanager
+
+#: The signals that end a node or a command cleanly (a bridge's last command is zero, a recorder closes its bag):
+#: SIGINT (Ctrl-C), SIGTERM (kill, a launcher), SIGHUP (a closing terminal or SSH session), SIGQUIT (Ctrl-\\),
+#: SIGPIPE (a closed pipe on stdout or stderr, or kill -PIPE).
+ENDING_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP, signal.SIGQUIT, signal.SIGPIPE)
+#: Job-control stops a node ignores (Ctrl-Z, background terminal I/O): a stopped loop would hold its last output.
+STOP_SIGNALS = (signal.SIGTSTP, signal.SIGTTIN, signal.SIGTTOU)
 
 
 class StopRequest:
@@ -45,7 +52,7 @@ class StopRequest:
 
 
 @contextmanager
-def stop_on_signals(signals=(signal.SIGINT, signal.SIGTERM)):
+def stop_on_signals(signals=ENDING_SIGNALS):
     """A StopRequest set by any of `signals` while the block runs; the previous handlers come back after it."""
     request = StopRequest()
     previous = {signum: signal.signal(signum, request.set) for signum in signals}

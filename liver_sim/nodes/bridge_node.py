@@ -11,7 +11,7 @@ is stamped with the stamp of the input it was computed from (the tool pose; the 
 mode), or the node's clock before any.
 
 A Supervisor thread (haptic_bridge.supervisor) publishes zero whenever the loop stalls beyond
-stall_bound_s, raises, or ends, and holds it until the loop is back; on SIGINT/SIGTERM (run_node)
+stall_bound_s, raises, or ends, and holds it until the loop is back; on an ending signal (run_node)
 or close the last message is a zero force, acknowledged before the context goes.  Run-time
 parameter changes are checked like start-up values and applied from the next tick, or refused with
 the reason.  `haptic_bridge --managed` runs the same bridge as a lifecycle node: activate starts the
@@ -313,7 +313,7 @@ class HapticBridge(Node):
 
     def close(self) -> None:
         """Zero force on the wire, then stop the loop."""
-        self.shell.stop("node closed (SIGINT, SIGTERM or exit)")
+        self.shell.stop("node closed (an ending signal or exit)")
         self.shell.destroy()
 
 

@@ -12,7 +12,7 @@ from rclpy.experimental import EventsExecutor
 from rclpy.signals import SignalHandlerOptions
 
 from liver_sim.base.process_settings import use_dds_profile
-from liver_sim.base.stop_request import StopRequest
+from liver_sim.base.stop_request import ENDING_SIGNALS, STOP_SIGNALS, StopRequest
 from liver_sim.nodes.garbage import FULL_COLLECTION_PERIOD_S, collect_garbage, freeze_garbage
 
 #: How often (s) a thread holding the GIL is asked to hand it over.
@@ -36,9 +36,12 @@ def spin(executor, context=None, stop=None) -> None:
 
 
 def run_node(make_node, args=None) -> int:
-    """Entry point of a node process: create it, spin an EventsExecutor until SIGINT or SIGTERM, clean up.
+    """Entry point of a node process: create it, spin an EventsExecutor until an ending signal, clean up.
 
-    The process handles SIGINT and SIGTERM itself (rclpy's handlers would shut the context down first):
+    The process handles the ENDING_SIGNALS itself (SIGINT, SIGTERM, SIGHUP, SIGQUIT, SIGPIPE; rclpy's handlers
+    would shut the context down first) and ignores the job-control STOP_SIGNALS (Ctrl-Z would freeze a loop
+    and its supervisor with the last command held; SIGSTOP cannot be caught: after SIGCONT the bridge's loop
+    sees the gap and restarts from zero with a soft start):
     a signal ends the spin, then `node.close()` runs while the context is still up — the bridge sends its
     zero force there — then the node waits up to CLOSE_ACK_TIMEOUT_S for its reliable subscribers (a
     recorder) to acknowledge what it published; only then does the context go.  A refused parameter ends
@@ -52,8 +55,10 @@ def run_node(make_node, args=None) -> int:
     dds_profile = use_dds_profile()
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     stop = StopRequest()
-    for signum in (signal.SIGINT, signal.SIGTERM):
+    for signum in ENDING_SIGNALS:
         signal.signal(signum, stop.set)
+    for signum in STOP_SIGNALS:
+        signal.signal(signum, signal.SIG_IGN)
     node = None
     try:
         node = make_node()

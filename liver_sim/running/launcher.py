@@ -21,6 +21,8 @@ import time
 from contextlib import contextmanager
 from pathlib import Path
 
+from liver_sim.base.stop_request import ENDING_SIGNALS
+
 #: Where the run files live: one per ROS domain, for this user.
 RUN_DIR = Path(tempfile.gettempdir()) / f"liver_sim-runs-{os.getuid()}"
 #: A stopping node is signalled again (SIGINT, SIGTERM, SIGKILL) after this long (s).
@@ -89,8 +91,6 @@ def die_with_parent(parent_pid: int):
     return preexec
 
 
-#: The signals that end a command (liver_sim.cli.main): SIGINT, SIGTERM, SIGHUP.
-ENDING_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 
 
 @contextmanager
