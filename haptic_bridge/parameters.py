@@ -55,6 +55,8 @@ PARAMETERS = {
                            "is not passive is then reported, not refused"),
     "device_map_topic": Param(TOPIC_NAMES["device_map"], "the device map liver_tool publishes (latched); no "
                               "force is rendered before it arrives"),
+    "device_map_node": Param("/liver_tool", "the only node (fully qualified name) whose device map the bridge "
+                             "takes: maps on device_map_topic while any other node publishes there are refused"),
     "force_output": Param("wrench_stamped", "message type of the force command", choices=FORCE_OUTPUT_FORMATS),
     "force_topic": Param(TOPIC_NAMES["servo_cf"], "force command to the device driver"),
     "tool_pose_topic": Param(TOPIC_NAMES["tool_pose"], "tool tip pose in the liver frame (PoseStamped)"),

@@ -54,6 +54,7 @@ def local_model(kind: str) -> LocalModel:
 def start_bridge(env: dict, program: list[str] | None = None, **params) -> subprocess.Popen:
     args = (program or [sys.executable, "-m", "liver_sim.nodes.bridge_node"]) + ["--ros-args", "--params-file",
                                                                                str(CONFIG)]
+    params = {"device_map_node": "/test_haptic_bridge", **params}  # the Rig publishes the device map
     for name, v in params.items():
         text = ("[" + ",".join(repr(float(x)) for x in v) + "]" if isinstance(v, list)
                 else str(v).lower() if isinstance(v, bool) else str(v))
@@ -99,6 +100,10 @@ class Rig:
         self.node.create_timer(PUBLISH_PERIOD_S, self._publish)
         self._map = self.node.create_publisher(TOPICS["device_map"].type, TOPICS["device_map"].name,
                                                TOPICS["device_map"].qos)
+        self.publish_map(rotation_xyzw)
+
+    def publish_map(self, rotation_xyzw) -> None:
+        """Latch a device map of this rotation (no translation, scale 1) on the map topic."""
         self._map.publish(device_map_message(DeviceMap(rotation_xyzw)))
 
     def _on_force(self, message) -> None:

@@ -12,8 +12,12 @@ import time
 
 import numpy as np
 import pytest
+import rclpy
 
+from liver_sim.base.geometry.device_map import DeviceMap
 from liver_sim.base.local_model import LocalModel
+from msg_defs.device_map import device_map_message
+from msg_defs.topics import TOPICS
 
 from bridge_rig import (
     ABOVE,
@@ -320,6 +324,59 @@ def test_the_parameter_service_lowers_the_clamp_and_never_loosens_the_envelope(r
         rig.wait_for_force(CONTACT, bridge)
     finally:
         stop(bridge)
+    assert_safe(rig.forces)
+
+
+HALF_TURN_X = (1.0, 0.0, 0.0, 0.0)
+
+
+def fresh_loop_status(rig: Rig, bridge: subprocess.Popen) -> dict:
+    """The bridge's next loop status published after this call."""
+    del rig.diagnostics[:]
+    rig.wait_until(lambda: rig.loop_status() is not None, "diagnostics", bridge)
+    return rig.loop_status()
+
+
+def test_a_map_from_another_node_or_in_contact_is_refused_one_out_of_contact_applies(rig_factory, ros_env):
+    rig = rig_factory()
+    rig.model, rig.tool = local_model("plane"), INSIDE
+    bridge = start_bridge(ros_env)
+    intruder_context = rclpy.Context()
+    rclpy.init(context=intruder_context)
+    intruder = rclpy.create_node("intruder", context=intruder_context)
+    try:
+        rig.wait_for_force(CONTACT, bridge)
+        for _ in range(3):  # a stall of the loop (the machine, DDS discovery) restarts the force: try again then
+            stalls = fresh_loop_status(rig, bridge)["stalls"]
+            published = rig.node.get_clock().now().seconds_nanoseconds()
+            rig.publish_map((0.0, 0.0, 0.0, 1.0))  # the same map again: nothing changes, no restart
+            rig.wait_until(lambda: sum(stamp > published for stamp in rig.stamps[-600:]) >= 500, "commands", bridge)
+            if fresh_loop_status(rig, bridge)["stalls"] == stalls:
+                break
+            rig.wait_for_force(CONTACT, bridge)
+        after = [f for f, stamp in zip(rig.forces, rig.stamps) if stamp > published]  # by stamps: this side lags
+        assert all(np.allclose(f, CONTACT, atol=1e-3) for f in after), "an equal map changes nothing"
+        foreign = intruder.create_publisher(TOPICS["device_map"].type, TOPICS["device_map"].name,
+                                            TOPICS["device_map"].qos)
+        foreign.publish(device_map_message(DeviceMap(HALF_TURN_X)))  # would turn the force 180° about x
+        rig.wait_until(lambda: int((rig.loop_status() or {}).get("bad_device_map", 0)) >= 1, "a refused map",
+                       bridge)
+        rig.wait_for_force(CONTACT, bridge)
+        intruder.destroy_publisher(foreign)
+        rig.publish_map(HALF_TURN_X)  # its own node, but in contact: refused
+        rig.wait_until(lambda: int(rig.loop_status()["bad_device_map"]) >= 2, "a map refused in contact", bridge)
+        rig.wait_for_force(CONTACT, bridge)
+        rig.tool = ABOVE
+        rig.wait_for_force(np.zeros(3), bridge)
+        taken = int(fresh_loop_status(rig, bridge)["device_maps_taken"])
+        rig.publish_map(HALF_TURN_X)  # out of contact: taken
+        rig.wait_until(lambda: int(rig.loop_status()["device_maps_taken"]) > taken, "the map taken", bridge)
+        rig.tool = INSIDE
+        rig.wait_for_force(-CONTACT, bridge)  # turned 180° about x: z flips
+    finally:
+        stop(bridge)
+        intruder.destroy_node()
+        rclpy.shutdown(context=intruder_context)
     assert_safe(rig.forces)
 
 

@@ -45,6 +45,9 @@ from msg_defs.local_model import local_model_from_bytes
 from msg_defs.poses import pose_from_bytes
 from msg_defs.topics import TOPICS, loop_input_qos
 
+#: How long (s) after a device map arrives the bridge checks who publishes on its topic: the graph learns of a new
+#: publisher about when its first message arrives.
+MAP_SOURCE_CHECK_S = 0.2
 #: How long (s) close waits for the driver to acknowledge the last zero (and a recorder the last diagnostics).
 ZERO_ACK_TIMEOUT_S = 1.0
 
@@ -78,6 +81,10 @@ class BridgeShell:
         self._pending_map = (0, None)  # (version, DeviceMap or None)
         self._applied = self._applied_map = 0
         self._map_problem = f"waiting for the device map on {p['device_map_topic']}"
+        self._device_map = None        # the map the loop renders through (executor thread's view)
+        self._map_resubscribe = False  # a map was refused for its source: take the latched one again later
+        self._offered_map = self._offer_timer = None  # the newest map received, until MAP_SOURCE_CHECK_S later
+        self._maps_taken = 0
         self._last_force = np.zeros(3)
         self._last_report = time.monotonic()
         self._loop = self.supervisor = None
@@ -85,8 +92,7 @@ class BridgeShell:
                                                 TOPICS["servo_cf"].qos)
         self._diagnostics = node.create_publisher(TOPICS["diagnostics"].type, TOPICS["diagnostics"].name,
                                                   TOPICS["diagnostics"].qos)
-        self._map_subscription = node.create_subscription(TOPICS["device_map"].type, p["device_map_topic"],
-                                                          self._on_device_map, TOPICS["device_map"].qos)
+        self._map_subscription = self._subscribe_map()
         self._inputs = LoopInputs(node)  # read by the 1 kHz loop itself, not by the executor
         self._pose_input = self._inputs.subscribe(TOPICS["tool_pose"].type, p["tool_pose_topic"],
                                                   loop_input_qos(TOPICS["tool_pose"]), self._on_pose, raw=True,
@@ -133,6 +139,8 @@ class BridgeShell:
 
     def destroy(self) -> None:
         self._inputs.destroy()
+        if self._offer_timer is not None:
+            self.node.destroy_timer(self._offer_timer)
         self.node.destroy_timer(self._timer)
         self.node.destroy_subscription(self._map_subscription)
         self.node.destroy_publisher(self._publisher)
@@ -145,7 +153,33 @@ class BridgeShell:
         self._pending = (self._pending[0] + 1, self.p)
         return None
 
+    # -- the device map (executor thread): one source, never re-aimed in contact
+    def _subscribe_map(self):
+        return self.node.create_subscription(TOPICS["device_map"].type, self.p["device_map_topic"],
+                                             self._on_device_map, TOPICS["device_map"].qos)
+
+    def _foreign_map_publishers(self) -> list[str]:
+        """The nodes other than device_map_node that publish on device_map_topic."""
+        names = {f"{info.node_namespace.rstrip('/')}/{info.node_name}"
+                 for info in self.node.get_publishers_info_by_topic(self.p["device_map_topic"])}
+        return sorted(names - {self.p["device_map_node"]})
+
+    def _refuse_map(self, reason: str) -> None:
+        self._bad["device_map"] += 1
+        self.node.get_logger().error(f"device map refused: {reason}")
+
+    def _retake_map(self) -> None:
+        """After a map refused for its source while the bridge has none (its own may have come in the meantime,
+        refused with it): once device_map_node alone publishes, subscribe again, so that its latched map
+        arrives again. With a map in use nothing is done (a new reader can hold up the loop's publish)."""
+        if self._map_resubscribe and self._device_map is None and not self._foreign_map_publishers():
+            self._map_resubscribe = False
+            self.node.destroy_subscription(self._map_subscription)
+            self._map_subscription = self._subscribe_map()
+
     def _on_device_map(self, message) -> None:
+        """A map is taken MAP_SOURCE_CHECK_S after it arrived, when the graph has caught up with whoever sent it
+        (:meth:`_take_offered_map`); a map that cannot be decoded or is not passive is refused at once."""
         try:
             device_map = device_map_from_message(message)
             if self.p["drives_device"]:
@@ -154,9 +188,34 @@ class BridgeShell:
             self._bad["device_map"] += 1
             self._map_problem = f"device map refused: {exc}"
             self.node.get_logger().error(f"{self._map_problem}; the force stays zero")
+            self._device_map = None
             self._pending_map = (self._pending_map[0] + 1, None)
             return
-        self.scale, self._map_problem = device_map.scale, None
+        self._offered_map = device_map
+        if self._offer_timer is None:
+            self._offer_timer = self.node.create_timer(MAP_SOURCE_CHECK_S, self._take_offered_map)
+
+    def _take_offered_map(self) -> None:
+        """Take the newest offered map from device_map_node only (checked against the topic's publishers: a
+        message carries no sender); equal to the current one: nothing; new while in contact: refused; else
+        rendered from the next tick with a soft start."""
+        self.node.destroy_timer(self._offer_timer)
+        self._offer_timer = None
+        device_map, self._offered_map = self._offered_map, None
+        foreign = self._foreign_map_publishers()
+        if foreign:
+            self._map_resubscribe = True
+            self._refuse_map(f"{', '.join(foreign)} also publish(es) on {self.p['device_map_topic']}; only "
+                             f"{self.p['device_map_node']} may (parameter device_map_node)")
+            return
+        if device_map.same_as(self._device_map):
+            return
+        if self._device_map is not None and self._last_force.any():
+            self._refuse_map("a new map while the tool is in contact (the force would turn); the current map "
+                             "stays")
+            return
+        self.scale, self._map_problem, self._device_map = device_map.scale, None, device_map
+        self._maps_taken += 1
         self._pending_map = (self._pending_map[0] + 1, device_map)
         self.node.get_logger().info(
             f"device map from {self.p['device_map_topic']}: R {np.round(device_map.rotation, 6).tolist()}, "
@@ -242,6 +301,7 @@ class BridgeShell:
 
     # -- diagnostics (executor thread)
     def _publish_diagnostics(self) -> None:
+        self._retake_map()
         now = time.monotonic()
         logger = self.node.get_logger()
         for kind, count in self._bad.items():
@@ -268,7 +328,8 @@ class BridgeShell:
                  ("tool_wrench_age_s" if self.mode == "none" else "local_model_age_s"): float(now - source_received),
                  "tool_pose_publishers": self._pose_input.get_publisher_count(),
                  "source_publishers": self._source_input.get_publisher_count(),
-                 "device_scale": self.scale if self._map_problem is None else float("nan"), **report,
+                 "device_scale": self.scale if self._map_problem is None else float("nan"),
+                 "device_maps_taken": self._maps_taken, **report,
                  "max_gap_1s_at": wall_time(report["max_gap_1s_at_s"]), "max_gap_at": wall_time(report["max_gap_at_s"])}
         del extra["max_gap_1s_at_s"], extra["max_gap_at_s"], extra["error"]
         if stats["new_gaps"]:

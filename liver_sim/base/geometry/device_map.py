@@ -65,6 +65,11 @@ class DeviceMap:
         object.__setattr__(self, "workspace_radius_m",
                            positive(self.workspace_radius_m, "DeviceMap.workspace_radius_m"))
 
+    def same_as(self, other: DeviceMap | None) -> bool:
+        """Whether `other` maps every point and force as this map does (the workspace radius aside)."""
+        return (other is not None and self.scale == other.scale and np.array_equal(self.rotation, other.rotation)
+                and np.array_equal(self.translation, other.translation))
+
     @classmethod
     def from_parameters(cls, values: dict, workspace_radius_m: float = 0.5) -> DeviceMap:
         """The map named by the DEVICE_MAP_PARAMETERS `values`, or ValueError naming the bad parameter."""
