@@ -17,6 +17,7 @@ import rclpy
 from liver_sim.base.geometry.device_map import DeviceMap
 from liver_sim.base.local_model import LocalModel
 from msg_defs.device_map import device_map_message
+from msg_defs.forces import force_message_type
 from msg_defs.topics import TOPICS
 
 from bridge_rig import (
@@ -377,6 +378,24 @@ def test_a_map_from_another_node_or_in_contact_is_refused_one_out_of_contact_app
         stop(bridge)
         intruder.destroy_node()
         rclpy.shutdown(context=intruder_context)
+    assert_safe(rig.forces)
+
+
+def test_another_publisher_on_the_force_topic_holds_the_bridge_at_zero(rig_factory, ros_env):
+    rig = rig_factory()
+    rig.model, rig.tool = local_model("plane"), INSIDE
+    bridge = start_bridge(ros_env)
+    try:
+        rig.wait_for_force(CONTACT, bridge)
+        rival = rig.node.create_publisher(force_message_type("wrench_stamped"), TOPICS["servo_cf"].name,
+                                          TOPICS["servo_cf"].qos)  # a second bridge or driver on the device
+        rig.wait_for_force(np.zeros(3), bridge)
+        rig.wait_until(lambda: "another publisher" in (rig.loop_level() or (0, ""))[1], "a diagnostic", bridge)
+        assert rig.loop_level()[0] == 2 and "test_haptic_bridge" in rig.loop_level()[1]
+        rig.node.destroy_publisher(rival)
+        rig.wait_for_force(CONTACT, bridge)  # driving again once it has gone
+    finally:
+        stop(bridge)
     assert_safe(rig.forces)
 
 

@@ -48,6 +48,8 @@ from msg_defs.topics import TOPICS, loop_input_qos
 #: How long (s) after a device map arrives the bridge checks who publishes on its topic: the graph learns of a new
 #: publisher about when its first message arrives.
 MAP_SOURCE_CHECK_S = 0.2
+#: How often (s) the bridge looks for another publisher on its force topic (a second bridge on the device).
+RIVAL_CHECK_S = 0.1
 #: How long (s) close waits for the driver to acknowledge the last zero (and a recorder the last diagnostics).
 ZERO_ACK_TIMEOUT_S = 1.0
 
@@ -108,7 +110,9 @@ class BridgeShell:
                                                         loop_input_qos(TOPICS["contact_plane"]), self._on_marker,
                                                         raw=True,
                                                         received=True)
+        self._rivals: list[str] = []  # the other publishers on force_topic: while any, the bridge sends zero
         self._timer = node.create_timer(1.0, self._publish_diagnostics)
+        self._rival_timer = node.create_timer(RIVAL_CHECK_S, self._check_rivals)
 
     # -- life cycle
     def start(self) -> None:
@@ -139,6 +143,7 @@ class BridgeShell:
 
     def destroy(self) -> None:
         self._inputs.destroy()
+        self.node.destroy_timer(self._rival_timer)
         if self._offer_timer is not None:
             self.node.destroy_timer(self._offer_timer)
         self.node.destroy_timer(self._timer)
@@ -152,6 +157,24 @@ class BridgeShell:
         self.p = checked_change(self.p, changes, self.scale, self.start_p)
         self._pending = (self._pending[0] + 1, self.p)
         return None
+
+    # -- one bridge per device (executor thread)
+    def _check_rivals(self) -> None:
+        """Note every publisher on force_topic but this bridge's own: two bridges interleaving their commands
+        would defeat the rate limit and the watchdog, so while any other publishes there, this one sends zero."""
+        names = [f"{info.node_namespace.rstrip('/')}/{info.node_name}"
+                 for info in self.node.get_publishers_info_by_topic(self.p["force_topic"])]
+        own = f"{self.node.get_namespace().rstrip('/')}/{self.node.get_name()}"
+        if own in names:
+            names.remove(own)
+        elif names:
+            names.pop()  # ours, under a name the graph has not caught up with
+        if names and not self._rivals:
+            self.node.get_logger().error(f"another publisher on {self.p['force_topic']} ({', '.join(names)}): "
+                                         "sending zero, not driving the device while it publishes there")
+        elif self._rivals and not names:
+            self.node.get_logger().info(f"{self.p['force_topic']} has no other publisher: driving again (soft start)")
+        self._rivals = names
 
     # -- the device map (executor thread): one source, never re-aimed in contact
     def _subscribe_map(self):
@@ -286,6 +309,9 @@ class BridgeShell:
         pose_age = now - pose_received if self._pose_input.get_publisher_count() else math.inf
         source_age = now - source_received if self._source_input.get_publisher_count() else math.inf
         command = self.tick.step(now, tip, pose_age, source, source_age)
+        if self._rivals:  # another bridge on the device: zero, and a soft start once it has gone
+            self.tick.restart()
+            command = np.zeros(3)
         self._last_force = command
         if stamp is None or (source_age if self.mode == "none" else pose_age) > self.p["lifetime_s"]:
             stamp = self.node.get_clock().now().seconds_nanoseconds()  # no fresh input: the command holds now
@@ -341,9 +367,11 @@ class BridgeShell:
             problems.append(f"watchdog {state}")
         if self._map_problem:
             problems.append(self._map_problem)
+        if self._rivals:
+            problems.append(f"another publisher on {self.p['force_topic']} ({', '.join(self._rivals)}): not driving")
         if not self.p["drives_device"]:
             problems += filter(None, [passivity_problem(self.p, self.scale)])
-        error = report["error"] or (self._map_problem or "").startswith("device map refused")
+        error = report["error"] or (self._map_problem or "").startswith("device map refused") or bool(self._rivals)
         message = "; ".join(events + problems) or "ok"
         publish_diagnostics(self.node, self._diagnostics, [diagnostic_status(
             f"{self.node.get_name()}: loop", stats, not problems, message, extra, error=error)])
