@@ -39,8 +39,9 @@ PARAMETERS = {
     "ramp_time_s": Param(0.01, "time (s) for the watchdog to ramp the force to zero on stale data", 0.001, 0.01),
     "soft_start_s": Param(0.2, "time (s) over which the force rises from zero after start and after every "
                           "recovery (fresh data again, a stall or error of the loop, a new device map)", 0.1, 10.0),
-    "stall_bound_s": Param(0.005, "the supervisor publishes zero when the loop has not ticked for this long (s) "
-                           "and holds it until the loop is back", 0.002, 0.1),
+    "stall_bound_s": Param(0.003, "the supervisor publishes zero when the loop has not ticked for this long (s) "
+                           "and holds it until the loop is back; the T of the passivity bound when longer than a "
+                           "period", 0.002, 0.1),
     "workspace_centre_m": Param([0.0, 0.0, 0.0], "centre of the plausible workspace around the liver (m, liver "
                                 "frame)"),
     "workspace_radius_m": Param(0.4, "a tool tip, plane point or sphere centre farther than this from "

@@ -39,28 +39,38 @@ def clamp_norm(force: np.ndarray, max_force: float) -> np.ndarray:
 
 
 class RateLimiter:
-    """Limits |F_k − F_{k−1}| to `max_rate_n_per_s`·`period_s` (N) per tick by moving towards the target.
+    """Limits the change of the force to `max_rate_n_per_s` per second of the clock the ticks give: |F_k − F_{k−1}|
+    ≤ max_rate_n_per_s·(t_k − t_{k−1}), moving towards the target; a burst of ticks microseconds apart (a loop
+    catching up) changes it by no more than the time they span allows. Without tick times, and for the first
+    tick after a reset, the elapsed time is `period_s`.
 
     A non-finite target counts as zero, so the state stays finite.
     """
 
     def __init__(self, max_rate_n_per_s: float, period_s: float):
-        self.max_step_n = (positive(max_rate_n_per_s, "max_rate_n_per_s")
-                           * positive(period_s, "period_s"))
-        self.last = np.zeros(3)
+        self.max_rate_n_per_s = positive(max_rate_n_per_s, "max_rate_n_per_s")
+        self.period_s = positive(period_s, "period_s")
+        self.reset()
 
     def reset(self) -> None:
         """Restart from zero force."""
         self.last = np.zeros(3)
+        self.last_s = None
 
-    def step(self, target: np.ndarray) -> np.ndarray:
-        """The force (N) one tick closer to `target`: F_{k−1} + Δ, |Δ| ≤ max_step_n."""
+    def step(self, target: np.ndarray, now_s: float | None = None) -> np.ndarray:
+        """The force (N) closer to `target` at tick time `now_s` (s): F_{k−1} + Δ, |Δ| ≤ max_rate_n_per_s·elapsed."""
+        if now_s is None or self.last_s is None:
+            elapsed = self.period_s
+        else:
+            elapsed = min(max(now_s - self.last_s, 0.0), 1.0)
+        self.last_s = now_s
         delta = target - self.last
         if not np.isfinite(delta).all():
             delta = -self.last
         change = math.hypot(*delta)
-        if change > self.max_step_n:
-            delta *= self.max_step_n / change
+        max_change = self.max_rate_n_per_s * elapsed
+        if change > max_change:
+            delta *= max_change / change
         self.last = self.last + delta
         return self.last.copy()
 
@@ -139,14 +149,14 @@ class SafeForceOutput:
         max_force = positive(max_force, "max_force")
         if max_force > PHANTOM_MAX_FORCE_N:
             raise ValueError(f"max_force must be <= {PHANTOM_MAX_FORCE_N} N (PHANToM limit), got {max_force!r}")
-        max_step = positive(max_rate_n_per_s, "max_rate_n_per_s") * self.watchdog.period_s
-        if max_step * (positive(ramp_time_s, "ramp_time_s") / self.watchdog.period_s) < max_force * (1.0 - 1e-9):
+        max_rate = positive(max_rate_n_per_s, "max_rate_n_per_s")
+        if max_rate * positive(ramp_time_s, "ramp_time_s") < max_force * (1.0 - 1e-9):
             raise ValueError(f"max_rate_n_per_s must be >= max_force/ramp_time_s = "
                              f"{max_force / ramp_time_s:g} N/s so the force can reach 0 "
                              f"within ramp_time_s, got {max_rate_n_per_s!r}")
         self.watchdog.configure(lifetime_s, ramp_time_s, soft_start_s)
         self.max_force = max_force
-        self.limiter.max_step_n = max_step
+        self.limiter.max_rate_n_per_s = max_rate
         self.limiter.last = clamp_norm(self.limiter.last, max_force)  # no wind-up above a lowered clamp
 
     def restart(self) -> None:
@@ -160,10 +170,11 @@ class SafeForceOutput:
         return self.watchdog.state
 
     def step(self, force: np.ndarray, model_age_s: float, pose_age_s: float,
-             model_lifetime_s: float | None = None) -> np.ndarray:
-        """The (3,) force (N) to send this tick for the requested `force` (N); see :class:`Watchdog` for the ages."""
+             model_lifetime_s: float | None = None, now_s: float | None = None) -> np.ndarray:
+        """The (3,) force (N) to send at tick time `now_s` (s; None: one nominal period after the last) for the
+        requested `force` (N); see :class:`Watchdog` for the ages and :class:`RateLimiter` for the times."""
         gain = self.watchdog.update(model_age_s, pose_age_s, model_lifetime_s)
         if gain == 0.0:
             self.limiter.reset()
             return np.zeros(3)
-        return clamp_norm(self.limiter.step(clamp_norm(force, self.max_force) * gain), self.max_force)
+        return clamp_norm(self.limiter.step(clamp_norm(force, self.max_force) * gain, now_s), self.max_force)

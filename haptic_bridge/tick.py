@@ -19,25 +19,34 @@ _ZERO = np.zeros(3)
 _ZERO.setflags(write=False)
 
 
+def hold_time_s(p: dict) -> float:
+    """The longest time T (s) a command can be held at the device while the bridge drives it: a period of what
+    is rendered (1/rate_hz; with `local_model: none` the physics wrench, 1/physics_rate_hz), or the longest
+    gap between ticks before the supervisor sends zero (stall_bound_s), whichever is longer."""
+    rate = p["physics_rate_hz"] if p["local_model"] == "none" else p["rate_hz"]
+    return max(1.0 / rate, p["stall_bound_s"])
+
+
 def passivity_problem(p: dict, scale: float = 1.0) -> str | None:
     """Why the force `p` renders is not passive at the device (Colgate: b > K·T/2 + |B|), or None.
 
-    Every mode is checked with what it renders: the local model's K, B at rate_hz; with `local_model: none`
-    the physics penalty (contact_stiffness_n_per_m, contact_damping_ns_per_m) held between physics frames,
-    so at T = 1/physics_rate_hz. At the device a liver-side K and B are felt as K·scale and B·scale
-    (`scale`: the device map's).
+    Every mode is checked with what it renders: the local model's K, B; with `local_model: none` the physics
+    penalty (contact_stiffness_n_per_m, contact_damping_ns_per_m). T is the longest hold (:func:`hold_time_s`),
+    not the nominal period: ticks may lie up to stall_bound_s apart. At the device a liver-side K and B are felt
+    as K·scale and B·scale (`scale`: the device map's).
     """
     if p["local_model"] == "none":
         names, rate_name = ("contact_stiffness_n_per_m", "contact_damping_ns_per_m"), "physics_rate_hz"
     else:
         names, rate_name = ("stiffness_n_per_m", "damping_ns_per_m"), "rate_hz"
-    stiffness, damping, rate = p[names[0]], p[names[1]], p[rate_name]
-    limit = max_passive_stiffness(p["device_damping_ns_per_m"], 1.0 / rate, damping * scale)
+    stiffness, damping, hold = p[names[0]], p[names[1]], hold_time_s(p)
+    limit = max_passive_stiffness(p["device_damping_ns_per_m"], hold, damping * scale)
     if stiffness * scale < limit or stiffness + damping <= 0.0:
         return None
     return (f"parameter {names[0]}={stiffness:g} is not passive with local_model {p['local_model']}: with "
             f"device_damping_ns_per_m={p['device_damping_ns_per_m']:g}, {names[1]}={damping:g}, device scale "
-            f"{scale:g} and {rate_name}={rate:g}, Colgate's b > K·T/2 + B allows {names[0]} < {limit / scale:g} N/m")
+            f"{scale:g} and a hold of T={hold * 1e3:g} ms (the longer of 1/{rate_name} and stall_bound_s), "
+            f"Colgate's b > K·T/2 + B allows {names[0]} < {limit / scale:g} N/m")
 
 
 def check_passivity(p: dict, scale: float = 1.0) -> None:
@@ -203,4 +212,4 @@ class BridgeTick:
         if self.device_map is None:  # no map yet: nothing is fresh
             return self.safety.step(_ZERO, math.inf, math.inf)
         return self.safety.step(self.device_map.liver_to_device_force(force), source_age_s, pose_age_s,
-                                min(lifetime, self.p["lifetime_s"]))
+                                min(lifetime, self.p["lifetime_s"]), now_s)

@@ -4,6 +4,7 @@ import math
 import numpy as np
 import pytest
 
+from haptic_bridge.parameters import PARAMETERS
 from haptic_bridge.safety import (
     PHANTOM_MAX_FORCE_N,
     RateLimiter,
@@ -11,6 +12,7 @@ from haptic_bridge.safety import (
     Watchdog,
     clamp_norm,
 )
+from haptic_bridge.tick import hold_time_s, passivity_problem
 
 FRESH = (0.0, 0.0)
 STALE = (0.2, 0.0)  # local model 200 ms old, lifetime 50 ms
@@ -50,6 +52,26 @@ def test_rate_limiter_bounds_the_change_per_tick():
     np.testing.assert_allclose(previous, target)  # 5 N reached after 25 ticks
     first = RateLimiter(200.0, 0.001).step(target)
     np.testing.assert_allclose(first, target / 25.0)  # moves straight towards the target
+
+
+def test_rate_limiter_holds_per_second_of_tick_time_through_a_burst():
+    limiter = RateLimiter(max_rate_n_per_s=400.0, period_s=0.001)
+    target = np.array([0.0, 0.0, 2.0])
+    times = [0.0, 0.001, 0.004, 0.004001, 0.004002, 0.005]  # a 3 ms gap, then two catch-up ticks 1 µs apart
+    forces = [limiter.step(target, t) for t in times]
+    np.testing.assert_allclose([f[2] for f in forces], [0.4, 0.8, 2.0, 2.0, 2.0, 2.0])  # first: one period
+    limiter.reset()
+    limiter.step(np.zeros(3), 0.0)
+    burst = [limiter.step(target, 0.001 + k * 1e-6) for k in range(3)]  # three ticks within 3 µs of each other
+    assert burst[-1][2] - burst[0][2] <= 400.0 * 2e-6 + 1e-12, "the burst adds no more than its span allows"
+
+
+def test_passivity_is_checked_at_the_longest_hold_not_the_nominal_period():
+    p = {name: spec.default for name, spec in PARAMETERS.items()}
+    assert hold_time_s(p) == p["stall_bound_s"] == 0.003  # ticks 1 ms apart, but up to 3 ms before a zero
+    assert passivity_problem(p) is None  # K 300 < 2·0.5/0.003 = 333 N/m
+    problem = passivity_problem({**p, "stall_bound_s": 0.005})  # 2·0.5/0.005 = 200 N/m
+    assert "T=5 ms" in problem and "stall_bound_s" in problem and "< 200 N/m" in problem
 
 
 def test_rate_limiter_survives_a_non_finite_target():
