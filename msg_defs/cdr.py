@@ -11,8 +11,9 @@ the byte after the header: stamp.sec int32, stamp.nanosec uint32, frame_id as ui
 (with its NUL) + characters + NUL, padding to 8, then the float64 payload
 (PoseStamped: position x y z, orientation x y z w; WrenchStamped: force x y z, torque x y z).
 
-Readers refuse truncated or inconsistent bytes with a ValueError naming the field; checking that
-the numbers are finite is the caller's (msg_defs.poses, msg_defs.forces).
+Readers refuse truncated or inconsistent bytes with a ValueError naming the field, and messages longer than
+MAX_BYTES of their type before reading anything (a 2 MB Marker took 15 ms to decode in the 1 kHz loop);
+checking that the numbers are finite is the caller's (msg_defs.poses, msg_defs.forces).
 """
 from __future__ import annotations
 
@@ -25,6 +26,17 @@ _STAMP_AND_LENGTH = {e: struct.Struct(e + "iII") for e in "<>"}
 POSE_FIELDS = 7
 WRENCH_FIELDS = 6
 _PAYLOAD = {(e, n): struct.Struct(f"{e}{n}d") for e in "<>" for n in (POSE_FIELDS, WRENCH_FIELDS)}
+#: The longest serialized message (bytes) a loop reads, by type: a stamped pose or wrench with a frame_id of
+#: up to about 900 characters; a local-model Marker with short strings and empty sequences (its text carries
+#: one key=value, msg_defs.local_model).
+MAX_BYTES = {"PoseStamped": 1024, "WrenchStamped": 1024, "Marker": 4096}
+
+
+def check_size(data: bytes, type_name: str) -> None:
+    """ValueError when `data` is longer than MAX_BYTES[type_name]."""
+    if len(data) > MAX_BYTES[type_name]:
+        raise ValueError(f"{type_name}: {len(data)} bytes, more than the {MAX_BYTES[type_name]} a {type_name} "
+                         f"read by a loop may have (msg_defs.cdr.MAX_BYTES)")
 
 
 def encode(sec: int, nanosec: int, frame_id: str, values) -> bytes:
@@ -37,6 +49,7 @@ def encode(sec: int, nanosec: int, frame_id: str, values) -> bytes:
 
 def _header(data: bytes, type_name: str) -> tuple[str, int, int, int]:
     """(struct endianness, stamp sec, stamp nanosec, frame_id length) of a serialized stamped message."""
+    check_size(data, type_name)
     endian = _ENDIAN.get(bytes(data[:2]))
     if endian is None or len(data) < 16:
         raise ValueError(f"{type_name}: not a CDR message ({len(data)} bytes, header {bytes(data[:4]).hex()})")
@@ -72,6 +85,7 @@ class _Cursor:
     encapsulation header; a field that runs past the end is a ValueError naming it."""
 
     def __init__(self, data: bytes, type_name: str):
+        check_size(data, type_name)
         self.endian = _ENDIAN.get(bytes(data[:2]))
         if self.endian is None or len(data) < 8:
             raise ValueError(f"{type_name}: not a CDR message ({len(data)} bytes, header {bytes(data[:4]).hex()})")

@@ -77,12 +77,25 @@ def force_message_bytes(fmt: str, force, stamp, frame_id: str) -> bytes:
     return serialize_message(force_message(fmt, force, stamp, frame_id))
 
 
-def force_from_bytes(fmt: str, data: bytes) -> np.ndarray:
-    """:func:`force_from_message` of a serialized force command: WrenchStamped decoded directly."""
-    if fmt == "wrench_stamped":
-        return np.array(finite_floats(cdr.decode(data, cdr.WRENCH_FIELDS, "WrenchStamped")[3][:3], (3,),
-                                       "WrenchStamped force"))
+#: The longest serialized force command (bytes) of a format other than wrench_stamped read by a loop: a
+#: Float64MultiArray of 3 values with a short layout, or a Wrench, Vector3 or OmniFeedback.
+MAX_FORCE_COMMAND_BYTES = 1024
 
+
+def stamped_force_from_bytes(data: bytes) -> tuple[np.ndarray, tuple[int, int]]:
+    """(force (3,) N, stamp (sec, nanosec)) of a serialized WrenchStamped, decoded directly; refuses malformed or
+    oversized bytes (msg_defs.cdr.MAX_BYTES) and non-finite values, naming the field."""
+    sec, nanosec, _, values = cdr.decode(data, cdr.WRENCH_FIELDS, "WrenchStamped")
+    return np.array(finite_floats(values[:3], (3,), "WrenchStamped force")), (sec, nanosec)
+
+
+def force_from_bytes(fmt: str, data: bytes) -> np.ndarray:
+    """:func:`force_from_message` of a serialized force command: WrenchStamped decoded directly, the other
+    formats deserialized once their length is checked (MAX_FORCE_COMMAND_BYTES)."""
+    if fmt == "wrench_stamped":
+        return stamped_force_from_bytes(data)[0]
+    if len(data) > MAX_FORCE_COMMAND_BYTES:
+        raise ValueError(f"force command ({fmt}): {len(data)} bytes, more than {MAX_FORCE_COMMAND_BYTES}")
     return force_from_message(fmt, deserialize_message(data, force_message_type(fmt)))
 
 

@@ -2,6 +2,8 @@
 message or from its bytes)."""
 from __future__ import annotations
 
+import re
+
 import numpy as np
 from geometry_msgs.msg import Vector3
 from visualization_msgs.msg import Marker
@@ -20,6 +22,8 @@ SPHERE_COLOUR = (0.2, 0.5, 0.9, 0.3)
 PLANE_THICKNESS_M = 0.001
 #: The key of the local model's stiffness K (N/m) in the Marker's `text` ("key=value").
 STIFFNESS_KEY = "stiffness_n_per_m"
+#: The first STIFFNESS_KEY entry among the whitespace-separated entries of `text`, found without splitting it.
+_STIFFNESS_ENTRY = re.compile(rf"(?:^|\s){STIFFNESS_KEY}=(\S*)")
 
 
 def local_model_marker(model: LocalModel, stamp, frame_id: str, lifetime_s: float,
@@ -56,14 +60,14 @@ def local_model_marker(model: LocalModel, stamp, frame_id: str, lifetime_s: floa
 def _marker_stiffness(text: str) -> float | None:
     """K (N/m) from a local-model Marker's `text`: None when it carries no STIFFNESS_KEY entry; ValueError
     naming the field for a value that is not a finite number > 0."""
-    for entry in text.split():
-        key, _, value = entry.partition("=")
-        if key == STIFFNESS_KEY:
-            try:
-                return positive(float(value), f"Marker.text {STIFFNESS_KEY}")
-            except ValueError:
-                raise ValueError(f"Marker.text {STIFFNESS_KEY} must be a finite number > 0, got {value!r}") from None
-    return None
+    found = _STIFFNESS_ENTRY.search(text)
+    if found is None:
+        return None
+    value = found.group(1)
+    try:
+        return positive(float(value), f"Marker.text {STIFFNESS_KEY}")
+    except ValueError:
+        raise ValueError(f"Marker.text {STIFFNESS_KEY} must be a finite number > 0, got {value[:40]!r}") from None
 
 
 def marker_to_local_model(msg: Marker) -> tuple[LocalModel | None, float]:

@@ -89,6 +89,7 @@ class Rig:
         self.nan_pose = False
         self.model = None     # a LocalModel published as the contact marker, or None
         self.zero_quaternion = False
+        self.huge_marker = False  # a local model whose text makes the Marker 100 kB
         self.wrench = None    # a force (N) published as the physics wrench, or None
         self._publishers = {key: self.node.create_publisher(TOPICS[key].type, TOPICS[key].name,
                                                             TOPICS[key].qos if input_qos is None else input_qos)
@@ -124,6 +125,8 @@ class Rig:
             marker = local_model_marker(self.model, stamp, "liver", 0.05)
             if self.zero_quaternion:
                 marker.pose.orientation.w = 0.0
+            if self.huge_marker:
+                marker.text = "x " * 50000
             self._publishers["contact_plane"].publish(marker)
         if self.wrench is not None:
             self._publishers["tool_wrench"].publish(wrench_stamped(self.wrench, stamp, "liver"))

@@ -416,3 +416,14 @@ def test_devices_subscribe_to_force_commands_volatile_so_no_old_command_is_repla
     assert TOPICS["servo_cf"].qos.durability == DurabilityPolicy.TRANSIENT_LOCAL  # the recorder's catch-up
     assert device.durability == DurabilityPolicy.VOLATILE
     assert device.reliability == TOPICS["servo_cf"].qos.reliability and device.depth == TOPICS["servo_cf"].depth
+
+
+def test_oversized_serialized_pose_and_force_are_refused():
+    long_frame = "f" * 2000
+    with pytest.raises(ValueError, match="PoseStamped: .* bytes, more than the 1024"):
+        pose_from_bytes(pose_stamped_bytes([0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0], (1, 2), long_frame))
+    with pytest.raises(ValueError, match="WrenchStamped: .* bytes, more than the 1024"):
+        force_from_bytes("wrench_stamped", force_message_bytes("wrench_stamped", np.zeros(3), (1, 2), long_frame))
+    huge = serialize_message(force_message("float64_array", np.zeros(3), (1, 2), "f"))
+    with pytest.raises(ValueError, match="more than 1024"):
+        force_from_bytes("float64_array", huge + bytes(2000))

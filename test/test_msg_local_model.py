@@ -133,3 +133,17 @@ def test_truncated_marker_bytes_are_refused_naming_the_field(cut):
     data = serialize_message(_marker(text=f"{STIFFNESS_KEY}=34.5"))
     with pytest.raises(ValueError, match=r"^Marker(\.[a-z_.]+|, type, action)?: (not a CDR message|truncated|bad)"):
         local_model_from_bytes(data[:cut])
+
+
+def test_an_oversized_marker_is_refused_before_it_is_read():
+    data = serialize_message(_marker(text="x " * 1_000_000))  # 2 MB
+    with pytest.raises(ValueError, match=r"^Marker: 2000\d+ bytes, more than the 4096"):
+        local_model_from_bytes(data)
+
+
+@pytest.mark.parametrize("text, stiffness", [(f"note=1 {STIFFNESS_KEY}=34.5", 34.5), (f"{STIFFNESS_KEY}=7", 7.0),
+                                             (f"x{STIFFNESS_KEY}=7", None), ("", None),
+                                             (f"a\t{STIFFNESS_KEY}=2 {STIFFNESS_KEY}=3", 2.0)])
+def test_the_stiffness_is_the_first_entry_with_its_key(text, stiffness):
+    model, _ = _both_ways(_marker(text=text))
+    assert model.stiffness_n_per_m == stiffness

@@ -40,7 +40,7 @@ from liver_sim.nodes.parameters import declare_parameters, on_parameter_changes
 from liver_sim.nodes.rate_loop import RateLoop, warn
 from liver_sim.nodes.run import run_node
 from msg_defs.device_map import device_map_from_message
-from msg_defs.forces import force_from_message, force_message_bytes, force_message_type
+from msg_defs.forces import force_message_bytes, force_message_type, stamped_force_from_bytes
 from msg_defs.local_model import local_model_from_bytes
 from msg_defs.poses import pose_from_bytes
 from msg_defs.topics import TOPICS, loop_input_qos
@@ -103,7 +103,7 @@ class BridgeShell:
             self.source_topic = p["tool_wrench_topic"]
             self._source_input = self._inputs.subscribe(TOPICS["tool_wrench"].type, self.source_topic,
                                                         loop_input_qos(TOPICS["tool_wrench"]), self._on_wrench,
-                                                        received=True)
+                                                        raw=True, received=True)
         else:
             self.source_topic = p["local_model_topic"]
             self._source_input = self._inputs.subscribe(TOPICS["contact_plane"].type, self.source_topic,
@@ -270,9 +270,9 @@ class BridgeShell:
         cap = self.p["lifetime_s"]
         self._source.set((model, min(lifetime, cap) if lifetime > 0.0 else cap), received)
 
-    def _on_wrench(self, message, received: float) -> None:
+    def _on_wrench(self, data: bytes, received: float) -> None:
         try:
-            force = force_from_message("wrench_stamped", message)
+            force, stamp = stamped_force_from_bytes(data)
         except ValueError as exc:
             self._refuse("tool_wrench", str(exc))
             return
@@ -280,7 +280,7 @@ class BridgeShell:
         if problem:
             self._refuse("tool_wrench", problem)
             return
-        self._source.set((force, message.header.stamp), received)
+        self._source.set((force, stamp), received)
 
     def _refuse(self, kind: str, reason: str) -> None:
         self._bad[kind] += 1
