@@ -222,9 +222,12 @@ class BridgeShell:
         """Take the newest offered map from device_map_node only (checked against the topic's publishers: a
         message carries no sender); equal to the current one: nothing; new while in contact: refused; else
         rendered from the next tick with a soft start."""
-        self.node.destroy_timer(self._offer_timer)
-        self._offer_timer = None
+        if self._offer_timer is not None:
+            self.node.destroy_timer(self._offer_timer)
+            self._offer_timer = None
         device_map, self._offered_map = self._offered_map, None
+        if device_map is None:  # a timer event queued before the timer was destroyed
+            return
         foreign = self._foreign_map_publishers()
         if foreign:
             self._map_resubscribe = True
