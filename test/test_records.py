@@ -2,6 +2,7 @@
 import json
 import os
 import signal
+import stat
 import subprocess
 import sys
 import time
@@ -9,7 +10,7 @@ import time
 import pytest
 
 from liver_sim.base.process_settings import cli_command_line
-from liver_sim.running.launcher import RunFile, _process_start, stop_leftovers
+from liver_sim.running.launcher import RunFile, _command_line, _process_start, run_dir, stop_leftovers
 from liver_sim.sessions.bag import BagError, BagWriter, bag_info, check_bag
 from liver_sim.sessions.gaps import SequenceGaps
 
@@ -82,7 +83,7 @@ def test_leftovers_of_a_dead_run_are_stopped_and_a_live_run_is_refused(tmp_path)
     try:
         with run_file.edit() as runs:
             runs.append({"owner": [dead_owner.pid, 1], "log_dir": "old", "processes": [
-                ["liver_physics", leftover.pid, _process_start(leftover.pid), False]]})
+                ["liver_physics", leftover.pid, _process_start(leftover.pid), False, _command_line(leftover.pid)]]})
         said = []
         assert stop_leftovers(run_file, said.append) == [f"liver_physics (pid {leftover.pid})"]
         assert leftover.wait(timeout=10) == -signal.SIGTERM and "liver_physics" in said[0]
@@ -90,7 +91,7 @@ def test_leftovers_of_a_dead_run_are_stopped_and_a_live_run_is_refused(tmp_path)
         live = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(600)"])
         with run_file.edit() as runs:
             runs.append({"owner": [live.pid, _process_start(live.pid)], "log_dir": "busy", "processes": [
-                ["haptic_bridge", live.pid, _process_start(live.pid), False]]})
+                ["haptic_bridge", live.pid, _process_start(live.pid), False, _command_line(live.pid)]]})
         with pytest.raises(RuntimeError, match="choose another ROS_DOMAIN_ID"):
             stop_leftovers(run_file)
         assert live.poll() is None  # another live run's process is never touched
@@ -99,6 +100,47 @@ def test_leftovers_of_a_dead_run_are_stopped_and_a_live_run_is_refused(tmp_path)
     finally:
         leftover.kill()
         leftover.wait()
+
+
+def test_a_process_is_signalled_only_when_pid_start_and_command_line_match(tmp_path):
+    other = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(600)"], start_new_session=True)
+    dead_owner = subprocess.Popen([sys.executable, "-c", "pass"])
+    dead_owner.wait()
+    run_file = RunFile("8", tmp_path)
+    try:
+        with run_file.edit() as runs:  # the pid and start time of `other`, but the command line of a node
+            runs.append({"owner": [dead_owner.pid, 1], "log_dir": "old", "processes": [
+                ["liver_physics", other.pid, _process_start(other.pid), False, "liver_physics\0--ros-args\0"],
+                ["haptic_bridge", other.pid, _process_start(other.pid), False]]})  # no command line noted
+        assert stop_leftovers(run_file, lambda line: None) == []
+        time.sleep(0.2)
+        assert other.poll() is None, "a process that is not the one noted is never signalled"
+    finally:
+        other.kill()
+        other.wait()
+
+
+def test_run_files_live_in_a_private_directory_and_never_follow_links(tmp_path, monkeypatch):
+    monkeypatch.setenv("XDG_RUNTIME_DIR", str(tmp_path))
+    private = run_dir()
+    assert private == tmp_path / "liver_sim-runs" and stat.S_IMODE(private.stat().st_mode) == 0o700
+    target = tmp_path / "elsewhere.json"
+    target.write_text('{"runs": [{"owner": [1, 1], "log_dir": "x", "processes": [["evil", 1, 1, false, "init"]]}]}')
+    run_file = RunFile("9", private)
+    run_file.path.symlink_to(target)  # a link planted in place of the run file is neither read nor written through
+    with run_file.edit() as runs:
+        assert runs == []
+        runs.append({"owner": [os.getpid(), _process_start(os.getpid())], "log_dir": "y", "processes": [["a", 1, 1,
+                                                                                                        False, ""]]})
+    assert not run_file.path.is_symlink() and "evil" in target.read_text()
+    private.chmod(0o755)
+    with pytest.raises(RuntimeError, match="mode 755; it must be this user's"):
+        run_dir()
+    private.chmod(0o700)
+    private.rename(tmp_path / "moved")
+    (tmp_path / "liver_sim-runs").symlink_to(tmp_path / "moved")
+    with pytest.raises(RuntimeError, match="symbolic link"):
+        run_dir()
 
 
 KILLED_WRITER = """
@@ -183,7 +225,7 @@ def run_processes(ros_env):
         runs = json.loads(path.read_text())["runs"]
     except (OSError, ValueError):
         return {}
-    return {label: pid for run in runs for label, pid, _, _ in run["processes"]}
+    return {label: pid for run in runs for label, pid, *_ in run["processes"]}
 
 
 def alive(pid):

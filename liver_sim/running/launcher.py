@@ -14,6 +14,7 @@ import fcntl
 import json
 import os
 import signal
+import stat
 import subprocess
 import tempfile
 import threading
@@ -23,8 +24,6 @@ from pathlib import Path
 
 from liver_sim.base.stop_request import ENDING_SIGNALS
 
-#: Where the run files live: one per ROS domain, for this user.
-RUN_DIR = Path(tempfile.gettempdir()) / f"liver_sim-runs-{os.getuid()}"
 #: A stopping node is signalled again (SIGINT, SIGTERM, SIGKILL) after this long (s).
 STOP_TIMEOUT_S = 5.0
 #: A stopping process started `patient` (a recorder closing its bag) is signalled again only after this long
@@ -68,6 +67,47 @@ def _process_start(pid: int) -> int | None:
         return None
     fields = stat.rsplit(")", 1)[1].split()
     return None if fields[0] in ("Z", "X") else int(fields[19])
+
+
+def _command_line(pid: int) -> str | None:
+    """The command line of `pid` (arguments joined by NUL), or None when it cannot be read."""
+    try:
+        return Path(f"/proc/{pid}/cmdline").read_bytes().decode(errors="replace")
+    except OSError:
+        return None
+
+
+def _is_process(pid: int, start: int, command_line: str) -> bool:
+    """Whether `pid` is still the process that was noted: same kernel start time and same command line."""
+    return _process_start(pid) == start and _command_line(pid) == command_line
+
+
+def run_dir() -> Path:
+    """The private directory of this user's run files: $XDG_RUNTIME_DIR/liver_sim-runs (per user, 0700 by the
+    XDG spec) when it is set, else <tmp>/liver_sim-runs-<uid>. Created with mode 0700; RuntimeError naming it
+    when it is a symbolic link, not a directory, owned by another user or open to others (a planted directory
+    could name another process to be signalled)."""
+    runtime = os.environ.get("XDG_RUNTIME_DIR")
+    path = (Path(runtime) / "liver_sim-runs" if runtime
+            else Path(tempfile.gettempdir()) / f"liver_sim-runs-{os.getuid()}")
+    try:
+        os.mkdir(path, 0o700)
+    except FileExistsError:
+        pass
+    info = os.lstat(path)
+    if stat.S_ISLNK(info.st_mode) or not stat.S_ISDIR(info.st_mode):
+        raise RuntimeError(f"{path}: the run-file directory is not a directory of its own (a symbolic link or a "
+                           "file); remove it or set XDG_RUNTIME_DIR")
+    if info.st_uid != os.getuid() or info.st_mode & 0o077:
+        raise RuntimeError(f"{path}: the run-file directory belongs to uid {info.st_uid} with mode "
+                           f"{stat.S_IMODE(info.st_mode):o}; it must be this user's ({os.getuid()}) with mode 700")
+    return path
+
+
+def _open_private(path: Path, flags: int):
+    """`path` opened without following a symbolic link (mode 0600 when created), as a text file."""
+    return os.fdopen(os.open(path, flags | os.O_NOFOLLOW | os.O_CLOEXEC, 0o600), "r+" if flags & os.O_RDWR else
+                     "w" if flags & os.O_WRONLY else "r")
 
 
 def _cpu_ticks(pid: int) -> int:
@@ -115,34 +155,46 @@ def ending_signals_deferred():
 
 
 class RunFile:
-    """The run file of a ROS domain: {"runs": [{"owner": [pid, start], "log_dir", "processes": [[label, pid,
-    start, patient], …]}]}, read and written under an exclusive lock."""
+    """The run file of a ROS domain in this user's private directory (:func:`run_dir`): {"runs": [{"owner": [pid,
+    start], "log_dir", "processes": [[label, pid, start, patient, command line], …]}]}, read and written under an
+    exclusive lock, never through a symbolic link."""
 
-    def __init__(self, domain: str, run_dir: Path | None = None):
-        self.run_dir = RUN_DIR if run_dir is None else run_dir
+    def __init__(self, domain: str, directory: Path | None = None):
+        self.run_dir = run_dir() if directory is None else directory
         self.path = self.run_dir / f"domain-{domain}.json"
 
     @contextmanager
     def edit(self):
         """The runs, as a list to change in place; written back on exit."""
-        self.run_dir.mkdir(mode=0o700, parents=True, exist_ok=True)
-        with open(self.run_dir / f"{self.path.name}.lock", "a+") as lock:
+        with _open_private(self.run_dir / f"{self.path.name}.lock", os.O_RDWR | os.O_CREAT) as lock:
             fcntl.flock(lock, fcntl.LOCK_EX)
             try:
-                runs = json.loads(self.path.read_text())["runs"] if self.path.exists() else []
-            except (ValueError, KeyError, TypeError):
-                runs = []  # a damaged run file names nothing that can be trusted
+                with _open_private(self.path, os.O_RDONLY) as file:
+                    runs = json.loads(file.read())["runs"]
+            except FileNotFoundError:
+                runs = []
+            except (OSError, ValueError, KeyError, TypeError):
+                runs = []  # a damaged run file (or a link planted in its place) names nothing to be trusted
             yield runs
             runs[:] = [run for run in runs if run["processes"]]
             if runs:
-                self.path.write_text(json.dumps({"runs": runs}, indent=1) + "\n")
-            elif self.path.exists():
+                if self.path.is_symlink():
+                    self.path.unlink()
+                with _open_private(self.path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC) as file:
+                    file.write(json.dumps({"runs": runs}, indent=1) + "\n")
+            elif self.path.exists() or self.path.is_symlink():
                 self.path.unlink()
 
 
 def _alive(identity) -> bool:
     pid, start = identity
     return _process_start(pid) == start
+
+
+def _noted_alive(entry) -> bool:
+    """Whether a run file's process entry still names the process that was started: pid, start time and
+    command line all match (an entry without a command line never does)."""
+    return len(entry) >= 5 and _is_process(entry[1], entry[2], entry[4])
 
 
 def stop_leftovers(run_file: RunFile, progress=print) -> list[str]:
@@ -152,17 +204,17 @@ def stop_leftovers(run_file: RunFile, progress=print) -> list[str]:
     stopped = []
     with run_file.edit() as runs:
         for run in runs:
-            alive = [entry for entry in run["processes"] if _alive(entry[1:3])]
+            alive = [entry for entry in run["processes"] if _noted_alive(entry)]
             if _alive(run["owner"]):
                 if run["owner"] != me and alive:
                     raise RuntimeError(f"{run_file.path}: pid {run['owner'][0]} runs {', '.join(e[0] for e in alive)} "
                                        f"on this ROS domain (logs in {run['log_dir']}); stop it or choose another "
                                        "ROS_DOMAIN_ID")
                 continue
-            for label, pid, _, _ in alive:
+            for label, pid, *_ in alive:
                 os.kill(pid, signal.SIGTERM)
-            for label, pid, start, patient in alive:
-                _wait_gone(pid, start, (signal.SIGKILL,), patient)
+            for label, pid, start, patient, command_line in alive:
+                _wait_gone(pid, start, (signal.SIGKILL,), patient, command_line=command_line)
                 stopped.append(f"{label} (pid {pid})")
             run["processes"] = []
     if stopped:
@@ -170,14 +222,18 @@ def stop_leftovers(run_file: RunFile, progress=print) -> list[str]:
     return stopped
 
 
-def _wait_gone(pid: int, start: int, escalation, patient: bool, poll=None) -> None:
-    """Wait until the process (pid, start) is gone (or `poll` gives its status), sending the next signal of
-    `escalation` after STOP_TIMEOUT_S, or when `patient` once it has used no CPU time for
-    IDLE_BEFORE_ESCALATION_S (at the latest after MAX_STOP_S)."""
+def _wait_gone(pid: int, start: int, escalation, patient: bool, poll=None, command_line: str | None = None) -> None:
+    """Wait until the process (pid, start, and `command_line` when given) is gone (or `poll` gives its status),
+    sending the next signal of `escalation` after STOP_TIMEOUT_S, or when `patient` once it has used no CPU
+    time for IDLE_BEFORE_ESCALATION_S (at the latest after MAX_STOP_S)."""
     escalation = list(escalation)
     began = idle_since = time.monotonic()
     ticks = _cpu_ticks(pid)
-    while (poll is None or poll() is None) and _process_start(pid) == start:
+
+    def same() -> bool:
+        return _process_start(pid) == start and (command_line is None or _command_line(pid) == command_line)
+
+    while (poll is None or poll() is None) and same():
         now, used = time.monotonic(), _cpu_ticks(pid)
         if used != ticks:
             ticks, idle_since = used, now
@@ -193,12 +249,12 @@ class NodeProcesses:
     """Started node processes, noted in the domain's run file, stopped with SIGINT (then SIGTERM, then
     SIGKILL: see _wait_gone) on exit or stop(). `exit_codes` keeps the status of every stopped process."""
 
-    def __init__(self, log_dir: Path, progress=print, run_dir: Path | None = None):
+    def __init__(self, log_dir: Path, progress=print, run_directory: Path | None = None):
         self.log_dir = log_dir
         self.processes: dict[str, subprocess.Popen] = {}
         self.exit_codes: dict[str, int] = {}
         self._identity = [os.getpid(), _process_start(os.getpid())]
-        self._run_file = RunFile(os.environ.get("ROS_DOMAIN_ID") or "0", run_dir)
+        self._run_file = RunFile(os.environ.get("ROS_DOMAIN_ID") or "0", run_directory)
         stop_leftovers(self._run_file, progress)
 
     def start(self, label: str, args: list[str], patient: bool = False) -> subprocess.Popen:
@@ -216,7 +272,8 @@ class NodeProcesses:
                 if run is None:
                     run = {"owner": self._identity, "log_dir": str(self.log_dir), "processes": []}
                     runs.append(run)
-                run["processes"].append([label, process.pid, _process_start(process.pid), patient])
+                run["processes"].append([label, process.pid, _process_start(process.pid), patient,
+                                         _command_line(process.pid)])
         return process
 
     def stop(self, label: str | list[str] | None = None) -> dict[str, int]:
