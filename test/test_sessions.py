@@ -433,3 +433,38 @@ def test_fig8_offline_on_the_exploration_is_five_times_smoother_with_the_local_m
     for name in ("fig8.png", "force.png"):
         assert (tmp_path / name).read_bytes().startswith(PNG)
     assert json.loads((tmp_path / "fig8.json").read_text())["smoothness_ratio"] == figures["smoothness_ratio"]
+
+
+DEVICE_DRIVER = """
+import time, rclpy
+from geometry_msgs.msg import PoseStamped
+rclpy.init()
+node = rclpy.create_node("omni_driver")
+node.create_publisher(PoseStamped, "/phantom/measured_cp", 1)
+print("up", flush=True)
+time.sleep(60)
+"""
+
+
+@pytest.mark.parametrize("occupant", ["haptic_bridge", "device"])
+def test_demo_and_replay_refuse_a_domain_where_a_bridge_or_a_device_runs(ros_env, tmp_path, occupant):
+    args = ([sys.executable, "-m", "liver_sim.nodes.bridge_node"] if occupant == "haptic_bridge"
+            else [sys.executable, "-c", DEVICE_DRIVER])
+    log = open(tmp_path / "running.log", "w")
+    running = subprocess.Popen(args, env=ros_env, stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
+    found = ("node /haptic_bridge" if occupant == "haptic_bridge"
+             else "node /omni_driver publishing /phantom/measured_cp")
+    bag = pose_bag(tmp_path / "poses")
+    try:
+        for command in (["demo", "--duration", "5", "--out", str(tmp_path / "demo")],
+                        ["replay", str(bag), "--delay", "0"]):
+            result = subprocess.run(cli_command_line(*command), env=ros_env, capture_output=True, text=True,
+                                    timeout=120)
+            assert result.returncode == 2, result.stdout + result.stderr
+            assert "already has" in result.stderr and found in result.stderr, result.stderr
+            assert "ROS_DOMAIN_ID of its own" in result.stderr
+        assert running.poll() is None, "what ran on the domain was left alone"
+    finally:
+        running.send_signal(signal.SIGINT)
+        running.wait(timeout=10)
+        log.close()

@@ -40,6 +40,7 @@ from liver_sim.mesh.io import (
 )
 from liver_sim.mesh.liver_shape import build_liver, default_liver
 from liver_sim.mesh.tetmesh import TetMesh
+from liver_sim.nodes.occupants import DomainOccupied
 from liver_sim.running.launcher import NodeFailure
 from liver_sim.sessions.bag import STORAGES
 
@@ -418,6 +419,9 @@ def main(argv=None) -> int:
     except NodeFailure as exc:  # names the node, its status and the end of its log
         print(f"{PROG}: error: {exc}", file=sys.stderr)
         return EXIT_NODE_FAILED
+    except DomainOccupied as exc:  # names what already runs on the domain
+        print(f"{PROG}: error: {exc}", file=sys.stderr)
+        return EXIT_REFUSED
 
 
 if __name__ == "__main__":

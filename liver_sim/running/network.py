@@ -21,6 +21,7 @@ from liver_sim.analysis import rate_figures
 from liver_sim.base.process_settings import command_line, printable
 from liver_sim.mesh.landmarks import press_anchor
 from liver_sim.mesh.liver_shape import default_liver
+from liver_sim.nodes.occupants import refuse_occupied
 from liver_sim.nodes.run import spin
 from liver_sim.running.launcher import NodeProcesses, log_tail
 from liver_sim.running.listener import NetworkListener, NetworkSnapshot
@@ -151,7 +152,8 @@ def run_network(plan: NetworkPlan, duration_s: float, log_dir: Path, progress=pr
     loads = []
     sentinels = Sentinels(log_dir)
     try:
-        processes = NodeProcesses(log_dir, progress)
+        processes = NodeProcesses(log_dir, progress)  # first stops what a dead run of this user left
+        refuse_occupied(listener, "this run")
         for label, args in plan.observers.items():
             processes.start(label, args, patient=True)
         _wait_until(listener, processes, f"the recorder(s) {', '.join(plan.observers)} (ready and subscribed)",

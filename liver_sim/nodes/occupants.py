@@ -1,0 +1,55 @@
+"""Who else is on a ROS domain: the product's nodes and a haptic device, as the ROS graph shows them.
+
+`liver-sim demo`, `bench loop` and `replay` start nodes or publish the product's topics; on a domain where
+a bridge, a physics or a device already runs they would drive the same device (two bridges interleaving
+their commands defeat the rate limit) or feed the running nodes. They look first and refuse
+(:func:`refuse_occupied`). `ROS_DOMAIN_ID` 0 is shared by every user of a host.
+"""
+from __future__ import annotations
+
+import os
+import time
+
+from liver_sim.base.topic_names import TOPIC_NAMES
+
+#: The product's node names (each node's loop inputs live in a hidden node `_<name>_loop`).
+PRODUCT_NODES = ("liver_physics", "haptic_bridge", "liver_tool", "phantom_sim")
+#: How long (s) a new participant lets discovery run before it reads the graph.
+DISCOVERY_WAIT_S = 2.0
+
+
+class DomainOccupied(RuntimeError):
+    """The ROS domain already has the product's nodes or a device: names them."""
+
+
+def _owner(name: str) -> str:
+    """The node a hidden loop-input node `_<name>_loop` belongs to; other names as they are."""
+    return name[1:].removesuffix("_loop") if name.startswith("_") else name
+
+
+def domain_occupants(node, ignore: tuple[str, ...] = ()) -> list[str]:
+    """What already runs on `node`'s domain: the product's nodes, and any node publishing the device's measured
+    pose (a device driver) or its force command (another bridge); `node` itself and the nodes named in `ignore`
+    aside (with their hidden loop-input nodes). Subscribers are observers (a viewer, a recorder) and welcome.
+    A node killed hard stays in the graph until its DDS lease ends (about 20 s)."""
+    ignored = {node.get_name(), *ignore}
+    found = []
+    for name, namespace in node.get_node_names_and_namespaces():
+        if _owner(name) in PRODUCT_NODES and _owner(name) not in ignored:
+            found.append(f"node {namespace.rstrip('/')}/{_owner(name)}")
+    for topic in (TOPIC_NAMES["measured_cp"], TOPIC_NAMES["servo_cf"]):
+        for info in node.get_publishers_info_by_topic(topic):
+            owner = _owner(info.node_name)
+            if owner not in PRODUCT_NODES and owner not in ignored:
+                found.append(f"node {info.node_namespace.rstrip('/')}/{owner} publishing {topic}")
+    return sorted(set(found))
+
+
+def refuse_occupied(node, what: str, ignore: tuple[str, ...] = (), wait_s: float = DISCOVERY_WAIT_S) -> None:
+    """After `wait_s` of discovery, DomainOccupied naming what :func:`domain_occupants` finds on the domain."""
+    time.sleep(wait_s)
+    occupants = domain_occupants(node, ignore)
+    if occupants:
+        raise DomainOccupied(f"ROS_DOMAIN_ID={os.environ.get('ROS_DOMAIN_ID', '0')} already has "
+                           f"{'; '.join(occupants)}: {what} would share its device and topics; stop them or give "
+                           "this run a ROS_DOMAIN_ID of its own")
