@@ -76,8 +76,10 @@ def stop(process: subprocess.Popen) -> None:
 class Rig:
     """The test side: a node in its own context publishing the inputs every 10 ms and keeping the forces."""
 
-    def __init__(self, force_output: str = "wrench_stamped", rotation_xyzw=(0.0, 0.0, 0.0, 1.0), input_qos=None):
-        """`input_qos`: the QoS of the tool pose, local model and wrench publishers (default: the contract's)."""
+    def __init__(self, force_output: str = "wrench_stamped", rotation_xyzw=(0.0, 0.0, 0.0, 1.0), input_qos=None,
+                 names=None):
+        """`input_qos`: the QoS of the tool pose, local model and wrench publishers (default: the contract's);
+        `names`: other topic names for them (key of TOPICS → name)."""
         self.context = rclpy.Context()
         rclpy.init(context=self.context, signal_handler_options=SignalHandlerOptions.NO)
         self.node = rclpy.create_node("test_haptic_bridge", context=self.context)
@@ -91,7 +93,7 @@ class Rig:
         self.zero_quaternion = False
         self.huge_marker = False  # a local model whose text makes the Marker 100 kB
         self.wrench = None    # a force (N) published as the physics wrench, or None
-        self._publishers = {key: self.node.create_publisher(TOPICS[key].type, TOPICS[key].name,
+        self._publishers = {key: self.node.create_publisher(TOPICS[key].type, (names or {}).get(key, TOPICS[key].name),
                                                             TOPICS[key].qos if input_qos is None else input_qos)
                             for key in ("tool_pose", "contact_plane", "tool_wrench")}
         self.node.create_subscription(force_message_type(force_output), TOPICS["servo_cf"].name,

@@ -1,6 +1,8 @@
 """What haptic_bridge takes its inputs from, as a real process: publishers with ROS's default QoS (reliable,
 volatile) are rendered like the product's own, and a publisher's transient-local history is never taken as a
-fresh input when the bridge (re)matches it."""
+fresh input when the bridge (re)matches it; remapped inputs reach the loop."""
+import sys
+
 import numpy as np
 
 from bridge_rig import ABOVE, EXPECTED_INSIDE, INSIDE, QUARTER_TURN_X, assert_safe, local_model, start_bridge, stop
@@ -35,3 +37,17 @@ def test_an_old_local_model_kept_by_its_publisher_is_not_rendered_when_the_bridg
         stop(bridge)
     assert_safe(rig.forces)
     assert not np.array(rig.forces).any(), "a force was rendered from a local model sent before the bridge ran"
+
+
+def test_remapped_inputs_reach_the_loop(rig_factory, ros_env):
+    rig = rig_factory(rotation_xyzw=QUARTER_TURN_X,
+                      names={"tool_pose": "/rig/tool_pose", "contact_plane": "/rig/contact_plane"})
+    rig.model, rig.tool = local_model("plane"), INSIDE
+    bridge = start_bridge(ros_env, [sys.executable, "-m", "liver_sim.nodes.bridge_node", "--ros-args",
+                                    "-r", "/tool/pose:=/rig/tool_pose",
+                                    "-r", "/liver/contact_plane:=/rig/contact_plane", "--"])
+    try:
+        rig.wait_for_force(EXPECTED_INSIDE, bridge)  # the loop's own subscriptions took the remaps
+    finally:
+        stop(bridge)
+    assert_safe(rig.forces)

@@ -163,7 +163,7 @@ class BridgeShell:
         """Note every publisher on force_topic but this bridge's own: two bridges interleaving their commands
         would defeat the rate limit and the watchdog, so while any other publishes there, this one sends zero."""
         names = [f"{info.node_namespace.rstrip('/')}/{info.node_name}"
-                 for info in self.node.get_publishers_info_by_topic(self.p["force_topic"])]
+                 for info in self.node.get_publishers_info_by_topic(self._publisher.topic_name)]
         own = f"{self.node.get_namespace().rstrip('/')}/{self.node.get_name()}"
         if own in names:
             names.remove(own)
@@ -184,7 +184,7 @@ class BridgeShell:
     def _foreign_map_publishers(self) -> list[str]:
         """The nodes other than device_map_node that publish on device_map_topic."""
         names = {f"{info.node_namespace.rstrip('/')}/{info.node_name}"
-                 for info in self.node.get_publishers_info_by_topic(self.p["device_map_topic"])}
+                 for info in self.node.get_publishers_info_by_topic(self._map_subscription.topic_name)}
         return sorted(names - {self.p["device_map_node"]})
 
     def _refuse_map(self, reason: str) -> None:

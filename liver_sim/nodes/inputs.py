@@ -38,6 +38,7 @@ class LoopInputs:
     """
 
     def __init__(self, node):
+        self._owner = node
         self._node = rclpy.create_node(f"_{node.get_name()}_loop", context=node.context,
                                        use_global_arguments=False, start_parameter_services=False,
                                        enable_rosout=False)
@@ -45,8 +46,10 @@ class LoopInputs:
 
     def subscribe(self, msg_type, topic: str, qos, callback, raw: bool = False, every: bool = False,
                   received: bool = False):
-        """Subscribe; returns the subscription (its get_publisher_count() tells whether anyone publishes)."""
-        subscription = self._node.create_subscription(msg_type, topic, callback, qos, raw=raw)
+        """Subscribe to `topic` as the owning node names it (its namespace and remappings, `-r from:=to`,
+        applied); returns the subscription (its get_publisher_count() tells whether anyone publishes)."""
+        resolved = self._owner.resolve_topic_name(topic)
+        subscription = self._node.create_subscription(msg_type, resolved, callback, qos, raw=raw)
         self._inputs.append((subscription, callback, every, received))
         return subscription
 
