@@ -5,9 +5,12 @@ The loop calls :meth:`Supervisor.beat` at the start of each tick, sends its comm
 :meth:`Supervisor.send` and reports an exception of its step with :meth:`Supervisor.error`. A thread that is
 not the loop (:meth:`Supervisor.start`) checks every `bound_s`/2 that the loop has ticked within `bound_s`;
 when it has not, or the loop has ended, it publishes a zero force and repeats it every `bound_s` until the
-loop is back. While tripped the loop's own commands are dropped (under the same lock as the zero, so no
-command computed before a stall reaches the wire after its zero), and the loop's first tick after a trip is
-told to restart its output from zero (soft start). :meth:`close` sends the last zero and lets nothing after it.
+loop is back. The zeros go through a publisher of their own (`publish_zero`): a publish of the loop held up
+in the middleware (a transient-local reader joining holds the writer ~50 ms) holds up neither the trip nor
+its zero. While tripped the loop's own commands are dropped, and a command the loop was publishing when the
+zero went is followed by another zero once its publish returns, so the last word on the wire is zero; the
+loop's first tick after a trip is told to restart its output from zero (soft start). :meth:`close` sends the
+last zero and lets nothing after it but zero.
 
 A supervisor in the loop's own interpreter cannot preempt a loop that holds the GIL: the device driver's own
 command timeout stays the last line of defence (docs/haptic-safety.md).
@@ -73,14 +76,16 @@ class GapLog:
 class Supervisor:
     """Holds the device at zero force while the loop is stalled, failing or gone (see the module doc).
 
-    `publish(message)` puts a command on the wire; `zero_message()` builds a zero-force one; `loop_alive()`
-    says whether the loop thread still runs; `period_s` is the loop's period (for the gap log).
+    `publish(message)` puts the loop's command on the wire; `publish_zero(message)` the supervisor's zeros (its
+    own writer on the same topic; default `publish`); `zero_message()` builds a zero-force command;
+    `loop_alive()` says whether the loop thread still runs; `period_s` is the loop's period (for the gap log).
     """
 
     def __init__(self, bound_s: float, period_s: float, publish, zero_message, loop_alive=lambda: True,
-                 clock=time.monotonic, realtime_priority: int = 0):
+                 clock=time.monotonic, realtime_priority: int = 0, publish_zero=None):
         self.bound_s = positive(bound_s, "bound_s")
         self._publish, self._zero_message, self._loop_alive, self._clock = publish, zero_message, loop_alive, clock
+        self._publish_zero = publish if publish_zero is None else publish_zero
         self._lock = threading.Lock()
         self._beat = clock()
         self._last_zero = -math.inf
@@ -115,12 +120,18 @@ class Supervisor:
             return False
 
     def send(self, message) -> bool:
-        """Publish the loop's command unless the output is held at zero; whether it was published."""
+        """Publish the loop's command unless the output is held at zero; whether it was published. The publish
+        runs outside the lock: if the output was tripped or closed meanwhile, a zero follows it."""
         with self._lock:
             if self.tripped is not None or self._closed:
                 return False
+        try:
             self._publish(message)
-            return True
+        finally:
+            with self._lock:
+                if self.tripped is not None or self._closed:
+                    self._send_zero(self._clock())
+        return True
 
     def error(self, now_s: float, exc: BaseException) -> None:
         """The loop's step raised `exc`: zero now; the next tick restarts from zero."""
@@ -183,7 +194,7 @@ class Supervisor:
     def _send_zero(self, now_s: float) -> None:
         self._last_zero = now_s
         try:
-            self._publish(self._zero_message())
+            self._publish_zero(self._zero_message())
             self.zeros_sent += 1
         except Exception:  # the context is gone: nothing can be sent any more
             self.publish_failures += 1

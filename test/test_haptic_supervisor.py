@@ -2,6 +2,7 @@
 input plausibility, the no-latch depth rate and passivity in every mode."""
 import itertools
 import math
+import threading
 import time
 
 import numpy as np
@@ -52,6 +53,29 @@ def test_a_stall_publishes_zero_holds_it_and_drops_the_loops_late_command():
     assert sup.send("F2") and wire.sent[-1] == "F2"
     report = sup.report(0.012, since_s=0.0)
     assert report["error"] and report["stalls"] == 1 and "no tick within 5 ms" in report["events"][0].cause
+
+
+def test_a_publish_held_up_in_the_middleware_holds_up_neither_the_trip_nor_its_zero():
+    wire = Wire()  # one topic, two writers: the loop's and the supervisor's
+    held, release = threading.Event(), threading.Event()
+
+    def slow_publish(message) -> None:  # the loop's writer, held ~50 ms by a transient-local reader joining
+        held.set()
+        release.wait(5.0)
+        wire.publish(message)
+
+    now = [0.001]
+    sup = Supervisor(0.005, 0.001, slow_publish, lambda: ZERO, clock=lambda: now[0], publish_zero=wire.publish)
+    sup.beat(0.001)
+    loop = threading.Thread(target=sup.send, args=("F held",))
+    loop.start()
+    assert held.wait(5.0)
+    now[0] = 0.0065
+    sup.check(now[0])  # returns at once: the loop's publish does not hold the lock
+    assert wire.sent == [ZERO] and sup.tripped is not None
+    release.set()
+    loop.join(5.0)
+    assert wire.sent == [ZERO, "F held", ZERO], "a zero follows the command that was held up"
 
 
 def test_an_error_zeroes_and_the_next_tick_restarts():

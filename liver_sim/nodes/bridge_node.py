@@ -50,6 +50,8 @@ from msg_defs.topics import TOPICS, loop_input_qos
 MAP_SOURCE_CHECK_S = 0.2
 #: How often (s) the bridge looks for another publisher on its force topic (a second bridge on the device).
 RIVAL_CHECK_S = 0.1
+#: The bridge's own writers on its force topic: the loop's and the supervisor's zeros.
+OWN_FORCE_WRITERS = 2
 #: How long (s) close waits for the driver to acknowledge the last zero (and a recorder the last diagnostics).
 ZERO_ACK_TIMEOUT_S = 1.0
 
@@ -92,6 +94,9 @@ class BridgeShell:
         self._loop = self.supervisor = None
         self._publisher = node.create_publisher(force_message_type(p["force_output"]), p["force_topic"],
                                                 TOPICS["servo_cf"].qos)
+        # the supervisor's zeros: a writer of their own, not held up by a publish of the loop
+        self._zero_publisher = node.create_publisher(force_message_type(p["force_output"]), p["force_topic"],
+                                                     TOPICS["servo_cf"].qos)
         self._diagnostics = node.create_publisher(TOPICS["diagnostics"].type, TOPICS["diagnostics"].name,
                                                   TOPICS["diagnostics"].qos)
         self._map_subscription = self._subscribe_map()
@@ -123,7 +128,8 @@ class BridgeShell:
                               realtime_priority=p["realtime_priority"], on_refused=warn(self.node))
         self.supervisor = Supervisor(p["stall_bound_s"], self._loop.period_s, self._publisher.publish,
                                      self._zero_message, self._loop.is_alive,
-                                     realtime_priority=p["realtime_priority"])
+                                     realtime_priority=p["realtime_priority"],
+                                     publish_zero=self._zero_publisher.publish)
         self._loop.start()
         self.supervisor.start()
 
@@ -135,7 +141,7 @@ class BridgeShell:
             self.supervisor.close(cause)
             self._loop.stop()
             deadline = time.monotonic() + ZERO_ACK_TIMEOUT_S
-            for publisher in (self._publisher, self._diagnostics):
+            for publisher in (self._publisher, self._zero_publisher, self._diagnostics):
                 try:
                     publisher.wait_for_all_acked(Duration(seconds=max(0.0, deadline - time.monotonic())))
                 except Exception:  # noqa: BLE001 — a context already gone: nothing more can be done here
@@ -149,6 +155,7 @@ class BridgeShell:
         self.node.destroy_timer(self._timer)
         self.node.destroy_subscription(self._map_subscription)
         self.node.destroy_publisher(self._publisher)
+        self.node.destroy_publisher(self._zero_publisher)
         self.node.destroy_publisher(self._diagnostics)
 
     # -- run-time parameters (executor thread)
@@ -165,10 +172,11 @@ class BridgeShell:
         names = [f"{info.node_namespace.rstrip('/')}/{info.node_name}"
                  for info in self.node.get_publishers_info_by_topic(self._publisher.topic_name)]
         own = f"{self.node.get_namespace().rstrip('/')}/{self.node.get_name()}"
-        if own in names:
-            names.remove(own)
-        elif names:
-            names.pop()  # ours, under a name the graph has not caught up with
+        for _ in range(OWN_FORCE_WRITERS):  # the loop's and the supervisor's
+            if own in names:
+                names.remove(own)
+            elif names:
+                names.pop()  # ours, under a name the graph has not caught up with
         if names and not self._rivals:
             self.node.get_logger().error(f"another publisher on {self.p['force_topic']} ({', '.join(names)}): "
                                          "sending zero, not driving the device while it publishes there")
