@@ -12,9 +12,11 @@ from sensor_msgs.msg import PointCloud2
 
 from liver_sim.base.process_settings import command_line
 from liver_sim.nodes.run import spin
+from liver_sim.running import listener as listener_module
 from liver_sim.running.launcher import NodeProcesses
 from liver_sim.running.listener import NetworkListener
 from liver_sim.running.network import default_anchor
+from msg_defs.forces import wrench_stamped_bytes
 from msg_defs.point_cloud import nodes_to_pointcloud2
 from msg_defs.poses import pose_stamped
 from msg_defs.topics import TOPICS
@@ -337,3 +339,26 @@ def test_loop_bench_reports_every_figure_against_its_target(ros_domain_id, tmp_p
     for gap in results["haptic_gaps_over_target"]:
         assert gap["gap_s"] > LOOP_TARGETS["haptic_max_gap_s_max"]
         assert gap["product_s"] == pytest.approx(gap["gap_s"] - gap["machine_s"])
+
+
+def test_the_listener_keeps_a_bounded_window_and_lets_decoded_bytes_go(ros_domain_id, monkeypatch):
+    monkeypatch.setattr(listener_module, "MAX_KEPT_S", 1.0)
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    listener = NetworkListener({"local_model": ("/phantom/servo_cf", "wrench_stamped")}, context=context)
+    try:
+        received = listener._received["force", "local_model"]
+        now_ns = time.time_ns()
+        for second in range(5):  # five batches, one a second apart, as DDS would hand them over
+            for k in range(100):
+                t_ns = now_ns + second * 10**9 + k * 10**7
+                received.append((wrench_stamped_bytes([0.0, 0.0, second], (1, 0), "phantom_base"),
+                                 {"received_timestamp": t_ns, "source_timestamp": t_ns}))
+            listener.decode()
+            assert not received, "decoded bytes are let go"
+        arrival, forces = listener.snapshot().forces["local_model"]
+        assert arrival.max() - arrival.min() <= 1.0 + 1e-6 and len(arrival) <= 200
+        assert forces[-1][2] == 4.0
+    finally:
+        listener.destroy_node()
+        context.try_shutdown()

@@ -24,6 +24,9 @@ POLL_RATE_HZ = 200.0
 #: Messages each stream keeps between two polls: 5 s of the 1 kHz commands, so that a listener starved of CPU
 #: for seconds (normal priority beside real-time nodes and a busy machine) loses nothing it must measure.
 HISTORY_DEPTH = 5000
+#: What the listener keeps (s of each stream, counted back from its newest message): its memory is bounded
+#: however long a run lasts; a longer run's figures cover its last MAX_KEPT_S.
+MAX_KEPT_S = 600.0
 
 
 @dataclass(frozen=True)
@@ -116,10 +119,18 @@ class NetworkListener(Node):
         self._polled.subscribe(msg_type, topic, batch_qos(row, HISTORY_DEPTH), keep, raw=True, every=True)
 
     def _new(self, key) -> list:
-        """The messages under `key` not decoded yet: (arrival here s, publication s, bytes), both times as
-        DDS stamped them, on the time.monotonic() scale."""
+        """The messages under `key` not decoded yet, taken out of the received ones (whose bytes then go): (arrival
+        here s, publication s, bytes), both times as DDS stamped them, on the time.monotonic() scale. The decoded
+        rows of `key` older than MAX_KEPT_S before the newest are dropped."""
         with self._lock:
-            new = self._received[key][len(self._decoded[key]):]
+            received = self._received[key]
+            new = received[:]
+            del received[:]
+        decoded = self._decoded[key]
+        if new and decoded:
+            oldest = new[-1][1]["received_timestamp"] * 1e-9 + self._monotonic_minus_wall_s - MAX_KEPT_S
+            cut = next((i for i, row in enumerate(decoded) if row[0] >= oldest), len(decoded))
+            del decoded[:cut]
         offset = self._monotonic_minus_wall_s
         return [(info["received_timestamp"] * 1e-9 + offset, info["source_timestamp"] * 1e-9 + offset, data)
                 for data, info in new]
@@ -193,6 +204,15 @@ class NetworkListener(Node):
         with self._lock:
             for status in message.status:
                 self.diagnostics[status.name] = {kv.key: kv.value for kv in status.values}
+
+    def decode(self) -> None:
+        """Decode what has arrived so far (its bytes go; see :meth:`_new`): called once a second during a run,
+        so that the listener's memory stays bounded."""
+        for label in self._force_formats:
+            self._decode_forces(label)
+        self._decode_tool_poses()
+        self._decode_nodes()
+        self._decode_wrenches()
 
     def snapshot(self) -> NetworkSnapshot:
         """Copies of everything received so far, as numpy arrays where that fits.

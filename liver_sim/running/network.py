@@ -181,6 +181,7 @@ def run_network(plan: NetworkPlan, duration_s: float, log_dir: Path, progress=pr
         start = time.monotonic()
         while time.monotonic() - start < duration_s:
             time.sleep(min(1.0, duration_s - (time.monotonic() - start)))
+            listener.decode()  # its memory stays bounded however long the run
             processes.check("while running")
             progress(f"  {time.monotonic() - start:5.1f} / {duration_s:.1f} s")
         window = (start, time.monotonic())
