@@ -455,7 +455,9 @@ def test_demo_and_replay_refuse_a_domain_where_a_bridge_or_a_device_runs(ros_env
     found = ("node /haptic_bridge" if occupant == "haptic_bridge"
              else "node /omni_driver publishing /phantom/measured_cp")
     bag = pose_bag(tmp_path / "poses")
+    up = "haptic_bridge: 1000 Hz" if occupant == "haptic_bridge" else "up"
     try:
+        wait_for(lambda: up in (tmp_path / "running.log").read_text(), 60.0, f"the {occupant} to come up")
         for command in (["demo", "--duration", "5", "--out", str(tmp_path / "demo")],
                         ["replay", str(bag), "--delay", "0"]):
             result = subprocess.run(cli_command_line(*command), env=ros_env, capture_output=True, text=True,
