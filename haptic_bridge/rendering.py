@@ -7,7 +7,7 @@ Everything here works on 3-vectors in metres and newtons, without ROS.
 """
 from __future__ import annotations
 
-from dataclasses import replace
+import math
 
 import numpy as np
 
@@ -25,16 +25,19 @@ def blend(start: LocalModel | None, target: LocalModel, fraction: float) -> Loca
     f = min(max(float(fraction), 0.0), 1.0)
     if f >= 1.0 or start is None or start.kind != target.kind or not (start.valid and target.valid):
         return target
+    fields = {}
     if start.stiffness_n_per_m is not None and target.stiffness_n_per_m is not None:
-        target = replace(target, stiffness_n_per_m=start.stiffness_n_per_m
-                         + f * (target.stiffness_n_per_m - start.stiffness_n_per_m))
+        fields["stiffness_n_per_m"] = (start.stiffness_n_per_m
+                                       + f * (target.stiffness_n_per_m - start.stiffness_n_per_m))
     if target.kind == "plane":
         normal = (1.0 - f) * start.normal + f * target.normal
-        if not np.linalg.norm(normal) > 1e-9:
+        length = math.hypot(*normal)
+        if not length > 1e-9:
             return target
-        return replace(target, point=start.point + f * (target.point - start.point), normal=normal)
-    return replace(target, centre=start.centre + f * (target.centre - start.centre),
-                   radius_m=start.radius_m + f * (target.radius_m - start.radius_m))
+        return LocalModel.derived(target, point=start.point + f * (target.point - start.point),
+                                  normal=normal / length, **fields)
+    return LocalModel.derived(target, centre=start.centre + f * (target.centre - start.centre),
+                              radius_m=start.radius_m + f * (target.radius_m - start.radius_m), **fields)
 
 
 class ModelGlide:

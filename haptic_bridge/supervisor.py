@@ -3,7 +3,7 @@ command, and an account of every stall, error and gap.
 
 The loop calls :meth:`Supervisor.beat` at the start of each tick, sends its command through
 :meth:`Supervisor.send` and reports an exception of its step with :meth:`Supervisor.error`. A thread that is
-not the loop (:meth:`Supervisor.start`) checks every `bound_s`/2 that the loop has ticked within `bound_s`;
+not the loop (:meth:`Supervisor.start`) checks, when the bound would run out, that the loop has ticked within `bound_s`;
 when it has not, or the loop has ended, it publishes a zero force and repeats it every `bound_s` until the
 loop is back. The zeros go through a publisher of their own (`publish_zero`): a publish of the loop held up
 in the middleware (a transient-local reader joining holds the writer ~50 ms) holds up neither the trip nor
@@ -30,6 +30,8 @@ from liver_sim.base.process_settings import set_realtime_priority
 
 #: How many stall/error/stop events the supervisor keeps for diagnostics.
 EVENT_HISTORY = 32
+#: The supervisor wakes this long (s) after the bound would run out, so that the bound has run out.
+WAKE_SLACK_S = 0.0001
 
 
 @dataclass
@@ -155,7 +157,8 @@ class Supervisor:
                 self._send_zero(now_s)
 
     def start(self) -> None:
-        """Run :meth:`check` every `bound_s`/2 in a thread of its own."""
+        """Run :meth:`check` in a thread of its own, woken when the bound would run out (WAKE_SLACK_S after the
+        newest beat + `bound_s`, or after the last zero + `bound_s` while tripped), not on a fixed period."""
         self._beat = self._clock()
         self._thread = threading.Thread(target=self._run, name="haptic_supervisor", daemon=True)
         self._thread.start()
@@ -176,7 +179,11 @@ class Supervisor:
 
     def _run(self) -> None:
         set_realtime_priority(self.realtime_priority)  # as the loop: a refusal is the loop's to report
-        while not self._stopping.wait(self.bound_s / 2.0):
+        while True:
+            with self._lock:
+                due = (self._last_zero if self.tripped is not None else self._beat) + self.bound_s
+            if self._stopping.wait(max(0.0, due - self._clock()) + WAKE_SLACK_S):
+                return
             self.check(self._clock())
 
     def _record(self, kind: str, start_s: float, cause: str) -> Event:

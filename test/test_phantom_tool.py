@@ -244,3 +244,15 @@ def test_explore_taps_and_strokes_the_surface_at_hand_speed():
     assert in_contact_travel[np.diff(stroke) == 1].sum() > 2 * SETTINGS.slide_m  # strokes along the surface at depth
     with pytest.raises(ValueError, match="hand_speed_m_s"):
         make_script("explore", replace(SETTINGS, hand_speed_m_s=0.0))
+
+
+def test_a_device_samples_liver_orientation_is_the_map_rotation_times_its_own(rng):
+    for _ in range(200):
+        device_map = DeviceMap(rng.normal(size=4), rng.normal(size=3) * 0.1, float(rng.uniform(0.5, 2.0)))
+        orientation = rng.normal(size=4) * 10.0 ** rng.uniform(-3, 3)
+        _, liver = device_map.pose(rng.normal(size=3) * 0.05, orientation)
+        expected = matrix_to_quaternion(device_map.rotation @ quaternion_to_matrix(orientation))
+        np.testing.assert_allclose(liver, expected, atol=1e-12)
+        assert liver[3] >= 0.0 and math.isclose(np.linalg.norm(liver), 1.0)
+    with pytest.raises(ValueError, match="quaternion must be a finite, non-zero"):
+        DeviceMap().pose(np.zeros(3), [0.0, 0.0, 0.0, 0.0])

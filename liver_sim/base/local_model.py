@@ -66,6 +66,16 @@ class LocalModel:
                                                                    "LocalModel.stiffness_n_per_m"))
 
     @classmethod
+    def derived(cls, model: LocalModel, **fields) -> LocalModel:
+        """`model` with `fields` replaced, without the checks: only for values computed from checked models (a
+        blend of two, 1 kHz), which are finite already; a new normal must be a unit (3,) array. Building a
+        checked model costs about 40 µs, a fifth of the haptic tick's budget."""
+        derived = object.__new__(cls)
+        for name in cls.__dataclass_fields__:
+            object.__setattr__(derived, name, fields[name] if name in fields else getattr(model, name))
+        return derived
+
+    @classmethod
     def invalid(cls) -> LocalModel:
         """No surface near the tool."""
         return cls("plane", False, _ZERO, _UP, _ZERO, 0.0, 0.0, False)

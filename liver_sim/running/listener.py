@@ -206,8 +206,8 @@ class NetworkListener(Node):
                 self.diagnostics[status.name] = {kv.key: kv.value for kv in status.values}
 
     def decode(self) -> None:
-        """Decode what has arrived so far (its bytes go; see :meth:`_new`): called once a second during a run,
-        so that the listener's memory stays bounded."""
+        """Decode what has arrived so far (its bytes go; see :meth:`_new`): called every few seconds during a
+        run, so that the listener's memory stays bounded."""
         for label in self._force_formats:
             self._decode_forces(label)
         self._decode_tool_poses()

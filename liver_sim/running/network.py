@@ -29,6 +29,8 @@ from liver_sim.running.machine_stalls import Sentinels, gaps_with_stalls
 from liver_sim.sessions.record import READY, RECORDER_NODE
 from msg_defs.topics import TOPICS
 
+#: How often (s) the listener decodes what it received during a run (and lets the bytes go).
+DECODE_EVERY_S = 10.0
 #: The scripted hand waits this long (s) before moving: DDS discovery of a new process takes seconds,
 #: and the press must not begin before the tool node relays the stylus.
 DEVICE_START_DELAY_S = 3.0
@@ -179,9 +181,12 @@ def run_network(plan: NetworkPlan, duration_s: float, log_dir: Path, progress=pr
         pids.update({"listener": os.getpid(), **{f"extra_load_{k + 1}": p.pid for k, p in enumerate(loads)}})
         before = {label: process_counters(pid) for label, pid in pids.items()}
         start = time.monotonic()
+        decoded = start
         while time.monotonic() - start < duration_s:
             time.sleep(min(1.0, duration_s - (time.monotonic() - start)))
-            listener.decode()  # its memory stays bounded however long the run
+            if time.monotonic() - decoded >= DECODE_EVERY_S:
+                listener.decode()  # its memory stays bounded however long the run
+                decoded = time.monotonic()
             processes.check("while running")
             progress(f"  {time.monotonic() - start:5.1f} / {duration_s:.1f} s")
         window = (start, time.monotonic())

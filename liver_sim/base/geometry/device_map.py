@@ -6,6 +6,7 @@ One type and one parameter set serve every node that maps between the two frames
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -64,6 +65,7 @@ class DeviceMap:
         object.__setattr__(self, "scale", positive(self.scale, "DeviceMap.scale"))
         object.__setattr__(self, "workspace_radius_m",
                            positive(self.workspace_radius_m, "DeviceMap.workspace_radius_m"))
+        object.__setattr__(self, "_quaternion", tuple(matrix_to_quaternion(self.rotation).tolist()))
 
     def same_as(self, other: DeviceMap | None) -> bool:
         """Whether `other` maps every point and force as this map does (the workspace radius aside)."""
@@ -97,9 +99,23 @@ class DeviceMap:
         position = np.asarray(position, dtype=np.float64)
         if not np.isfinite(position).all():
             raise ValueError(f"device position {position.tolist()} is not finite")
-        distance = float(np.linalg.norm(position))
+        distance = math.hypot(*position) if position.shape == (3,) else float(np.linalg.norm(position))
         if distance > self.workspace_radius_m:
             raise ValueError(f"device position {np.round(position, 4).tolist()} m is {distance:.3g} m from the "
                              f"device origin, beyond workspace_radius_m={self.workspace_radius_m:g}")
-        rotation = self.rotation @ quaternion_to_matrix(orientation_xyzw)
-        return self.device_to_liver(position), matrix_to_quaternion(rotation)
+        return self.device_to_liver(position), self._liver_orientation(orientation_xyzw)
+
+    def _liver_orientation(self, orientation_xyzw) -> np.ndarray:
+        """q_map ⊗ q_device, normalised, w ≥ 0: the orientation R·R_device as a unit quaternion (x, y, z, w), in
+        floats (a 1 kHz relay calls it per sample); a zero or non-finite quaternion is refused."""
+        components = tuple(map(float, orientation_xyzw)) if len(orientation_xyzw) == 4 else ()
+        norm = math.sqrt(sum(c * c for c in components)) if components else 0.0
+        if not (math.isfinite(norm) and norm > 0.0):
+            raise ValueError(f"quaternion must be a finite, non-zero (x, y, z, w), got {orientation_xyzw!r}")
+        bx, by, bz, bw = (c / norm for c in components)
+        ax, ay, az, aw = self._quaternion
+        q = (aw * bx + ax * bw + ay * bz - az * by, aw * by - ax * bz + ay * bw + az * bx,
+             aw * bz + ax * by - ay * bx + az * bw, aw * bw - ax * bx - ay * by - az * bz)
+        length = math.sqrt(sum(c * c for c in q))
+        sign = 1.0 if q[3] >= 0.0 else -1.0
+        return np.array([sign * c / length for c in q])
