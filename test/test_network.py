@@ -3,6 +3,7 @@ import os
 import subprocess
 import threading
 import time
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -11,6 +12,7 @@ from rclpy.experimental import EventsExecutor
 from sensor_msgs.msg import PointCloud2
 
 from liver_sim.base.process_settings import command_line
+from liver_sim.bench.loop import neighbour_figures
 from liver_sim.nodes.run import spin
 from liver_sim.running import listener as listener_module
 from liver_sim.running.launcher import NodeProcesses
@@ -362,3 +364,18 @@ def test_the_listener_keeps_a_bounded_window_and_lets_decoded_bytes_go(ros_domai
     finally:
         listener.destroy_node()
         context.try_shutdown()
+
+
+def test_the_neighbour_counts_by_header_stamps_within_the_window():
+    now = time.monotonic()
+    wall = time.time() - time.monotonic()
+    stamps = np.arange(0.0, 10.0, 0.001) + now + wall  # 1 kHz commands over 10 s, stamped in ROS time
+    run = SimpleNamespace(window_s=(now + 1.0, now + 9.0), nodes_stamp_s=np.arange(0.0, 10.0, 1 / 150) + now + wall,
+                          force_stamp_s={"local_model": stamps},
+                          stamp_to_arrival_s={"local_model": np.where(np.arange(stamps.size) % 50, 0.002, 0.008)})
+    figures = neighbour_figures(run)
+    assert figures["frames_hz_by_stamp"] == pytest.approx(150.0, rel=0.01)
+    assert figures["commands_hz_by_stamp"] == pytest.approx(1000.0, rel=0.01)
+    assert figures["pose_to_command_at_client_p99_s"] == pytest.approx(0.008)  # 2 % of them 8 ms late
+    assert figures["met"] == {"frames_hz_by_stamp_min": True, "commands_hz_by_stamp_min": True,
+                              "pose_to_command_at_client_p99_s_max": False}

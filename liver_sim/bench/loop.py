@@ -4,6 +4,7 @@ process cost, each against its target, beside the machine's own stalls."""
 from __future__ import annotations
 
 import os
+import time
 from pathlib import Path
 
 import numpy as np
@@ -18,6 +19,11 @@ LOOP_TARGETS = {"physics_rate_hz": (147.0, 153.0), "haptic_rate_hz_min": 995.0, 
                 "haptic_max_gap_s_max": 0.005, "haptic_max_gap_outside_machine_stalls_s_max": 0.005,
                 "pose_to_force_p99_s_max": 0.002, "pose_to_force_p99_outside_machine_stalls_s_max": 0.002,
                 "fig8_smoothness_ratio_min": 5.0, "fig8_smoothness_ratio_outside_machine_stalls_min": 5.0}
+#: What a neighbour on the rig must see (docs/contract.md): an independent client at normal priority (the listener:
+#: this process) counts the frames and commands by their header stamps and times each command from the stamp of
+#: the tool pose it was computed from to its own reception.
+NEIGHBOUR_TARGETS = {"frames_hz_by_stamp_min": 148.0, "commands_hz_by_stamp_min": 990.0,
+                     "pose_to_command_at_client_p99_s_max": 0.005}
 #: After a machine stall the simulated hand has moved on by the stall's length and the physics catches up two
 #: frames: commands from a stall's start to this long (s, three physics frames) after its end are the stall's.
 MACHINE_STALL_SETTLE_S = 0.02
@@ -127,8 +133,36 @@ def loop_run(duration_s: float, log_dir, progress=None, observers: dict | None =
             (figures["fig8_smoothness_ratio_outside_machine_stalls"] or 0.0)
             >= t["fig8_smoothness_ratio_outside_machine_stalls_min"]),
     }
+    neighbour = neighbour_figures(run)
+    met.update({f"neighbour_{key}": value for key, value in neighbour.pop("met").items()})
+    figures["neighbour"] = neighbour
     costs = run.process_costs
     return {"benchmark": "loop", "machine": machine(), "duration_s": duration_s, "results": figures,
               "processes": costs, "cores_used": sum(c["cpu_share_of_one_core"] for c in costs.values()),
               "load_average": {"before": list(load_before), "after": list(load_after)},
-              "targets": LOOP_TARGETS, "met": met}
+              "targets": {**LOOP_TARGETS, "neighbour": NEIGHBOUR_TARGETS}, "met": met}
+
+
+def neighbour_figures(run) -> dict:
+    """What the listener, a client at normal priority beside the nodes, saw within the run's window: frames and
+    commands per second counted by their header stamps (ROS time), and from each command's stamp (its tool
+    pose's) to its reception here (p50, p99); `met` against NEIGHBOUR_TARGETS."""
+    wall_minus_monotonic = time.time() - time.monotonic()
+    start, end = (t + wall_minus_monotonic for t in run.window_s)
+    frames = run.nodes_stamp_s[(run.nodes_stamp_s >= start) & (run.nodes_stamp_s <= end)]
+    stamps = run.force_stamp_s["local_model"]
+    inside = (stamps >= start) & (stamps <= end)
+    latency = run.stamp_to_arrival_s["local_model"][inside]
+    figures = {"client": "the listener (this process, normal priority): /liver/nodes, /liver/surface, "
+                         "/liver/tool_wrench, /tool/pose, /phantom/servo_cf, /diagnostics",
+               "frames_hz_by_stamp": frames.size / (end - start),
+               "commands_hz_by_stamp": int(inside.sum()) / (end - start),
+               "pose_to_command_at_client_p50_s": float(np.percentile(latency, 50)) if latency.size else None,
+               "pose_to_command_at_client_p99_s": float(np.percentile(latency, 99)) if latency.size else None}
+    t = NEIGHBOUR_TARGETS
+    figures["met"] = {
+        "frames_hz_by_stamp_min": figures["frames_hz_by_stamp"] >= t["frames_hz_by_stamp_min"],
+        "commands_hz_by_stamp_min": figures["commands_hz_by_stamp"] >= t["commands_hz_by_stamp_min"],
+        "pose_to_command_at_client_p99_s_max": ((figures["pose_to_command_at_client_p99_s"] or 1.0)
+                                                <= t["pose_to_command_at_client_p99_s_max"])}
+    return figures

@@ -42,6 +42,12 @@ class NetworkSnapshot:
     #: label -> for each force command stamped with a tool pose, the time from that pose's publication to the
     #: command's (K,) s; NaN where the pose was not seen
     pose_to_force_s: dict
+    #: label -> header stamps (K,) of the force commands (s, ROS time: the tool pose a command was computed
+    #: from, or the bridge's clock); NaN for formats without a header
+    force_stamp_s: dict
+    #: label -> for each force command, from its header stamp to its arrival here (K,) s: the tool pose's
+    #: sampling to the command reaching this client, as a neighbour on the rig sees it
+    stamp_to_arrival_s: dict
     #: arrival times (W,) and forces (W, 3) of the physics contact force on the tool (/liver/tool_wrench)
     wrench_arrival_s: np.ndarray
     wrench_n: np.ndarray
@@ -234,6 +240,9 @@ class NetworkListener(Node):
                 pose_to_force_s={label: np.array([sent - published_by_stamp.get(stamp, np.nan)
                                                   for sent, stamp in zip(sent_s, stamps)])
                                  for label, (_, sent_s, _, stamps) in decoded.items()},
+                force_stamp_s={label: stamps for label, (_, _, _, stamps) in decoded.items()},
+                stamp_to_arrival_s={label: arrival - self._monotonic_minus_wall_s - stamps
+                                    for label, (arrival, _, _, stamps) in decoded.items()},
                 wrench_arrival_s=wrench_arrival,
                 wrench_n=wrench,
                 tool_arrival_s=tool_arrival,
