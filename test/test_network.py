@@ -304,10 +304,11 @@ def test_sigterm_to_the_demo_stops_the_nodes_it_started(ros_env, tmp_path):
 def test_loop_bench_reports_every_figure_against_its_target(ros_domain_id, tmp_path):
     import json
 
-    from liver_sim.bench.loop import LOOP_TARGETS, run_loop_bench
+    from liver_sim.bench.loop import LOOP_TARGETS, NEIGHBOUR_TARGETS, run_loop_bench
 
     report = json.loads(json.dumps(run_loop_bench(duration_s=3.0, log_dir=tmp_path)))
-    assert set(report["met"]) == set(LOOP_TARGETS) and report["machine"]
+    assert set(report["met"]) == set(LOOP_TARGETS) | {f"neighbour_{key}" for key in NEIGHBOUR_TARGETS}
+    assert report["machine"] and report["results"]["neighbour"]["commands_hz_by_stamp"] > 900.0
     results = report["results"]
     assert results["haptic_on_wire"]["samples"] > 1000 and results["physics_on_wire"]["samples"] > 100
     assert 0.0 < results["pose_to_force_p50_s"] <= results["pose_to_force_p99_s"]
