@@ -14,9 +14,10 @@ PARAMETERS = {
     "local_model": Param("plane", "plane or sphere: render the local model on local_model_topic (the marker's "
                          "kind decides: CUBE plane, SPHERE sphere); none: hold the physics contact wrench "
                          "(Fig. 8 baseline)", choices=MODES),
-    "stiffness_n_per_m": Param(300.0, "local-model stiffness K (N/m of penetration in the liver frame); "
-                               "K·device_scale must stay below 2·(device_damping_ns_per_m − "
-                               "damping_ns_per_m·device_scale)/T (Colgate)", 0.0, 10000.0),
+    "stiffness_n_per_m": Param(190.0, "local-model stiffness K (N/m of penetration in the liver frame), the cap "
+                               "on the tissue's own K a marker carries; K·device_scale must stay below "
+                               "2·(device_damping_ns_per_m − damping_ns_per_m·device_scale)/T (Colgate), T the "
+                               "longer of 1/rate_hz and stall_bound_s", 0.0, 10000.0),
     "model_glide_s": Param(round(1.0 / 150.0, 4), "time over which a new local model replaces the rendered one "
                            "(s): the surface glides to its new place instead of jumping at each physics update; "
                            "about one physics period; 0: at once", 0.0, 0.1),
@@ -39,7 +40,7 @@ PARAMETERS = {
     "ramp_time_s": Param(0.01, "time (s) for the watchdog to ramp the force to zero on stale data", 0.001, 0.01),
     "soft_start_s": Param(0.2, "time (s) over which the force rises from zero after start and after every "
                           "recovery (fresh data again, a stall or error of the loop, a new device map)", 0.1, 10.0),
-    "stall_bound_s": Param(0.003, "the supervisor publishes zero when the loop has not ticked for this long (s) "
+    "stall_bound_s": Param(0.005, "the supervisor publishes zero when the loop has not ticked for this long (s) "
                            "and holds it until the loop is back; the T of the passivity bound when longer than a "
                            "period", 0.002, 0.1),
     "workspace_centre_m": Param([0.0, 0.0, 0.0], "centre of the plausible workspace around the liver (m, liver "

@@ -29,7 +29,7 @@ CONFIG = ROOT / "config" / "haptic_bridge.yaml"
 WAIT_S = 15.0
 PUBLISH_PERIOD_S = 0.01
 TOOL_RADIUS_M = 0.015
-STIFFNESS_N_PER_M = 300.0
+STIFFNESS_N_PER_M = 190.0
 MAX_FORCE_N = 2.0
 #: Device → liver rotation: a quarter turn about x (liver +z is device +y).
 QUARTER_TURN_X = [math.sin(math.pi / 4), 0.0, 0.0, math.cos(math.pi / 4)]
@@ -38,8 +38,8 @@ UP = np.array([0.0, 0.0, 1.0])
 #: Tool tip heights (m) over the surface z = 0: 5 mm clear of it, 5 mm and 10 mm into it.
 ABOVE = np.array([0.0, 0.0, TOOL_RADIUS_M + 0.005])
 INSIDE = np.array([0.0, 0.0, TOOL_RADIUS_M - 0.005])
-DEEP = np.array([0.0, 0.0, TOOL_RADIUS_M - 0.010])
-EXPECTED_INSIDE = ROTATION.T @ (STIFFNESS_N_PER_M * 0.005 * UP)  # 1.5 N along the normal, in the device frame
+DEEP = np.array([0.0, 0.0, TOOL_RADIUS_M - 0.015])
+EXPECTED_INSIDE = ROTATION.T @ (STIFFNESS_N_PER_M * 0.005 * UP)  # 0.95 N along the normal, in the device frame
 LOOP = "haptic_bridge: loop"
 
 

@@ -68,10 +68,11 @@ def test_rate_limiter_holds_per_second_of_tick_time_through_a_burst():
 
 def test_passivity_is_checked_at_the_longest_hold_not_the_nominal_period():
     p = {name: spec.default for name, spec in PARAMETERS.items()}
-    assert hold_time_s(p) == p["stall_bound_s"] == 0.003  # ticks 1 ms apart, but up to 3 ms before a zero
-    assert passivity_problem(p) is None  # K 300 < 2·0.5/0.003 = 333 N/m
-    problem = passivity_problem({**p, "stall_bound_s": 0.005})  # 2·0.5/0.005 = 200 N/m
-    assert "T=5 ms" in problem and "stall_bound_s" in problem and "< 200 N/m" in problem
+    assert hold_time_s(p) == p["stall_bound_s"] == 0.005  # ticks 1 ms apart, but up to 5 ms before a zero
+    assert passivity_problem(p) is None  # K 190 < 2·0.5/0.005 = 200 N/m
+    assert passivity_problem({**p, "stall_bound_s": 0.001}) is None  # then T is the period
+    problem = passivity_problem({**p, "stall_bound_s": 0.008})  # 2·0.5/0.008 = 125 N/m
+    assert "T=8 ms" in problem and "stall_bound_s" in problem and "< 125 N/m" in problem
 
 
 def test_rate_limiter_survives_a_non_finite_target():

@@ -186,7 +186,7 @@ def test_a_huge_input_then_a_good_one_renders_again():
     tick.step(next(TICKS), np.array([0.0, 0.0, -1e300]), 0.0, plane, 0.0)
     for _ in range(300):
         out = tick.step(next(TICKS), np.array([0.0, 0.0, 0.01]), 0.0, plane, 0.0)
-    np.testing.assert_allclose(out, [0.0, 0.0, 1.5], atol=1e-6)
+    np.testing.assert_allclose(out, [0.0, 0.0, 0.95], atol=1e-6)
 
 
 def test_inputs_outside_the_workspace_are_refused():
@@ -260,7 +260,7 @@ def test_no_device_map_renders_zero_and_a_new_map_soft_starts():
     assert np.linalg.norm(first) < 0.02
     for _ in range(300):
         out = tick.step(next(TICKS), np.array([0.0, 0.0, 0.01]), 0.0, plane, 0.0)
-    np.testing.assert_allclose(out, [0.0, 1.5, 0.0], atol=1e-6)
+    np.testing.assert_allclose(out, [0.0, 0.95, 0.0], atol=1e-6)
 
 
 def test_the_marker_lifetime_is_capped_by_lifetime_s():
