@@ -13,6 +13,7 @@ from sensor_msgs.msg import PointCloud2
 
 from liver_sim.base.process_settings import command_line
 from liver_sim.bench.loop import neighbour_figures
+from liver_sim.nodes.occupants import domain_occupants
 from liver_sim.nodes.run import spin
 from liver_sim.running import listener as listener_module
 from liver_sim.running.launcher import NodeProcesses
@@ -380,3 +381,18 @@ def test_the_neighbour_counts_by_header_stamps_within_the_window():
     assert figures["pose_to_command_at_client_p99_s"] == pytest.approx(0.008)  # 2 % of them 8 ms late
     assert figures["met"] == {"frames_hz_by_stamp_min": True, "commands_hz_by_stamp_min": True,
                               "pose_to_command_at_client_p99_s_max": False}
+
+
+def test_domain_occupants_name_product_nodes_devices_and_bridges_but_not_observers():
+    def info(name):
+        return SimpleNamespace(node_name=name, node_namespace="/")
+
+    publishers = {"/phantom/measured_cp": [info("omni_driver"), info("_NODE_NAME_UNKNOWN_")],
+                  "/phantom/servo_cf": [info("_liver_sim_listener_loop"), info("my_bridge")]}
+    graph = SimpleNamespace(get_name=lambda: "liver_sim_listener",
+                            get_node_names_and_namespaces=lambda: [("liver_physics", "/"), ("_phantom_sim_loop", "/"),
+                                                                   ("rviz", "/"), ("liver_sim_listener", "/")],
+                            get_publishers_info_by_topic=lambda topic: publishers.get(topic, []))
+    assert domain_occupants(graph) == ["a node (its name not discovered yet) publishing /phantom/measured_cp",
+                                       "node /liver_physics", "node /my_bridge publishing /phantom/servo_cf",
+                                       "node /omni_driver publishing /phantom/measured_cp", "node /phantom_sim"]

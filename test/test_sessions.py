@@ -452,8 +452,7 @@ def test_demo_and_replay_refuse_a_domain_where_a_bridge_or_a_device_runs(ros_env
             else [sys.executable, "-c", DEVICE_DRIVER])
     log = open(tmp_path / "running.log", "w")
     running = subprocess.Popen(args, env=ros_env, stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
-    found = ("node /haptic_bridge" if occupant == "haptic_bridge"
-             else "node /omni_driver publishing /phantom/measured_cp")
+    found = "node /haptic_bridge" if occupant == "haptic_bridge" else "publishing /phantom/measured_cp"
     bag = pose_bag(tmp_path / "poses")
     up = "haptic_bridge: 1000 Hz" if occupant == "haptic_bridge" else "up"
     try:

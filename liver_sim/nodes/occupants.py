@@ -14,6 +14,8 @@ from liver_sim.base.topic_names import TOPIC_NAMES
 
 #: The product's node names (each node's loop inputs live in a hidden node `_<name>_loop`).
 PRODUCT_NODES = ("liver_physics", "haptic_bridge", "liver_tool", "phantom_sim")
+#: The name the graph gives an endpoint whose node it has not learnt yet.
+UNKNOWN_NODE_NAME = "_NODE_NAME_UNKNOWN_"
 #: How long (s) a new participant lets discovery run before it reads the graph.
 DISCOVERY_WAIT_S = 2.0
 
@@ -39,6 +41,9 @@ def domain_occupants(node, ignore: tuple[str, ...] = ()) -> list[str]:
             found.append(f"node {namespace.rstrip('/')}/{_owner(name)}")
     for topic in (TOPIC_NAMES["measured_cp"], TOPIC_NAMES["servo_cf"]):
         for info in node.get_publishers_info_by_topic(topic):
+            if info.node_name == UNKNOWN_NODE_NAME:
+                found.append(f"a node (its name not discovered yet) publishing {topic}")
+                continue
             owner = _owner(info.node_name)
             if owner not in PRODUCT_NODES and owner not in ignored:
                 found.append(f"node {info.node_namespace.rstrip('/')}/{owner} publishing {topic}")
