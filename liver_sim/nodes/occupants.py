@@ -16,8 +16,11 @@ from liver_sim.base.topic_names import TOPIC_NAMES
 PRODUCT_NODES = ("liver_physics", "haptic_bridge", "liver_tool", "phantom_sim")
 #: The name the graph gives an endpoint whose node it has not learnt yet.
 UNKNOWN_NODE_NAME = "_NODE_NAME_UNKNOWN_"
-#: How long (s) a new participant lets discovery run before it reads the graph.
-DISCOVERY_WAIT_S = 2.0
+#: How long (s) a new participant lets discovery run before it takes the graph as complete: longer than Fast
+#: DDS's participant announcement period (3 s), for when the first announcements are lost on a busy machine.
+DISCOVERY_WAIT_S = 3.5
+#: How often (s) the graph is looked at meanwhile.
+GRAPH_POLL_S = 0.25
 
 
 class DomainOccupied(RuntimeError):
@@ -51,9 +54,14 @@ def domain_occupants(node, ignore: tuple[str, ...] = ()) -> list[str]:
 
 
 def refuse_occupied(node, what: str, ignore: tuple[str, ...] = (), wait_s: float = DISCOVERY_WAIT_S) -> None:
-    """After `wait_s` of discovery, DomainOccupied naming what :func:`domain_occupants` finds on the domain."""
-    time.sleep(wait_s)
+    """DomainOccupied naming what :func:`domain_occupants` finds on the domain within `wait_s` of discovery
+    (looked at every GRAPH_POLL_S; an occupant found ends the wait, and a name still undiscovered gets a little
+    longer)."""
+    deadline = time.monotonic() + wait_s
     occupants = domain_occupants(node, ignore)
+    while time.monotonic() < deadline and not (occupants and not any("not discovered" in o for o in occupants)):
+        time.sleep(GRAPH_POLL_S)
+        occupants = domain_occupants(node, ignore)
     if occupants:
         raise DomainOccupied(f"ROS_DOMAIN_ID={os.environ.get('ROS_DOMAIN_ID', '0')} already has "
                            f"{'; '.join(occupants)}: {what} would share its device and topics; stop them or give "
