@@ -208,6 +208,11 @@ def terminate_to_zero(rig: Rig, bridge: subprocess.Popen) -> None:
     assert bridge.returncode == 0 and not rig.forces[-1].any()
 
 
+def seconds_of(stamp) -> float:
+    """Seconds of a command's (sec, nanosec) header stamp."""
+    return stamp[0] + stamp[1] * 1e-9
+
+
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT, signal.SIGHUP, signal.SIGQUIT, signal.SIGPIPE])
 def test_a_signal_in_contact_leaves_zero_as_the_last_command_after_a_soft_start(rig_factory, ros_env, sig):
     rig = rig_factory()
@@ -220,7 +225,7 @@ def test_a_signal_in_contact_leaves_zero_as_the_last_command_after_a_soft_start(
         reached = next(i for i in range(first, len(rig.forces)) if np.linalg.norm(rig.forces[i]) > NEARLY_CONTACT_N)
         # by the commands' stamps (the tool poses they were computed from, 10 ms apart), not by when this busy test
         # side got to read them
-        seconds = [sec + nanosec * 1e-9 for sec, nanosec in rig.stamps]
+        seconds = [seconds_of(stamp) for stamp in rig.stamps]
         assert seconds[reached] - seconds[first] >= 0.1, "soft start: 0.2 s from zero to full force"
         in_contact = len(rig.forces)
         bridge.send_signal(sig)
@@ -231,10 +236,6 @@ def test_a_signal_in_contact_leaves_zero_as_the_last_command_after_a_soft_start(
     assert np.linalg.norm(rig.forces[in_contact - 1]) > 0.9, "in contact when the signal came"
     assert not rig.forces[-1].any(), f"last command on the wire {rig.forces[-1].tolist()} N, not zero"
     assert_safe(rig.forces)
-
-
-def seconds_of(stamp) -> float:
-    return stamp[0] + stamp[1] * 1e-9
 
 
 def test_ctrl_z_is_ignored_and_a_stop_and_continue_resumes_with_a_soft_start(rig_factory, ros_env):

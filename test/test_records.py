@@ -75,20 +75,30 @@ def test_a_recording_fails_on_any_reliable_message_lost_after_ready_and_only_cou
     assert failures(whole, ["/nodes"]) == "the history of /nodes filled up between two drains"
 
 
+def sleeping_process(**kwargs) -> subprocess.Popen:
+    """A process that only sleeps (10 min), for a run file to name."""
+    return subprocess.Popen([sys.executable, "-c", "import time; time.sleep(600)"], **kwargs)
+
+
+def dead_pid() -> int:
+    """The pid of a process that has ended: a run's owner that is gone."""
+    process = subprocess.Popen([sys.executable, "-c", "pass"])
+    process.wait()
+    return process.pid
+
+
 def test_leftovers_of_a_dead_run_are_stopped_and_a_live_run_is_refused(tmp_path):
-    leftover = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(600)"], start_new_session=True)
-    dead_owner = subprocess.Popen([sys.executable, "-c", "pass"])
-    dead_owner.wait()
+    leftover = sleeping_process(start_new_session=True)
     run_file = RunFile("7", tmp_path)
     try:
         with run_file.edit() as runs:
-            runs.append({"owner": [dead_owner.pid, 1], "log_dir": "old", "processes": [
+            runs.append({"owner": [dead_pid(), 1], "log_dir": "old", "processes": [
                 ["liver_physics", leftover.pid, _process_start(leftover.pid), False, _command_line(leftover.pid)]]})
         said = []
         assert stop_leftovers(run_file, said.append) == [f"liver_physics (pid {leftover.pid})"]
         assert leftover.wait(timeout=10) == -signal.SIGTERM and "liver_physics" in said[0]
         assert not run_file.path.exists()  # nothing left to remember
-        live = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(600)"])
+        live = sleeping_process()
         with run_file.edit() as runs:
             runs.append({"owner": [live.pid, _process_start(live.pid)], "log_dir": "busy", "processes": [
                 ["haptic_bridge", live.pid, _process_start(live.pid), False, _command_line(live.pid)]]})
@@ -103,13 +113,11 @@ def test_leftovers_of_a_dead_run_are_stopped_and_a_live_run_is_refused(tmp_path)
 
 
 def test_a_process_is_signalled_only_when_pid_start_and_command_line_match(tmp_path):
-    other = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(600)"], start_new_session=True)
-    dead_owner = subprocess.Popen([sys.executable, "-c", "pass"])
-    dead_owner.wait()
+    other = sleeping_process(start_new_session=True)
     run_file = RunFile("8", tmp_path)
     try:
         with run_file.edit() as runs:  # the pid and start time of `other`, but the command line of a node
-            runs.append({"owner": [dead_owner.pid, 1], "log_dir": "old", "processes": [
+            runs.append({"owner": [dead_pid(), 1], "log_dir": "old", "processes": [
                 ["liver_physics", other.pid, _process_start(other.pid), False, "liver_physics\0--ros-args\0"],
                 ["haptic_bridge", other.pid, _process_start(other.pid), False]]})  # no command line noted
         assert stop_leftovers(run_file, lambda line: None) == []

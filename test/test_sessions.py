@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import rclpy
 from rclpy.serialization import serialize_message
 
 from liver_sim.analysis import largest_force_jump_n
@@ -454,9 +455,16 @@ def test_demo_and_replay_refuse_a_domain_where_a_bridge_or_a_device_runs(ros_env
     running = subprocess.Popen(args, env=ros_env, stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
     found = "node /haptic_bridge" if occupant == "haptic_bridge" else "publishing /phantom/measured_cp"
     bag = pose_bag(tmp_path / "poses")
-    up = "haptic_bridge: 1000 Hz" if occupant == "haptic_bridge" else "up"
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    probe = rclpy.create_node("refusal_probe", context=context)  # the test's own view of the graph
+
+    def seen() -> bool:
+        if occupant == "haptic_bridge":
+            return ("haptic_bridge", "/") in probe.get_node_names_and_namespaces()
+        return bool(probe.get_publishers_info_by_topic("/phantom/measured_cp"))
     try:
-        wait_for(lambda: up in (tmp_path / "running.log").read_text(), 60.0, f"the {occupant} to come up")
+        wait_for(seen, 60.0, f"the {occupant} in the graph", lambda: (tmp_path / "running.log").read_text())
         for command in (["demo", "--duration", "5", "--out", str(tmp_path / "demo")],
                         ["replay", str(bag), "--delay", "0"]):
             result = subprocess.run(cli_command_line(*command), env=ros_env, capture_output=True, text=True,
@@ -469,3 +477,5 @@ def test_demo_and_replay_refuse_a_domain_where_a_bridge_or_a_device_runs(ros_env
         running.send_signal(signal.SIGINT)
         running.wait(timeout=10)
         log.close()
+        probe.destroy_node()
+        context.try_shutdown()

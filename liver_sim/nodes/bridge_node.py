@@ -36,6 +36,7 @@ from haptic_bridge.supervisor import Supervisor
 from haptic_bridge.tick import BridgeTick, check_passivity, checked_change, passivity_problem
 from liver_sim.nodes.diagnostics import diagnostic_status, on_rate, publish_diagnostics
 from liver_sim.nodes.inputs import Latest, LoopInputs
+from liver_sim.nodes.occupants import node_path, publisher_nodes
 from liver_sim.nodes.parameters import declare_parameters, on_parameter_changes
 from liver_sim.nodes.rate_loop import RateLoop, warn
 from liver_sim.nodes.run import run_node
@@ -169,9 +170,8 @@ class BridgeShell:
     def _check_rivals(self) -> None:
         """Note every publisher on force_topic but this bridge's own: two bridges interleaving their commands
         would defeat the rate limit and the watchdog, so while any other publishes there, this one sends zero."""
-        names = [f"{info.node_namespace.rstrip('/')}/{info.node_name}"
-                 for info in self.node.get_publishers_info_by_topic(self._publisher.topic_name)]
-        own = f"{self.node.get_namespace().rstrip('/')}/{self.node.get_name()}"
+        names = publisher_nodes(self.node, self._publisher.topic_name)
+        own = node_path(self.node.get_namespace(), self.node.get_name())
         for _ in range(OWN_FORCE_WRITERS):  # the loop's and the supervisor's
             if own in names:
                 names.remove(own)
@@ -191,9 +191,7 @@ class BridgeShell:
 
     def _foreign_map_publishers(self) -> list[str]:
         """The nodes other than device_map_node that publish on device_map_topic."""
-        names = {f"{info.node_namespace.rstrip('/')}/{info.node_name}"
-                 for info in self.node.get_publishers_info_by_topic(self._map_subscription.topic_name)}
-        return sorted(names - {self.p["device_map_node"]})
+        return sorted(set(publisher_nodes(self.node, self._map_subscription.topic_name)) - {self.p["device_map_node"]})
 
     def _refuse_map(self, reason: str) -> None:
         self._bad["device_map"] += 1

@@ -27,6 +27,17 @@ class DomainOccupied(RuntimeError):
     """The ROS domain already has the product's nodes or a device: names them."""
 
 
+def node_path(namespace: str, name: str) -> str:
+    """The fully qualified name of a node: /ns/name, /name in the root namespace."""
+    return f"{namespace.rstrip('/')}/{name}"
+
+
+def publisher_nodes(node, topic: str) -> list[str]:
+    """The fully qualified names of the nodes publishing on `topic`, one per publisher, as `node`'s graph
+    knows them."""
+    return [node_path(info.node_namespace, info.node_name) for info in node.get_publishers_info_by_topic(topic)]
+
+
 def _owner(name: str) -> str:
     """The node a hidden loop-input node `_<name>_loop` belongs to; other names as they are."""
     return name[1:].removesuffix("_loop") if name.startswith("_") else name
@@ -41,7 +52,7 @@ def domain_occupants(node, ignore: tuple[str, ...] = ()) -> list[str]:
     found = []
     for name, namespace in node.get_node_names_and_namespaces():
         if _owner(name) in PRODUCT_NODES and _owner(name) not in ignored:
-            found.append(f"node {namespace.rstrip('/')}/{_owner(name)}")
+            found.append(f"node {node_path(namespace, _owner(name))}")
     for topic in (TOPIC_NAMES["measured_cp"], TOPIC_NAMES["servo_cf"]):
         for info in node.get_publishers_info_by_topic(topic):
             if info.node_name == UNKNOWN_NODE_NAME:
@@ -49,7 +60,7 @@ def domain_occupants(node, ignore: tuple[str, ...] = ()) -> list[str]:
                 continue
             owner = _owner(info.node_name)
             if owner not in PRODUCT_NODES and owner not in ignored:
-                found.append(f"node {info.node_namespace.rstrip('/')}/{owner} publishing {topic}")
+                found.append(f"node {node_path(info.node_namespace, owner)} publishing {topic}")
     return sorted(set(found))
 
 

@@ -20,7 +20,7 @@ from rclpy.signals import SignalHandlerOptions
 
 from liver_sim.base.stop_request import stop_on_signals
 from liver_sim.base.topic_names import BASELINE_FORCE_TOPIC
-from liver_sim.nodes.occupants import DISCOVERY_WAIT_S, refuse_occupied
+from liver_sim.nodes.occupants import refuse_occupied
 from liver_sim.sessions.bag import bag_info, read_messages
 from liver_sim.sessions.record import _rclpy_qos, known_topics, message_class
 from msg_defs.topics import TOPICS
@@ -72,6 +72,7 @@ def run_replay(bag: Path, rate: float = 1.0, topics: list[str] | None = None, de
     with stop_on_signals() as stop:
         try:
             node = rclpy.create_node(REPLAY_NODE, context=context, start_parameter_services=False)
+            refuse_occupied(node, "a replay")  # before any publisher shows itself to the running nodes
             known = known_topics()
             publishers = {}
             for topic in wanted:
@@ -84,7 +85,6 @@ def run_replay(bag: Path, rate: float = 1.0, topics: list[str] | None = None, de
             progress(f"replaying {sum(info.topics[t][1] for t in wanted)} messages of {bag} ({span:.1f} s at rate "
                      f"{rate:g}) on {', '.join(out_topics.values())}")
             stop.wait(delay_s)
-            refuse_occupied(node, "a replay", wait_s=max(0.0, DISCOVERY_WAIT_S - delay_s))
             start = time.monotonic()
             next_progress = start + 5.0
             for message in itertools.chain([first], messages):
