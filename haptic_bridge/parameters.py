@@ -4,6 +4,7 @@ the offline sessions (liver_sim.sessions), so both refuse the same values.
 The device map is not among them: the bridge takes the one `liver_tool` publishes on device_map_topic
 (latched), so the map that places the tool and the map that turns the force can never differ."""
 from haptic_bridge.safety import DEFAULT_MAX_FORCE_N, PHANTOM_MAX_FORCE_N
+from liver_sim.base.link import LINK_PARAMETERS
 from liver_sim.base.parameters import Param, realtime_priority_parameter
 from liver_sim.base.topic_names import FORCE_OUTPUT_FORMATS, TOPIC_NAMES
 
@@ -25,6 +26,11 @@ PARAMETERS = {
                               "model's force; 0 by default: the physics force the local model carries already "
                               "holds Eq. 3's damping, so any B makes the rendered force differ from it at each "
                               "update", 0.0, 10.0),
+    "passivity_control": Param(False, "time-domain passivity controller (Hannaford and Ryu): when the passivity "
+                               "observer finds that the commands gave the hand more energy than they took, add the "
+                               "damping that takes it out (haptic_bridge.passivity); read at start"),
+    "passivity_max_damping_ns_per_m": Param(20.0, "the controller's largest damping (N·s/m, device frame); read "
+                                            "at start", 0.0, 100.0),
     "device_damping_ns_per_m": Param(0.5, "physical damping b of the device at the stylus (N·s/m), for the "
                                      "passivity check b > K·T/2 + B; PHANToM-like default, identify yours",
                                      0.0, 100.0),
@@ -66,4 +72,5 @@ PARAMETERS = {
     "tool_wrench_topic": Param(TOPIC_NAMES["tool_wrench"], "physics contact force on the tool, liver frame "
                                "(WrenchStamped); rendered with local_model: none"),
     "device_frame_id": Param("phantom_base", "frame_id of the force command"),
+    **LINK_PARAMETERS,  # on the inputs from the other side of a teleoperation link
 }

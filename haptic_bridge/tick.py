@@ -10,6 +10,7 @@ import math
 
 import numpy as np
 
+from haptic_bridge.passivity import PassivityObserver
 from haptic_bridge.rendering import ModelGlide, contact_force, max_passive_stiffness
 from haptic_bridge.safety import SafeForceOutput
 from liver_sim.base.geometry.device_map import DeviceMap
@@ -146,9 +147,10 @@ class DepthRate:
 
 
 class BridgeTick:
-    """F_device = SafeForceOutput(Rᵀ·F_liver): F_liver is the local model's penalty force on the tool sphere
+    """F_device = SafeForceOutput(Rᵀ·F_liver [− α·v]): F_liver is the local model's penalty force on the tool sphere
     (`local_model` plane/sphere, rendered through a ModelGlide of `model_glide_s`) or the held physics
-    contact force (`local_model: none`, Fig. 8 baseline).
+    contact force (`local_model: none`, Fig. 8 baseline). A PassivityObserver (`passivity`) counts the energy
+    the commands give the hand; with `passivity_control` its damping −α·v joins the force before the safety chain.
 
     `device_map` maps the force into the device frame (default: the identity, as offline); None renders zero
     until :meth:`set_device_map`. Refuses (ValueError naming the parameter) a non-passive local-model stiffness
@@ -165,6 +167,8 @@ class BridgeTick:
         self.safety = safe_output(p)
         self.depth_rate = DepthRate(1.0 / p["rate_hz"], p["depth_rate_cutoff_hz"])
         self.glide = ModelGlide(p["model_glide_s"])
+        self.passivity = PassivityObserver(1.0 / p["rate_hz"], p["passivity_control"],
+                                           p["passivity_max_damping_ns_per_m"])
 
     def configure(self, p: dict) -> None:
         """Take parameters checked by :func:`checked_change`, from this tick on (called by the loop)."""
@@ -210,6 +214,11 @@ class BridgeTick:
             model, lifetime = source if source is not None else (None, self.p["lifetime_s"])
             force = self.render(self.glide.update(model, now_s), tip)
         if self.device_map is None:  # no map yet: nothing is fresh
-            return self.safety.step(_ZERO, math.inf, math.inf)
-        return self.safety.step(self.device_map.liver_to_device_force(force), source_age_s, pose_age_s,
-                                min(lifetime, self.p["lifetime_s"]), now_s)
+            self.passivity.observe(None)
+            command = self.safety.step(_ZERO, math.inf, math.inf)
+        else:
+            self.passivity.observe(None if tip is None else self.device_map.liver_to_device(tip))
+            command = self.safety.step(self.passivity.damp(self.device_map.liver_to_device_force(force)),
+                                       source_age_s, pose_age_s, min(lifetime, self.p["lifetime_s"]), now_s)
+        self.passivity.commanded(command)
+        return command

@@ -210,6 +210,17 @@ def add_bench_command(commands) -> None:
     loop.add_argument("--extra-load", action="store_true",
                       help="then the same run beside one core-bound process at normal priority (with_extra_load)")
     loop.set_defaults(handler=bench_loop)
+    teleop = kinds.add_parser("teleop", help="the closed loop over an emulated teleoperation link: each delay with "
+                                             "the local model and with direct force; stability, energy, error")
+    teleop.add_argument("--json", action="store_true", help="print one JSON object")
+    teleop.add_argument("--delays", type=float, nargs="+", default=None, metavar="MS",
+                        help="one-way delays (ms; default: 0 10 50 100 200)")
+    teleop.add_argument("--jitter", type=float, default=0.0, metavar="MS", help="jitter of every run (ms; default 0)")
+    teleop.add_argument("--loss", type=float, default=0.0, metavar="F", help="loss of every run (0-1; default 0)")
+    teleop.add_argument("--seed", type=int, default=0, help="seed of the jitter and loss")
+    teleop.add_argument("--duration", type=float, default=None, help="seconds of closed loop per run (default: 12)")
+    teleop.add_argument("--out", type=Path, default=Path("out/bench_teleop"), help="folder for the plots and logs")
+    teleop.set_defaults(handler=bench_teleop)
     topology = kinds.add_parser("topology", help="time of a tear and of a cut for the default liver and a "
                                                   "~10k-tet liver (target: one 150 Hz frame for the default liver)")
     topology.add_argument("--json", action="store_true", help="print one JSON object")
@@ -302,6 +313,33 @@ def bench_loop(args) -> int:
     return 0
 
 
+def bench_teleop(args) -> int:
+    # this command's own modules, loaded when it runs (module docstring)
+    from liver_sim.bench.teleop import TELEOP_DELAYS_MS, TELEOP_RUN_S, run_teleop_bench
+
+    for option, value, low, high in (("--jitter", args.jitter, 0.0, 1000.0), ("--loss", args.loss, 0.0, 1.0)):
+        if not low <= value <= high:
+            raise ValueError(f"{option} must lie in [{low:g}, {high:g}], got {value:g}")
+    delays = TELEOP_DELAYS_MS if args.delays is None else tuple(args.delays)
+    if any(not 0.0 <= d <= 1000.0 for d in delays):
+        raise ValueError(f"--delays must lie in [0, 1000] ms, got {list(delays)}")
+    report = run_teleop_bench(delays, args.jitter, args.loss, args.out, None if args.json else print,
+                              args.duration or TELEOP_RUN_S, args.seed)
+    if args.json:
+        print(json.dumps(report, default=float))
+        return 0
+    print(f"{'rendering':<12}{'delay ms':>9}{'stable':>8}{'passive':>8}{'energy mJ':>11}{'peak N':>8}"
+          f"{'error N':>9}{'depth mm':>9}")
+    for r in report["rows"]:
+        print(f"{r['rendering']:<12}{r['delay_ms']:>9g}{str(r['stable']):>8}{str(r['passive']):>8}"
+              f"{r['energy_generated_j'] * 1e3:>11.2f}{r['peak_force_n']:>8.2f}{r['force_error_rms_n']:>9.3f}"
+              f"{r['penetration_max_mm']:>9.1f}")
+    print(f"first unstable delay (ms): {report['first_unstable_delay_ms']}; plots: {', '.join(report['plots'])}")
+    for target, met in report["met"].items():
+        print(f"target {target} = {report['targets'][target]:g}: {'met' if met else 'NOT met'}")
+    return 0
+
+
 def bench_record(args) -> int:
     # this command's own modules, loaded when it runs (module docstring)
     from liver_sim.bench.record import run_record_bench
@@ -327,7 +365,7 @@ def bench_record(args) -> int:
 
 def add_demo_command(commands) -> None:
     """``liver-sim demo [--scenario press|tear|cut] [--mesh PATH [--scale F]] [--duration S] [--out DIR] [--offline]
-    [--record [--storage …]]``: the closed-loop demo."""
+    [--record [--storage …]] [--link-delay S [--link-jitter S] [--link-loss F]]``: the closed-loop demo."""
     parser = commands.add_parser("demo", help="the four nodes in closed loop with a simulated PHANToM "
                                               "pressing the default liver or --mesh (--offline: the model alone, "
                                               "no ROS)")
@@ -345,7 +383,33 @@ def add_demo_command(commands) -> None:
     parser.add_argument("--offline", action="store_true", help="scripted press-and-release in this process, no ROS")
     parser.add_argument("--record", action="store_true", help="record the run with `liver-sim record` into OUT/session")
     parser.add_argument("--storage", choices=STORAGES, default="mcap", help="storage of the recorded bag")
+    add_link_arguments(parser)
     parser.set_defaults(handler=demo)
+
+
+def add_link_arguments(parser) -> None:
+    """--link-delay, --link-jitter, --link-loss, --link-seed: the emulated teleoperation link (liver_sim.base.link)."""
+    parser.add_argument("--link-delay", type=float, default=0.0, metavar="S",
+                        help="one-way delay (s) between the operator's side (device, tool, bridge) and the physics, "
+                             "both ways (default: 0, no link)")
+    parser.add_argument("--link-jitter", type=float, default=0.0, metavar="S",
+                        help="jitter (s): each message's delay is the delay ± up to this; order is kept")
+    parser.add_argument("--link-loss", type=float, default=0.0, metavar="F", help="fraction of messages lost (0-1)")
+    parser.add_argument("--link-seed", type=int, default=0, help="seed of the jitter and loss")
+
+
+def link_settings(args):
+    """The LinkSettings of --link-*, checked against the nodes' parameter ranges (ValueError naming the option)."""
+    from liver_sim.base.link import LINK_PARAMETERS, LinkSettings
+    from liver_sim.base.parameters import check_parameter
+
+    settings = LinkSettings(args.link_delay, args.link_jitter, args.link_loss, args.link_seed)
+    for (name, value), option in zip(settings.parameters().items(), ("delay", "jitter", "loss", "seed")):
+        try:
+            check_parameter(name, LINK_PARAMETERS[name], value)
+        except ValueError as exc:
+            raise ValueError(f"--link-{option}: {exc}") from None
+    return settings
 
 
 def demo(args) -> int:
@@ -359,12 +423,13 @@ def demo(args) -> int:
         raise ValueError("--scale applies to --mesh PATH; the default liver is in metres")
     liver = DemoMesh(args.mesh, args.scale)
     if args.offline:
-        if args.record or args.scenario != "press":
-            raise ValueError("--record and --scenario run the node network; --offline is the press without ROS")
+        if args.record or args.scenario != "press" or link_settings(args).emulated:
+            raise ValueError("--record, --scenario and --link-* run the node network; --offline is the press "
+                             "without ROS")
         run_offline_demo(args.out, args.duration, progress, liver)
     else:
         run_demo(args.out, args.duration, progress, record_storage=args.storage if args.record else None,
-                 scenario=args.scenario, liver=liver)
+                 scenario=args.scenario, liver=liver, link=link_settings(args))
     return 0
 
 
@@ -390,7 +455,7 @@ def build_parser() -> argparse.ArgumentParser:
 def starts_ros(args) -> bool:
     """Whether the parsed command starts ROS (a context or node processes)."""
     return (args.command in ("record", "replay") or (args.command == "demo" and not args.offline)
-            or (args.command == "bench" and args.bench in ("loop", "record")))
+            or (args.command == "bench" and args.bench in ("loop", "record", "teleop")))
 
 
 def _terminate(signum, _frame) -> None:

@@ -34,8 +34,9 @@ from haptic_bridge.inputs import InputCheck
 from haptic_bridge.parameters import PARAMETERS
 from haptic_bridge.supervisor import Supervisor
 from haptic_bridge.tick import BridgeTick, check_passivity, checked_change, passivity_problem
+from liver_sim.base.link import link_text
 from liver_sim.nodes.diagnostics import diagnostic_status, on_rate, publish_diagnostics
-from liver_sim.nodes.inputs import Latest, LoopInputs
+from liver_sim.nodes.inputs import Latest, LoopInputs, emulated_link, link_report
 from liver_sim.nodes.occupants import node_path, publisher_nodes
 from liver_sim.nodes.parameters import declare_parameters, on_parameter_changes
 from liver_sim.nodes.rate_loop import RateLoop, warn
@@ -102,6 +103,7 @@ class BridgeShell:
                                                   TOPICS["diagnostics"].qos)
         self._map_subscription = self._subscribe_map()
         self._inputs = LoopInputs(node)  # read by the 1 kHz loop itself, not by the executor
+        self.link = emulated_link(p)  # the teleoperation link from the physics' side, if emulated
         self._pose_input = self._inputs.subscribe(TOPICS["tool_pose"].type, p["tool_pose_topic"],
                                                   loop_input_qos(TOPICS["tool_pose"]), self._on_pose, raw=True,
                                                   received=True)
@@ -109,13 +111,12 @@ class BridgeShell:
             self.source_topic = p["tool_wrench_topic"]
             self._source_input = self._inputs.subscribe(TOPICS["tool_wrench"].type, self.source_topic,
                                                         loop_input_qos(TOPICS["tool_wrench"]), self._on_wrench,
-                                                        raw=True, received=True)
+                                                        raw=True, received=True, link=self.link)
         else:
             self.source_topic = p["local_model_topic"]
             self._source_input = self._inputs.subscribe(TOPICS["contact_plane"].type, self.source_topic,
                                                         loop_input_qos(TOPICS["contact_plane"]), self._on_marker,
-                                                        raw=True,
-                                                        received=True)
+                                                        raw=True, received=True, link=self.link)
         self._rivals: list[str] = []  # the other publishers on force_topic: while any, the bridge sends zero
         self._timer = node.create_timer(1.0, self._publish_diagnostics)
         self._rival_timer = node.create_timer(RIVAL_CHECK_S, self._check_rivals)
@@ -364,7 +365,8 @@ class BridgeShell:
                  "tool_pose_publishers": self._pose_input.get_publisher_count(),
                  "source_publishers": self._source_input.get_publisher_count(),
                  "device_scale": self.scale if self._map_problem is None else float("nan"),
-                 "device_maps_taken": self._maps_taken, **report,
+                 "device_maps_taken": self._maps_taken, **self.tick.passivity.report(),
+                 **link_report(self.link, self._inputs), **report,
                  "max_gap_1s_at": wall_time(report["max_gap_1s_at_s"]), "max_gap_at": wall_time(report["max_gap_at_s"])}
         del extra["max_gap_1s_at_s"], extra["max_gap_at_s"], extra["error"]
         if stats["new_gaps"]:
@@ -391,7 +393,8 @@ class BridgeShell:
                      f"local model (K {p['stiffness_n_per_m']:g} N/m, B {p['damping_ns_per_m']:g} N·s/m, "
                      f"glide {p['model_glide_s']:g} s, tool radius {p['tool_radius_m']:g} m)")
         return (f"haptic_bridge: {p['rate_hz']:g} Hz, local_model {self.mode}: {rendering}; "
-                f"in: {p['tool_pose_topic']}, {self.source_topic}, device map {p['device_map_topic']}; "
+                f"in: {p['tool_pose_topic']}, {self.source_topic}{link_text(self.link)}, "
+                f"device map {p['device_map_topic']}; "
                 f"out: {p['force_topic']} ({p['force_output']}, frame {p['device_frame_id']}, max "
                 f"{p['max_force_n']:g} N, {p['max_force_rate_n_per_s']:g} N/s, soft start {p['soft_start_s']:g} s); "
                 f"watchdog: lifetime {p['lifetime_s']:g} s, ramp {p['ramp_time_s']:g} s; supervisor: zero after "

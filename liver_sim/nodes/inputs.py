@@ -7,6 +7,9 @@ import time
 import numpy as np
 import rclpy
 
+from liver_sim.base.link import EmulatedLink, LinkSettings
+from msg_defs.stamps import stamp_s_from_bytes
+
 
 class Latest:
     """The newest value of something and when it arrived (monotonic seconds).
@@ -35,6 +38,11 @@ class LoopInputs:
     from reception, not from the poll), or, for a subscription made with `every=True`, each message with its
     rmw info (a dict with `source_timestamp` and `received_timestamp`, system-clock ns, and
     `publication_sequence_number`).
+
+    A subscription given an EmulatedLink (liver_sim.base.link) sends every message into it, timed by its
+    reception, and hands the callback the newest one the link has released by the poll, with its release time
+    as its reception (`received=True`): an input's age counts from its emulated arrival. The owner node's clock
+    minus the header stamp of each released message is the delay a rig sees on the wire (`link_delay_s`).
     """
 
     def __init__(self, node):
@@ -43,25 +51,33 @@ class LoopInputs:
                                        use_global_arguments=False, start_parameter_services=False,
                                        enable_rosout=False)
         self._inputs = []
+        #: topic -> the newest (owner's ROS time − header stamp) (s) of a message its link released
+        self.link_delay_s: dict[str, float] = {}
 
     def subscribe(self, msg_type, topic: str, qos, callback, raw: bool = False, every: bool = False,
-                  received: bool = False):
+                  received: bool = False, link: EmulatedLink | None = None):
         """Subscribe to `topic` as the owning node names it (its namespace and remappings, `-r from:=to`,
-        applied); returns the subscription (its get_publisher_count() tells whether anyone publishes)."""
+        applied); returns the subscription (its get_publisher_count() tells whether anyone publishes).
+        With `link`, raw messages of a stamped type pass through it (class docstring)."""
         resolved = self._owner.resolve_topic_name(topic)
         subscription = self._node.create_subscription(msg_type, resolved, callback, qos, raw=raw)
-        self._inputs.append((subscription, callback, every, received))
+        self._inputs.append((subscription, callback, every, received, link))
         return subscription
 
     def poll(self) -> None:
-        for subscription, callback, every, received in self._inputs:
+        for subscription, callback, every, received, link in self._inputs:
             newest = None
             with subscription.handle:
                 while (taken := subscription.handle.take_message(subscription.msg_type, subscription.raw)):
-                    if every:
+                    if link is not None:
+                        link.send(taken[0], received_monotonic(taken[1]))
+                    elif every:
                         callback(*taken)
                     else:
                         newest = taken
+            if link is not None:
+                self._release(subscription, callback, received, link)
+                continue
             if newest is None:
                 continue
             if received:
@@ -69,8 +85,43 @@ class LoopInputs:
             else:
                 callback(newest[0])
 
+    def _release(self, subscription, callback, received: bool, link: EmulatedLink) -> None:
+        """Hand `callback` the newest message `link` has released by now, timed by its release."""
+        released = link.receive(time.monotonic())
+        if not released:
+            return
+        data, release_s = released[-1]
+        try:
+            stamp_s = stamp_s_from_bytes(data, subscription.msg_type.__name__)
+        except ValueError:
+            pass  # the callback refuses it with the reason
+        else:
+            self.link_delay_s[subscription.topic_name] = self._owner.get_clock().now().nanoseconds * 1e-9 - stamp_s
+        if received:
+            callback(data, release_s)
+        else:
+            callback(data)
+
     def destroy(self) -> None:
         self._node.destroy_node()
+
+
+def emulated_link(p: dict) -> EmulatedLink | None:
+    """The EmulatedLink of a node's link parameters (liver_sim.base.link.LINK_PARAMETERS), or None when they
+    emulate nothing: the inputs then bypass it at no cost."""
+    settings = LinkSettings.from_parameters(p)
+    return EmulatedLink(settings) if settings.emulated else None
+
+
+def link_report(link: EmulatedLink | None, inputs: LoopInputs) -> dict:
+    """Diagnostics of a node's emulated link: its settings, counts (EmulatedLink.counts) and the delay measured
+    by header stamps of what it released last (`link_delay_measured_s`); {} without a link."""
+    if link is None:
+        return {}
+    s = link.settings
+    measured = max(inputs.link_delay_s.values(), default=float("nan"))
+    return {"link_delay_s": s.delay_s, "link_jitter_s": s.jitter_s, "link_loss_fraction": s.loss_fraction,
+            **link.counts(), "link_delay_measured_s": measured}
 
 
 def received_monotonic(info: dict) -> float:

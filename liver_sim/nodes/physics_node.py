@@ -15,9 +15,10 @@ import numpy as np
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 
+from liver_sim.base.link import link_text
 from liver_sim.base.parameters import check_parameter
 from liver_sim.nodes.diagnostics import loop_status, publish_diagnostics
-from liver_sim.nodes.inputs import Latest, LoopInputs
+from liver_sim.nodes.inputs import Latest, LoopInputs, emulated_link, link_report
 from liver_sim.nodes.parameters import declare_parameters
 from liver_sim.nodes.rate_loop import RateLoop, warn
 from liver_sim.nodes.run import run_node
@@ -51,8 +52,9 @@ class PhysicsNode(Node):
                                                   TOPICS["diagnostics"].qos)
         # 1 kHz of poses for a 150 Hz consumer: the loop takes the newest bytes each frame
         self._inputs = LoopInputs(self)
+        self._link = emulated_link(p)  # the teleoperation link from the operator's side, if emulated
         self._inputs.subscribe(TOPICS["tool_pose"].type, p["tool_pose_topic"], loop_input_qos(TOPICS["tool_pose"]),
-                               self._pose.set, raw=True)
+                               self._pose.set, raw=True, received=self._link is not None, link=self._link)
         self._last_pose_bytes = None
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.publish_surface()
@@ -64,7 +66,8 @@ class PhysicsNode(Node):
             f"{len(mesh.skin)} skin triangles), {p['rate_hz']:g} Hz × {self.model.params.substeps} "
             f"{self.model.params.integrator} steps (dt {self.model.params.dt_s * 1e6:.0f} us"
             f"{'' if self.model.implicit else f', stable below {self.model.stable_dt_s * 1e6:.0f} us'}); "
-            f"in: {p['tool_pose_topic']}; out: {p['nodes_topic']}, {p['surface_topic']}, {p['marker_topic']} "
+            f"in: {p['tool_pose_topic']}{link_text(self._link)}; "
+            f"out: {p['nodes_topic']}, {p['surface_topic']}, {p['marker_topic']} "
             f"({p['marker_rate_hz']:g} Hz), {p['contact_plane_topic']} ({p['local_model']}), {p['tool_wrench_topic']}; "
             f"tool {p['tool_shape']} in mode {p['tool_mode']}, tearing {'on' if p['tearing'] else 'off'}")
         self._loop.start()
@@ -150,7 +153,8 @@ class PhysicsNode(Node):
                  "tool_mode": self._pipeline.tool_use.mode, "topology_changes": self.model.topology_version,
                  "topology_failures": self._pipeline.topology_failures,
                  "nodes": len(self.model.positions), "substeps": self.model.params.substeps,
-                 "tool_pose_age_s": float(time.monotonic() - received), "simulated_s": self.model.time_s}
+                 "tool_pose_age_s": float(time.monotonic() - received), "simulated_s": self.model.time_s,
+                 **link_report(self._link, self._inputs)}
         publish_diagnostics(self, self._diagnostics,
                             [loop_status(f"{self.get_name()}: loop", stats, self.p["rate_hz"], extra)])
 

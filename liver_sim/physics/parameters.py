@@ -3,6 +3,7 @@ ModelParams its values name (`model_params`) and the model they build (`build_mo
 `liver_physics`, read by the offline sessions, so both refuse the same values."""
 from __future__ import annotations
 
+from liver_sim.base.link import LINK_PARAMETERS
 from liver_sim.base.parameters import Param, realtime_priority_parameter
 from liver_sim.base.topic_names import TOPIC_NAMES
 from liver_sim.mesh.io import load_mesh
@@ -109,6 +110,7 @@ PARAMETERS = {
     "contact_plane_topic": Param(TOPIC_NAMES["contact_plane"], "local model for the haptic bridge (Marker)"),
     "tool_wrench_topic": Param(TOPIC_NAMES["tool_wrench"], "contact force on the tool (WrenchStamped)"),
     "tool_pose_topic": Param(TOPIC_NAMES["tool_pose"], "tool tip pose in the liver frame (PoseStamped)"),
+    **LINK_PARAMETERS,  # on the inputs from the other side of a teleoperation link
 }
 
 

@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from liver_sim.analysis import largest_force_jump_n
+from liver_sim.base.link import LinkSettings
 from liver_sim.running.machine_stalls import stall_summary
 from liver_sim.running.network import NetworkRun, closed_loop_plan, run_network, wire_gaps, wire_rates
 from liver_sim.sessions.record import recorder_command
@@ -47,13 +48,14 @@ TOPOLOGY_FIGURES = ("force.png", "before.png", "after.png")
 
 
 def run_demo(out_dir: Path, duration_s: float | None = None, progress=print, record_storage: str | None = None,
-             scenario: str = "press", liver: DemoMesh = DemoMesh()) -> dict:
+             scenario: str = "press", liver: DemoMesh = DemoMesh(), link: LinkSettings = LinkSettings()) -> dict:
     """The main job: the four nodes in closed loop with the simulated PHANToM playing `scenario` on `liver`
     (the physics node loads the same file; the hand presses the top of it).
 
     Writes summary.json/.md, force.png, and liver_press.png (press) or before.png and after.png (tear,
     cut), and the nodes' logs in logs/. With `record_storage` (mcap or sqlite3), `liver-sim record`
-    records the run into out_dir/session.
+    records the run into out_dir/session. `link` puts an emulated teleoperation link (delay, jitter, loss) between
+    the operator's side (device, tool, bridge) and the physics, both ways.
     """
     if scenario not in SCENARIOS:
         raise ValueError(f"--scenario must be one of {', '.join(SCENARIOS)}, got {scenario!r}")
@@ -61,7 +63,9 @@ def run_demo(out_dir: Path, duration_s: float | None = None, progress=print, rec
     duration_s = spec.duration_s if duration_s is None else duration_s
     mesh = liver.load()  # refused here, before any node starts, if the physics node would refuse it
     device = liver.device_parameters(mesh)
-    plan = closed_loop_plan(extra={"liver_physics": {**spec.physics, **liver.physics_parameters(mesh)},
+    over_link = link.parameters() if link.emulated else {}
+    plan = closed_loop_plan(extra={"liver_physics": {**spec.physics, **liver.physics_parameters(mesh), **over_link},
+                                   "haptic_bridge": over_link,
                                    "phantom_sim": {**device, **spec.hand},
                                    "liver_tool": {k: v for k, v in device.items() if k != "anchor_m"}})
     if record_storage:
@@ -77,6 +81,8 @@ def run_demo(out_dir: Path, duration_s: float | None = None, progress=print, rec
         "scenario": scenario,
         "mesh": {"source": mesh.source, "scale": liver.scale, "sha256": mesh.sha256},
         "duration_s": duration_s,
+        "link": {"delay_s": link.delay_s, "jitter_s": link.jitter_s, "loss_fraction": link.loss_fraction,
+                 "seed": link.seed},
         **wire_rates(run),
         "machine_stalls": stall_summary(run.machine_stalls),
         "haptic_gaps_over_5ms": wire_gaps(run, GAP_S),
