@@ -58,7 +58,8 @@ setup(
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),
         ('share/' + package_name + '/config', _rel_glob(os.path.join('config', '*.yaml'))
-         + _rel_glob(os.path.join('config', '*.xml'))),
+         + _rel_glob(os.path.join('config', '*.xml')) + _rel_glob(os.path.join('config', '*.json'))
+         + _rel_glob(os.path.join('config', '*.rviz'))),
     ],
     install_requires=[
         'numpy>=1.24,<2.5',  # numba 0.68 supports numpy < 2.5
@@ -69,9 +70,10 @@ setup(
         'matplotlib>=3.6',
         'rosbags>=0.11',  # sessions: rosbag2 bags (record, replay, resimulate, report)
         'PyYAML>=6.0',
+        'foxglove-sdk>=0.30',  # liver-sim view: the live view's WebSocket server for the Foxglove app
     ],
     extras_require={
-        'test': ['pytest'],
+        'test': ['pytest', 'websockets'],  # websockets: the tests' Foxglove client
         'peers': ['mujoco==4.0.0'],  # liver-sim bench physics --peers: MuJoCo's flex beside our model
     },
     zip_safe=True,

@@ -10,10 +10,13 @@ from pathlib import Path
 import numpy as np
 
 from liver_sim.analysis import contact_fraction, fig8_figures, held_wrench_baseline
+from liver_sim.base.process_settings import cli_command_line
 from liver_sim.bench.machine import machine
+from liver_sim.running.launcher import log_tail
 from liver_sim.running.machine_stalls import stall_summary
 from liver_sim.running.network import closed_loop_plan, run_network, wire_gaps, wire_rates
 from liver_sim.sessions.parameters import node_parameters
+from liver_sim.view.defaults import VIEW_SERVED
 
 LOOP_TARGETS = {"physics_rate_hz": (147.0, 153.0), "haptic_rate_hz_min": 995.0, "haptic_period_error_p99_s_max": 0.0005,
                 "haptic_max_gap_s_max": 0.005, "haptic_max_gap_outside_machine_stalls_s_max": 0.005,
@@ -34,12 +37,15 @@ FIG8_MAX_PERIOD_S = 0.0015
 
 
 def run_loop_bench(duration_s: float = 30.0, log_dir=None, progress=None, observers: dict | None = None,
-                   extra_load: bool = False) -> dict:
+                   extra_load: bool = False, view: bool = False) -> dict:
     """The loop benchmark's JSON object (:func:`loop_run`); with `extra_load`, the same run follows with one
-    core-bound process at normal priority beside the network, reported under `with_extra_load`."""
+    core-bound process at normal priority beside the network, reported under `with_extra_load`; with `view`, the
+    live view (`liver-sim view`) runs beside the network, its figures under `results.view`."""
 
     log_dir = Path(log_dir or "out/bench_loop/logs")
-    report = loop_run(duration_s, log_dir, progress, observers)
+    report = loop_run(duration_s, log_dir, progress, observers, view=view)
+    if view:
+        report["results"]["view"] = view_figures(report["processes"], log_dir / f"{VIEW}.log")
     if extra_load:
         (progress or (lambda line: None))("the same run with one core-bound process at normal priority beside it:")
         loaded = loop_run(duration_s, log_dir.with_name(log_dir.name + "_extra_load"), progress, observers, 1)
@@ -48,7 +54,8 @@ def run_loop_bench(duration_s: float = 30.0, log_dir=None, progress=None, observ
     return report
 
 
-def loop_run(duration_s: float, log_dir, progress=None, observers: dict | None = None, extra_load: int = 0) -> dict:
+def loop_run(duration_s: float, log_dir, progress=None, observers: dict | None = None, extra_load: int = 0,
+             view: bool = False) -> dict:
     """One run of the four nodes in closed loop for `duration_s` (R4), watched by a listener as a rig would.
 
     Rates and period errors are given twice: as each node's own loop measured them (diagnostics)
@@ -60,7 +67,7 @@ def loop_run(duration_s: float, log_dir, progress=None, observers: dict | None =
     each process cost over the window (network.process_costs: share of one core, context switches per
     second), `load_average` the machine's before and after.  `observers` (label -> argv) run beside the
     network (NetworkPlan.observers), e.g. a recorder; `extra_load` core-bound processes at normal priority
-    beside it (network.run_network).
+    beside it (network.run_network); `view`: the live view too (its cost in `processes`).
 
     Sentinels (liver_sim.running.machine_stalls, started by run_network) note when the machine itself ran nothing that
     was due; each command gap over the target is listed with the part of it the machine
@@ -71,6 +78,8 @@ def loop_run(duration_s: float, log_dir, progress=None, observers: dict | None =
 
     plan = closed_loop_plan(extra={"phantom_sim": {"loop_script": True, "script": "explore"}})
     plan.observers.update(observers or {})
+    if view:  # the live view joins as a viewer would, beside the four nodes
+        plan.commands[VIEW] = cli_command_line("view", "--port", "0")
     load_before = os.getloadavg()
     run = run_network(plan, duration_s, log_dir, progress or (lambda line: None), extra_load=extra_load)
     load_after = os.getloadavg()
@@ -141,6 +150,17 @@ def loop_run(duration_s: float, log_dir, progress=None, observers: dict | None =
               "processes": costs, "cores_used": sum(c["cpu_share_of_one_core"] for c in costs.values()),
               "load_average": {"before": list(load_before), "after": list(load_after)},
               "targets": {**LOOP_TARGETS, "neighbour": NEIGHBOUR_TARGETS}, "met": met}
+
+
+#: The live view's label among the processes of a run.
+VIEW = "view"
+
+
+def view_figures(costs: dict, log: Path) -> dict:
+    """The live view beside the loop: its share of a core and the scenes per second it said it served at exit."""
+    said = [line for line in log_tail(log, 50) if line.startswith(VIEW_SERVED)]
+    rate = float(said[-1].split("(")[1].split()[0]) if said else None
+    return {"cpu_share_of_one_core": costs.get(VIEW, {}).get("cpu_share_of_one_core"), "scenes_per_s": rate}
 
 
 def neighbour_figures(run) -> dict:

@@ -15,12 +15,13 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import signal
 import sys
 from pathlib import Path
 
 from liver_sim.base.process_settings import DISCOVERY_RANGES, keep_dds_local, use_dds_profile
+from liver_sim.cli.arguments import positive_float, positive_int
+from liver_sim.cli.bench import add_bench_command
 from liver_sim.cli.sessions import (
     add_bag_command,
     add_fig8_command,
@@ -49,28 +50,6 @@ PROG = "liver-sim"
 EXIT_REFUSED = 2
 #: Exit status of a command whose node processes failed (NodeFailure).
 EXIT_NODE_FAILED = 1
-
-
-def positive_int(text: str) -> int:
-    """argparse type: an integer >= 1."""
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"{value} is not positive")
-    return value
-
-
-def positive_float(text: str) -> float:
-    """argparse type: a finite number > 0."""
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
-    if not (math.isfinite(value) and value > 0.0):
-        raise argparse.ArgumentTypeError(f"{value} is not a finite number > 0")
-    return value
 
 
 def add_scale_argument(parser) -> None:
@@ -191,178 +170,6 @@ def traction(args) -> int:
     return 0
 
 
-def add_bench_command(commands) -> None:
-    """``liver-sim bench physics [--json]``: step cost of the model (not a test)."""
-    parser = commands.add_parser("bench", help="benchmarks (print JSON with --json)")
-    kinds = parser.add_subparsers(dest="bench", required=True, metavar="BENCHMARK")
-    physics = kinds.add_parser("physics", help="us per step for the default liver and ~10k/~100k-tet livers")
-    physics.add_argument("--json", action="store_true", help="print one JSON object")
-    physics.add_argument("--sizes", type=positive_int, nargs="*", default=None, metavar="TETS",
-                         help="target tet counts of the larger livers (default: 10000 100000)")
-    physics.add_argument("--seconds", type=float, default=1.0, help="timing per kernel and mesh (default: 1 s)")
-    physics.add_argument("--peers", action="store_true",
-                         help="also run each mesh through MuJoCo's flex and report the ratio (pip install .[peers])")
-    physics.set_defaults(handler=bench_physics)
-    loop = kinds.add_parser("loop", help="the four nodes in closed loop: rates, jitter, latency, Fig. 8 smoothness")
-    loop.add_argument("--json", action="store_true", help="print one JSON object")
-    loop.add_argument("--duration", type=float, default=30.0, help="seconds of closed loop (default: 30)")
-    loop.add_argument("--out", type=Path, default=Path("out/bench_loop"), help="folder for the nodes' logs")
-    loop.add_argument("--extra-load", action="store_true",
-                      help="then the same run beside one core-bound process at normal priority (with_extra_load)")
-    loop.set_defaults(handler=bench_loop)
-    teleop = kinds.add_parser("teleop", help="the closed loop over an emulated teleoperation link: each delay with "
-                                             "the local model and with direct force; stability, energy, error")
-    teleop.add_argument("--json", action="store_true", help="print one JSON object")
-    teleop.add_argument("--delays", type=float, nargs="+", default=None, metavar="MS",
-                        help="one-way delays (ms; default: 0 10 50 100 200)")
-    teleop.add_argument("--jitter", type=float, default=0.0, metavar="MS", help="jitter of every run (ms; default 0)")
-    teleop.add_argument("--loss", type=float, default=0.0, metavar="F", help="loss of every run (0-1; default 0)")
-    teleop.add_argument("--seed", type=int, default=0, help="seed of the jitter and loss")
-    teleop.add_argument("--duration", type=float, default=None, help="seconds of closed loop per run (default: 12)")
-    teleop.add_argument("--out", type=Path, default=Path("out/bench_teleop"), help="folder for the plots and logs")
-    teleop.set_defaults(handler=bench_teleop)
-    topology = kinds.add_parser("topology", help="time of a tear and of a cut for the default liver and a "
-                                                  "~10k-tet liver (target: one 150 Hz frame for the default liver)")
-    topology.add_argument("--json", action="store_true", help="print one JSON object")
-    topology.add_argument("--sizes", type=positive_int, nargs="*", default=None, metavar="TETS",
-                          help="target tet counts of the larger livers (default: 10000)")
-    topology.add_argument("--repeats", type=positive_int, default=9, help="timed repetitions (default: 9)")
-    topology.set_defaults(handler=bench_topology)
-    record = kinds.add_parser("record", help="the closed loop while `liver-sim record` records it: recorder CPU "
-                                             "share, haptic loop figures with and without it")
-    record.add_argument("--json", action="store_true", help="print one JSON object")
-    record.add_argument("--duration", type=float, default=30.0, help="seconds of closed loop per run (default: 30)")
-    record.add_argument("--storage", choices=STORAGES, default="mcap", help="bag storage (default: %(default)s)")
-    record.add_argument("--out", type=Path, default=Path("out/bench_record"), help="folder for the bag and the logs")
-    record.add_argument("--no-compare", action="store_true", help="skip the first run without the recorder")
-    record.set_defaults(handler=bench_record)
-
-
-def bench_physics(args) -> int:
-    # this command's own modules, loaded when it runs (module docstring)
-    from liver_sim.bench.physics import LARGER_LIVERS, run_physics_bench
-
-    progress = None if args.json else (lambda line: print(line, flush=True))
-    sizes = LARGER_LIVERS if args.sizes is None else tuple(args.sizes)
-    if args.peers:
-        # this command's own modules, loaded when it runs (module docstring)
-        from liver_sim.studies.peers import import_mujoco
-        try:
-            import_mujoco()
-        except ImportError as exc:
-            print(f"{PROG}: error: {exc}", file=sys.stderr)
-            return EXIT_REFUSED
-    report = run_physics_bench(sizes, args.seconds, progress, peers=args.peers)
-    if args.json:
-        print(json.dumps(report))
-        return 0
-    print(f"machine: {report['machine']['cpu']}, {report['machine']['cores']} cores")
-    print(f"{'mesh':<20}{'tets':>8}{'springs':>9}{'us/step 1t':>12}{'us/step all':>12}{'numpy us':>10}"
-          f"{'stable dt':>11}{'RT x150Hz':>10}")
-    for r in report["results"]:
-        print(f"{r['mesh']:<20}{r['tetrahedra']:>8}{r['springs']:>9}{r['us_per_step_1thread']:>12.1f}"
-              f"{r['us_per_step_all_threads']:>12.1f}{r['numpy_us_per_step']:>10.0f}"
-              f"{r['stable_dt_s'] * 1e6:>9.0f}us{r['realtime_factor_150hz']:>10.2f}")
-    print(f"\nwhole frames over a scripted press:\n{'mesh':<20}{'integrator':>18}{'steps':>7}{'ms 1t':>9}"
-          f"{'ms all':>9}{'RT x150Hz':>10}{'error vs ref':>14}")
-    for row in (row for r in report["results"] for row in r["integrators"]):
-        print(f"{row['mesh']:<20}{row['integrator']:>18}{row['steps_per_frame']:>7}{row['ms_per_frame_1thread']:>9.3f}"
-              f"{row['ms_per_frame_all_threads']:>9.3f}{row['realtime_factor_150hz']:>10.2f}"
-              f"{row['max_position_error_vs_reference_m'] * 1e3:>12.3f}mm")
-    for r in (r for r in report["results"] if "peer" in r):
-        print(f"{r['mesh']:<20} {r['peer']['simulator']}: {r['peer_ms_per_frame']:.2f} ms/frame "
-              f"({r['peer']['steps_per_frame']} step, 1 thread, stable: {r['peer']['stable']}), "
-              f"peer/liver_sim = {r['peer_ratio']:.2f}"
-              + (f", press force peer/liver_sim = {r['peer_force_ratio']:.2f}" if "peer_force_ratio" in r else ""))
-    for target, met in report["met"].items():
-        print(f"target {target} = {report['targets'][target]:g}: {'met' if met else 'NOT met'}")
-    return 0
-
-
-def bench_topology(args) -> int:
-    # this command's own modules, loaded when it runs (module docstring)
-    from liver_sim.bench.topology import run_topology_bench
-
-    report = run_topology_bench((10_000,) if args.sizes is None else tuple(args.sizes), args.repeats,
-                                None if args.json else (lambda line: print(line, flush=True)))
-    if args.json:
-        print(json.dumps(report))
-        return 0
-    print(f"machine: {report['machine']['cpu']}, {report['machine']['cores']} cores")
-    print(f"{'mesh':<20}{'tets':>8}{'detect/frame':>14}{'tear':>10}{'faces':>7}{'cut':>10}")
-    for r in report["results"]:
-        print(f"{r['mesh']:<20}{r['tetrahedra']:>8}{r['tear_detection_per_frame_s'] * 1e3:>12.3f}ms"
-              f"{r['tear_s'] * 1e3:>8.1f}ms{r['tear_faces_opened']:>7}{r['cut_s'] * 1e3:>8.1f}ms")
-    for target, met in report["met"].items():
-        print(f"target {target} = {report['targets'][target]:.4g}: {'met' if met else 'NOT met'}")
-    return 0
-
-
-def bench_loop(args) -> int:
-    # this command's own modules, loaded when it runs (module docstring)
-    from liver_sim.bench.loop import run_loop_bench
-
-    report = run_loop_bench(args.duration, args.out / "logs", None if args.json else print,
-                            extra_load=args.extra_load)
-    if args.json:
-        print(json.dumps(report, default=float))
-        return 0
-    print(json.dumps(report["results"], indent=2, default=float))
-    for target, met in report["met"].items():
-        print(f"target {target} = {report['targets'][target]}: {'met' if met else 'NOT met'}")
-    return 0
-
-
-def bench_teleop(args) -> int:
-    # this command's own modules, loaded when it runs (module docstring)
-    from liver_sim.bench.teleop import TELEOP_DELAYS_MS, TELEOP_RUN_S, run_teleop_bench
-
-    for option, value, low, high in (("--jitter", args.jitter, 0.0, 1000.0), ("--loss", args.loss, 0.0, 1.0)):
-        if not low <= value <= high:
-            raise ValueError(f"{option} must lie in [{low:g}, {high:g}], got {value:g}")
-    delays = TELEOP_DELAYS_MS if args.delays is None else tuple(args.delays)
-    if any(not 0.0 <= d <= 1000.0 for d in delays):
-        raise ValueError(f"--delays must lie in [0, 1000] ms, got {list(delays)}")
-    report = run_teleop_bench(delays, args.jitter, args.loss, args.out, None if args.json else print,
-                              args.duration or TELEOP_RUN_S, args.seed)
-    if args.json:
-        print(json.dumps(report, default=float))
-        return 0
-    print(f"{'rendering':<12}{'delay ms':>9}{'stable':>8}{'passive':>8}{'energy mJ':>11}{'peak N':>8}"
-          f"{'error N':>9}{'depth mm':>9}")
-    for r in report["rows"]:
-        print(f"{r['rendering']:<12}{r['delay_ms']:>9g}{str(r['stable']):>8}{str(r['passive']):>8}"
-              f"{r['energy_generated_j'] * 1e3:>11.2f}{r['peak_force_n']:>8.2f}{r['force_error_rms_n']:>9.3f}"
-              f"{r['penetration_max_mm']:>9.1f}")
-    print(f"first unstable delay (ms): {report['first_unstable_delay_ms']}; plots: {', '.join(report['plots'])}")
-    for target, met in report["met"].items():
-        print(f"target {target} = {report['targets'][target]:g}: {'met' if met else 'NOT met'}")
-    return 0
-
-
-def bench_record(args) -> int:
-    # this command's own modules, loaded when it runs (module docstring)
-    from liver_sim.bench.record import run_record_bench
-
-    report = run_record_bench(args.duration, args.out, args.storage,
-                              None if args.json else (lambda line: print(line, flush=True)),
-                              compare=not args.no_compare)
-    if args.json:
-        print(json.dumps(report, default=float))
-        return 0
-    print(json.dumps({k: report[k] for k in ("recorder", "bag")}, indent=2, default=float))
-    number = lambda value: float("nan") if value is None else value  # noqa: E731
-    without = report.get("loop_without_recorder", {})
-    print(f"{'haptic loop':<28}{'without recorder':>18}{'with recorder':>16}")
-    for name, value in report["loop_with_recorder"].items():
-        print(f"{name:<28}{number(without.get(name)):>18.4g}{number(value):>16.4g}")
-    for target, met in report["met"].items():
-        before = report.get("met_without_recorder", {}).get(target)
-        print(f"target {target} = {report['targets'][target]}: {'met' if met else 'NOT met'} while recording"
-              + ("" if before is None else f" ({'met' if before else 'NOT met'} without)"))
-    return 0
-
-
 def add_demo_command(commands) -> None:
     """``liver-sim demo [--scenario press|tear|cut] [--mesh PATH [--scale F]] [--duration S] [--out DIR] [--offline]
     [--record [--storage …]] [--link-delay S [--link-jitter S] [--link-loss F]]``: the closed-loop demo."""
@@ -384,6 +191,10 @@ def add_demo_command(commands) -> None:
     parser.add_argument("--record", action="store_true", help="record the run with `liver-sim record` into OUT/session")
     parser.add_argument("--storage", choices=STORAGES, default="mcap", help="storage of the recorded bag")
     add_link_arguments(parser)
+    parser.add_argument("--view", action="store_true", help="serve the live view (`liver-sim view`) beside the nodes "
+                        "and draw OUT/view.png")
+    parser.add_argument("--view-port", type=int, default=None, metavar="P", help="the live view's port (default "
+                        "8765; 0: any free one)")
     parser.set_defaults(handler=demo)
 
 
@@ -423,20 +234,52 @@ def demo(args) -> int:
         raise ValueError("--scale applies to --mesh PATH; the default liver is in metres")
     liver = DemoMesh(args.mesh, args.scale)
     if args.offline:
-        if args.record or args.scenario != "press" or link_settings(args).emulated:
-            raise ValueError("--record, --scenario and --link-* run the node network; --offline is the press "
-                             "without ROS")
+        if args.record or args.view or args.scenario != "press" or link_settings(args).emulated:
+            raise ValueError("--record, --view, --scenario and --link-* run the node network; --offline is the "
+                             "press without ROS")
         run_offline_demo(args.out, args.duration, progress, liver)
     else:
         run_demo(args.out, args.duration, progress, record_storage=args.storage if args.record else None,
-                 scenario=args.scenario, liver=liver, link=link_settings(args))
+                 scenario=args.scenario, liver=liver, link=link_settings(args),
+                 view=(["--port", str(args.view_port)] if args.view_port is not None else []) if args.view else None)
+    return 0
+
+
+def add_view_command(commands) -> None:
+    """``liver-sim view [--host H] [--port P] [--rate HZ] [--allow-remote] [--picture PNG] [--duration S]``."""
+    from liver_sim.view.defaults import DEFAULT_HOST, DEFAULT_PORT, VIEW_RATE_HZ
+
+    parser = commands.add_parser("view", help="serve the running network to the Foxglove app (a WebSocket on "
+                                              f"{DEFAULT_HOST}:{DEFAULT_PORT}): the deforming liver, tool, local "
+                                              "model, forces and diagnostics")
+    parser.add_argument("--host", default=DEFAULT_HOST, help="address to serve on (default: %(default)s)")
+    parser.add_argument("--port", type=int, default=DEFAULT_PORT, help="port (default: %(default)s; 0: any free one)")
+    parser.add_argument("--rate", type=float, default=VIEW_RATE_HZ, help="scenes per second (default: %(default)s)")
+    parser.add_argument("--allow-remote", action="store_true",
+                        help="allow a --host that is not a loopback address (the view has no authentication)")
+    parser.add_argument("--picture", type=Path, default=None, metavar="PNG",
+                        help="at exit, draw the scene with the largest contact force into this PNG")
+    parser.add_argument("--duration", type=float, default=None, help="seconds to serve (default: until Ctrl-C)")
+    parser.set_defaults(handler=view)
+
+
+def view(args) -> int:
+    # this command's own modules, loaded when it runs (module docstring)
+    from liver_sim.view.server import serve
+
+    if not 1.0 <= args.rate <= 150.0:
+        raise ValueError(f"--rate must lie in [1, 150] scenes per second, got {args.rate:g}")
+    if not 0 <= args.port <= 65535:
+        raise ValueError(f"--port must lie in [0, 65535], got {args.port}")
+    serve(args.host, args.port, args.rate, args.allow_remote, args.picture, args.duration,
+          lambda line: print(line, flush=True))
     return 0
 
 
 #: The subcommands, in the order `liver-sim --help` lists them.
 COMMANDS = (add_mesh_command, add_traction_command, add_validate_command, add_bench_command, add_demo_command,
             add_record_command, add_replay_command, add_resimulate_command, add_fig8_command, add_report_command,
-            add_bag_command)
+            add_bag_command, add_view_command)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -454,7 +297,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def starts_ros(args) -> bool:
     """Whether the parsed command starts ROS (a context or node processes)."""
-    return (args.command in ("record", "replay") or (args.command == "demo" and not args.offline)
+    return (args.command in ("record", "replay", "view") or (args.command == "demo" and not args.offline)
             or (args.command == "bench" and args.bench in ("loop", "record", "teleop")))
 
 

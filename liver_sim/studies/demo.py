@@ -14,6 +14,7 @@ import numpy as np
 
 from liver_sim.analysis import largest_force_jump_n
 from liver_sim.base.link import LinkSettings
+from liver_sim.base.process_settings import cli_command_line
 from liver_sim.running.machine_stalls import stall_summary
 from liver_sim.running.network import NetworkRun, closed_loop_plan, run_network, wire_gaps, wire_rates
 from liver_sim.sessions.record import recorder_command
@@ -48,14 +49,16 @@ TOPOLOGY_FIGURES = ("force.png", "before.png", "after.png")
 
 
 def run_demo(out_dir: Path, duration_s: float | None = None, progress=print, record_storage: str | None = None,
-             scenario: str = "press", liver: DemoMesh = DemoMesh(), link: LinkSettings = LinkSettings()) -> dict:
+             scenario: str = "press", liver: DemoMesh = DemoMesh(), link: LinkSettings = LinkSettings(),
+             view: list[str] | None = None) -> dict:
     """The main job: the four nodes in closed loop with the simulated PHANToM playing `scenario` on `liver`
     (the physics node loads the same file; the hand presses the top of it).
 
     Writes summary.json/.md, force.png, and liver_press.png (press) or before.png and after.png (tear,
     cut), and the nodes' logs in logs/. With `record_storage` (mcap or sqlite3), `liver-sim record`
     records the run into out_dir/session. `link` puts an emulated teleoperation link (delay, jitter, loss) between
-    the operator's side (device, tool, bridge) and the physics, both ways.
+    the operator's side (device, tool, bridge) and the physics, both ways. With `view` (the options of
+    `liver-sim view`), the live view runs beside the nodes and draws out_dir/view.png at the end.
     """
     if scenario not in SCENARIOS:
         raise ValueError(f"--scenario must be one of {', '.join(SCENARIOS)}, got {scenario!r}")
@@ -70,6 +73,8 @@ def run_demo(out_dir: Path, duration_s: float | None = None, progress=print, rec
                                    "liver_tool": {k: v for k, v in device.items() if k != "anchor_m"}})
     if record_storage:
         plan.observers["recorder"] = recorder_command(out_dir / "session", record_storage)
+    if view is not None:
+        plan.commands["view"] = cli_command_line("view", *view, "--picture", str(out_dir / "view.png"))
     progress(f"{spec.title}: starting the node network (the same command lines work in four terminals):")
     run = run_network(plan, duration_s, out_dir / "logs", progress)
     _, haptic_force = run.forces["local_model"]

@@ -1,0 +1,214 @@
+"""The live view: its scene (no ROS), its Foxglove messages read back as the app reads them, its address check, the
+view of a running network through a real Foxglove WebSocket client, and recorded sessions Foxglove can open."""
+import struct
+import subprocess
+import sys
+import threading
+import time
+
+import numpy as np
+import pytest
+from foxglove_client import field_numbers, fields, listen, packed_count, schema_bytes
+
+from liver_sim.base.local_model import LocalModel
+from liver_sim.mesh.liver_shape import default_liver
+from liver_sim.view import scene as scene_module
+from liver_sim.view.scene import DISPLACED_COLOUR, REST_COLOUR, build_scene, force_arrow, lips, plane_patch
+
+LIVER = default_liver()
+PLANE = LocalModel("plane", True, np.array([0.0, 0.0, 0.05]), np.array([0.0, 0.6, 0.8]), np.zeros(3), 0.0, 0.002,
+                   True, None)
+
+
+def test_the_scene_holds_every_skin_triangle_coloured_by_its_displacement():
+    moved = LIVER.points.copy()
+    moved[LIVER.skin[0]] += [0.0, 0.0, -0.02]  # beyond the colour's scale
+    scene = build_scene(moved, LIVER.points, LIVER.skin, LIVER.skin, np.array([0.0, 0.0, 0.1]), 0.015, PLANE,
+                        np.array([0.0, 0.0, 0.5]))
+    assert scene.triangle_count == len(LIVER.skin) and scene.triangles.shape == (len(LIVER.skin), 3, 3)
+    assert scene.colours[0] == pytest.approx(np.tile(DISPLACED_COLOUR, (3, 1)))
+    untouched = ~np.isin(LIVER.skin, LIVER.skin[0]).any(axis=1)
+    assert np.allclose(scene.colours[untouched], REST_COLOUR)
+    assert len(scene.lips) == 0                                    # no topology change
+    start, end = force_arrow(scene)
+    assert end - start == pytest.approx([0.0, 0.0, 0.5 * scene_module.ARROW_M_PER_N])
+
+
+def test_a_plane_patch_lies_in_its_plane_around_its_point():
+    corners = plane_patch(PLANE).reshape(-1, 3)
+    assert (corners - PLANE.point) @ PLANE.normal == pytest.approx(np.zeros(6), abs=1e-12)
+    half_diagonal = scene_module.PLANE_PATCH_M / np.sqrt(2.0)
+    assert np.linalg.norm(corners - PLANE.point, axis=1) == pytest.approx(np.full(6, half_diagonal))
+
+
+def test_lips_are_the_rim_of_the_triangles_a_cut_added():
+    skin = np.array([[0, 1, 2]])
+    opened = np.array([[0, 1, 2], [1, 3, 2], [3, 4, 2]])   # two new triangles sharing the edge (2, 3)
+    points = np.arange(15, dtype=float).reshape(5, 3)
+    rim = lips(opened, skin, points)
+    edges = {tuple(sorted((int(a[0] // 3), int(b[0] // 3)))) for a, b in rim}
+    assert edges == {(1, 3), (1, 2), (3, 4), (2, 4)}
+    assert len(lips(skin, skin, points)) == 0 and len(lips(opened, None, points)) == 0
+
+
+@pytest.mark.parametrize("host, allowed", [("127.0.0.1", True), ("localhost", True), ("::1", True),
+                                           ("0.0.0.0", False), ("192.168.1.20", False), ("liver.example", False)])
+def test_a_non_loopback_address_is_refused_unless_asked_for(host, allowed):
+    from liver_sim.view.server import check_host
+
+    if allowed:
+        assert check_host(host, False) == host
+    else:
+        with pytest.raises(ValueError, match="--allow-remote"):
+            check_host(host, False)
+        assert check_host(host, True) == host
+
+
+def decode_scene(payload: bytes, schema: bytes) -> dict:
+    """{entity id: {primitive field name: [primitive bytes]}} of a serialized foxglove.SceneUpdate."""
+    numbers = field_numbers(schema)
+    update, entity = numbers["SceneUpdate"], numbers["SceneEntity"]
+    names = {number: name for name, number in entity.items()}
+    entities = {}
+    for number, _, value in fields(payload):
+        if number != update["entities"]:
+            continue
+        parts = fields(value)
+        name = next(v.decode() for n, _, v in parts if n == entity["id"])
+        entities[name] = {}
+        for n, _, v in parts:
+            if names.get(n) in ("triangles", "spheres", "arrows", "lines"):
+                entities[name].setdefault(names[n], []).append(v)
+    return entities
+
+
+def skin_triangles(entities: dict, schema: bytes) -> int:
+    """Triangles of the scene's `skin` entity: its indices over three, or its points over three without indices."""
+    numbers = field_numbers(schema)["TriangleListPrimitive"]
+    (skin,) = entities["skin"]["triangles"]
+    parts = fields(skin)
+    indices = [v for n, _, v in parts if n == numbers["indices"]]
+    if indices:
+        return packed_count(b"".join(indices), field_numbers(schema, what=5)["TriangleListPrimitive"]["indices"]) // 3
+    return sum(1 for n, _, _ in parts if n == numbers["points"]) // 3
+
+
+def test_scene_updates_read_back_with_the_advertised_schema():
+    """The message the view logs, read as the app reads it: by the field numbers of the schema it advertises."""
+    from foxglove.messages import SceneUpdate
+
+    from liver_sim.view.server import scene_update
+
+    scene = build_scene(LIVER.points, LIVER.points, LIVER.skin, LIVER.skin, np.array([0.0, 0.0, 0.1]), 0.015, PLANE,
+                        np.array([0.0, 0.0, 0.4]))
+    schema = SceneUpdate.get_schema()
+    assert schema.name == "foxglove.SceneUpdate" and schema.encoding == "protobuf"
+    colours = np.tile(REST_COLOUR, (len(LIVER.points), 1))
+    for kwargs in ({}, {"points": (LIVER.points, colours), "indices": LIVER.skin}):
+        entities = decode_scene(scene_update(scene, 1_500_000_000, **kwargs).encode(), bytes(schema.data))
+        assert set(entities) == {"skin", "tool", "local_model", "force", "lips"}
+        assert skin_triangles(entities, bytes(schema.data)) == len(LIVER.skin)
+        assert len(entities["tool"]["spheres"]) == 1 and len(entities["force"]["arrows"]) == 1
+        assert len(entities["local_model"]["triangles"]) == 1 and "lines" not in entities["lips"]
+
+
+def test_the_view_command_refuses_a_public_address_by_name():
+    result = subprocess.run([sys.executable, "-m", "liver_sim.cli.main", "view", "--host", "0.0.0.0",
+                             "--duration", "1"], capture_output=True, text=True, timeout=120)
+    assert result.returncode == 2 and "--host 0.0.0.0" in result.stderr and "--allow-remote" in result.stderr
+
+
+def test_the_live_view_serves_the_running_network_to_a_foxglove_client(ros_domain_id, tmp_path):
+    """`demo --view` on a free port: a Foxglove client sees the three channels, decodes scenes whose skin is the
+    default liver's, at 20 scenes a second or more (asked for 40), and the demo leaves the view's picture."""
+    from liver_sim.studies.demo import run_demo
+
+    out = tmp_path / "demo"
+    done = {}
+    demo = threading.Thread(target=lambda: done.update(summary=run_demo(
+        out, duration_s=12.0, progress=lambda line: None, view=["--port", "0", "--rate", "40"])), daemon=True)
+    demo.start()
+    log = out / "logs" / "view.log"
+    deadline = time.monotonic() + 120.0
+    port = None
+    while port is None and time.monotonic() < deadline and demo.is_alive():
+        text = log.read_text() if log.exists() else ""
+        if "ws://127.0.0.1:" in text:
+            port = int(text.split("ws://127.0.0.1:", 1)[1].split()[0])
+        time.sleep(0.1)
+    assert port is not None, f"the view never said where it serves; its log: {log.read_text() if log.exists() else ''}"
+    topics = ["/liver/scene", "/liver/forces", "/liver/diagnostics"]
+    scenes = []
+    for _ in range(30):  # until the physics publishes (scenes start with the first surface and nodes)
+        info, channels, received = listen(port, topics, 3.0)
+        scenes = received["/liver/scene"]
+        if len(scenes) > 10:
+            break
+    demo.join(timeout=120.0)
+    assert set(topics) <= set(channels) and info["subprotocol"] in ("foxglove.sdk.v1", "foxglove.websocket.v1")
+    scene_channel = channels["/liver/scene"]
+    assert scene_channel["schemaName"] == "foxglove.SceneUpdate" and scene_channel["encoding"] == "protobuf"
+    schema = schema_bytes(scene_channel)
+    entities = decode_scene(scenes[-1][2], schema)
+    assert skin_triangles(entities, schema) == len(LIVER.skin)
+    arrivals = np.array([arrival for arrival, _, _ in scenes])
+    assert len(scenes) / (arrivals[-1] - arrivals[0] + 1.0 / 40.0) >= 20.0
+    assert received["/liver/forces"] and b"device_command_norm_n" in received["/liver/forces"][-1][2]
+    assert "summary" in done and (out / "view.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def mcap_schemas(path) -> dict[str, tuple[str, str, bytes]]:
+    """{topic: (schema name, schema encoding, schema data)} of an MCAP file, from its uncompressed Schema (0x03)
+    and Channel (0x04) records (MCAP repeats them in the summary section)."""
+    data = path.read_bytes()
+    assert data[:8] == b"\x89MCAP0\r\n", path
+    schemas, channels, i = {}, {}, 8
+
+    def string(at):
+        (length,) = struct.unpack_from("<I", data, at)
+        return data[at + 4:at + 4 + length], at + 4 + length
+
+    while i + 9 <= len(data):
+        opcode, length = data[i], struct.unpack_from("<Q", data, i + 1)[0]
+        body = i + 9
+        if opcode == 0x03:
+            (schema_id,) = struct.unpack_from("<H", data, body)
+            name, at = string(body + 2)
+            encoding, at = string(at)
+            payload, _ = string(at)
+            schemas[schema_id] = (name.decode(), encoding.decode(), payload)
+        elif opcode == 0x04:
+            _, schema_id = struct.unpack_from("<HH", data, body)
+            topic, _ = string(body + 4)
+            channels[topic.decode()] = schema_id
+        i = body + length
+        if opcode == 0x02:  # a footer ends the file
+            break
+    return {topic: schemas[schema_id] for topic, schema_id in channels.items() if schema_id in schemas}
+
+
+def test_a_recorded_session_carries_schemas_foxglove_decodes(recorded_demo):
+    """A bag from `liver-sim record` (MCAP) opens in Foxglove as it is: every channel has a ros2msg schema with
+    the definitions of the types it nests (the `MSG:` sections Foxglove reads), so its 3-D panel shows the skin
+    marker, the local model and the tool, and its plot the forces (config/foxglove_layout.json)."""
+    bags = list(recorded_demo.out.glob("session/*.mcap"))
+    assert bags, list(recorded_demo.out.glob("session/*"))
+    schemas = mcap_schemas(bags[0])
+    assert schemas["/liver/surface"][1] == "ros2msg" and b"MSG: shape_msgs" in schemas["/liver/surface"][2]
+    for topic in ("/liver/nodes", "/liver/contact_plane", "/tool/pose", "/phantom/servo_cf", "/liver/tool_wrench",
+                  "/diagnostics"):
+        name, encoding, definition = schemas[topic]
+        assert encoding == "ros2msg", (topic, encoding)
+        assert b"MSG: std_msgs/Header" in definition or b"MSG: std_msgs/msg/Header" in definition, topic
+    marker = schemas["/liver/contact_plane"][2]
+    assert b"geometry_msgs/Pose" in marker and b"MSG: geometry_msgs/Point" in marker.replace(b"/msg/", b"/")
+
+
+def test_the_loop_bench_reads_the_views_share_and_scene_rate(tmp_path):
+    from liver_sim.bench.loop import VIEW, view_figures
+
+    log = tmp_path / "view.log"
+    log.write_text("serving the live view on ws://127.0.0.1:40000 (…)\nserved 900 scenes in 30.1 s (29.9 per second)\n")
+    figures = view_figures({VIEW: {"cpu_share_of_one_core": 0.04}}, log)
+    assert figures == {"cpu_share_of_one_core": 0.04, "scenes_per_s": 29.9}
+    assert view_figures({}, tmp_path / "absent.log") == {"cpu_share_of_one_core": None, "scenes_per_s": None}
