@@ -244,8 +244,18 @@ def alive(pid):
     return stat.rsplit(")", 1)[1].split()[0] not in ("Z", "X")
 
 
+def recorded_messages(out) -> int:
+    """The message count of the recorder's newest progress line ("  T s: N messages") in out/logs/recorder.log."""
+    log = out / "logs" / "recorder.log"
+    lines = [line for line in (log.read_text() if log.exists() else "").splitlines() if line.endswith(" messages")]
+    return int(lines[-1].split(":")[1].split()[0]) if lines else 0
+
+
 def test_sigkill_of_the_demo_leaves_no_process_of_its_run(ros_env, tmp_path):
     demo = start_demo(ros_env, tmp_path)
+    # the recorder has matched the nodes and written (a kill before its first drain leaves an empty bag)
+    wait_for(lambda: recorded_messages(tmp_path) > 1000, START_TIMEOUT_S, "the recorder recording",
+             lambda: f"{recorded_messages(tmp_path)} messages")
     children = run_processes(ros_env)
     assert set(children) == DEMO_PROCESSES
     demo.kill()
