@@ -397,3 +397,16 @@ def test_domain_occupants_name_product_nodes_devices_and_bridges_but_not_observe
     assert domain_occupants(graph) == ["a node (its name not discovered yet) publishing /phantom/measured_cp",
                                        "node /liver_physics", "node /my_bridge publishing /phantom/servo_cf",
                                        "node /omni_driver publishing /phantom/measured_cp", "node /phantom_sim"]
+
+
+def test_floor_bench_runs_the_three_bare_hops_and_reports_their_cost(ros_domain_id, tmp_path):
+    import json
+
+    from liver_sim.bench.floor import ROLES, run_floor_bench
+
+    report = json.loads(json.dumps(run_floor_bench(duration_s=2.0, log_dir=tmp_path)))
+    assert report["machine"] and set(report["processes"]) == set(ROLES)
+    for cost in report["processes"].values():
+        assert cost["cpu_share_of_one_core"] > 0.0
+    assert report["processes"]["loop"]["voluntary_switches_per_s"] > 100.0  # a 1 kHz loop sleeps between ticks
+    assert {path.name for path in tmp_path.glob("*.log")} >= {f"{role}.log" for role in ROLES}

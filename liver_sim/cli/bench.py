@@ -42,6 +42,12 @@ def add_bench_command(commands) -> None:
     teleop.add_argument("--duration", type=float, default=None, help="seconds of closed loop per run (default: 12)")
     teleop.add_argument("--out", type=Path, default=Path("out/bench_teleop"), help="folder for the plots and logs")
     teleop.set_defaults(handler=bench_teleop)
+    floor = kinds.add_parser("floor", help="what the 1 kHz hops cost here with no work in them: the floor under the "
+                                           "nodes' CPU shares, set by rclpy and Fast DDS")
+    floor.add_argument("--json", action="store_true", help="print one JSON object")
+    floor.add_argument("--duration", type=float, default=20.0, help="seconds measured (default: 20)")
+    floor.add_argument("--out", type=Path, default=Path("out/bench_floor"), help="folder for the processes' logs")
+    floor.set_defaults(handler=bench_floor)
     topology = kinds.add_parser("topology", help="time of a tear and of a cut for the default liver and a "
                                                   "~10k-tet liver (target: one 150 Hz frame for the default liver)")
     topology.add_argument("--json", action="store_true", help="print one JSON object")
@@ -157,6 +163,21 @@ def bench_teleop(args) -> int:
     print(f"first unstable delay (ms): {report['first_unstable_delay_ms']}; plots: {', '.join(report['plots'])}")
     for target, met in report["met"].items():
         print(f"target {target} = {report['targets'][target]:g}: {'met' if met else 'NOT met'}")
+    return 0
+
+
+def bench_floor(args) -> int:
+    # this command's own modules, loaded when it runs (module docstring)
+    from liver_sim.bench.floor import run_floor_bench
+
+    report = run_floor_bench(args.duration, args.out / "logs", None if args.json else print)
+    if args.json:
+        print(json.dumps(report, default=float))
+        return 0
+    for role, cost in report["processes"].items():
+        print(f"{role:<8} {cost['cpu_share_of_one_core']:.3f} of a core, {cost['voluntary_switches_per_s']:.0f} "
+              "voluntary switches/s")
+    print(report["reading"])
     return 0
 
 

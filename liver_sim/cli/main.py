@@ -298,7 +298,7 @@ def build_parser() -> argparse.ArgumentParser:
 def starts_ros(args) -> bool:
     """Whether the parsed command starts ROS (a context or node processes)."""
     return (args.command in ("record", "replay", "view") or (args.command == "demo" and not args.offline)
-            or (args.command == "bench" and args.bench in ("loop", "record", "teleop")))
+            or (args.command == "bench" and args.bench in ("loop", "record", "teleop", "floor")))
 
 
 def _terminate(signum, _frame) -> None:
