@@ -188,3 +188,30 @@ def test_teleop_bench_rows_carry_every_key_and_the_reference_matches_itself(ros_
     assert {"stable", "passive", "energy_generated_j"} <= set(report["definitions"])
     for path in report["plots"]:
         assert open(path, "rb").read(8) == b"\x89PNG\r\n\x1a\n"
+
+
+def test_over_a_delayed_link_the_bridge_renders_and_still_zeroes_when_the_physics_stops(rig_factory, ros_env):
+    """A bridge whose local model comes over a 100 ms link with jitter and loss renders it as without the link;
+    when the physics stops, the queued models run out and the watchdog takes the force to exactly zero, as it
+    does when the physics dies without a link. The device never gets more than the clamp."""
+    from bridge_rig import EXPECTED_INSIDE, INSIDE, QUARTER_TURN_X, assert_safe, local_model, start_bridge, stop
+
+    rig = rig_factory(rotation_xyzw=QUARTER_TURN_X)
+    rig.model, rig.tool = local_model("plane"), INSIDE
+    bridge = start_bridge(ros_env, link_delay_s=0.1, link_jitter_s=0.01, link_loss_fraction=0.05, link_seed=3)
+    try:
+        rig.wait_for_force(EXPECTED_INSIDE, bridge)
+        rig.wait_until(lambda: int((rig.loop_status() or {}).get("link_lost", "0")) > 0, "a message lost", bridge)
+        status = rig.loop_status()
+        assert float(status["link_delay_s"]) == 0.1 and float(status["link_delay_measured_s"]) >= 0.09
+        rig.model = None  # the physics stops
+        rig.wait_until(lambda: len(rig.forces) > 50 and not any(f.any() for f in rig.forces[-50:]),
+                       "an exactly zero force", bridge)
+        first_zero = len(rig.forces) - 50
+        del rig.diagnostics[:]
+        rig.wait_until(lambda: (rig.loop_status() or {}).get("watchdog") == "stale"
+                       and len(rig.forces) > first_zero + 200, "diagnostics: watchdog stale", bridge)
+        assert all(not f.any() for f in rig.forces[first_zero:]), "stays exactly zero"
+    finally:
+        stop(bridge)
+    assert_safe(rig.forces)
