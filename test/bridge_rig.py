@@ -151,6 +151,18 @@ class Rig:
             np.allclose(f, expected, atol=1e-3, rtol=0.0) for f in self.forces[-count:]),
             f"force {np.round(expected, 4).tolist()} N", bridge)
 
+    def wait_for_stale_zero(self, bridge: subprocess.Popen) -> None:
+        """After the inputs stopped: wait for 50 exactly zero commands in a row (a local model sent just before
+        the stop is fresh data, and may render for a tick or two after a first zero), then for the watchdog to
+        say `stale` 200 commands later; every command from the first of those zeros on must be exactly zero."""
+        self.wait_until(lambda: len(self.forces) > 50 and not any(f.any() for f in self.forces[-50:]),
+                        "an exactly zero force", bridge)
+        first_zero = len(self.forces) - 50
+        del self.diagnostics[:]
+        self.wait_until(lambda: (self.loop_status() or {}).get("watchdog") == "stale"
+                        and len(self.forces) > first_zero + 200, "diagnostics: watchdog stale", bridge)
+        assert all(not f.any() for f in self.forces[first_zero:]), "stays exactly zero until fresh data"
+
     def loop_status(self) -> dict | None:
         """The bridge's newest diagnostics key/values, or None."""
         for array in reversed(self.diagnostics):

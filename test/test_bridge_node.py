@@ -96,15 +96,7 @@ def test_watchdog_zeroes_the_force_on_a_stale_model_and_recovers(rig_factory, ro
         rig.wait_until(lambda: (rig.loop_status() or {}).get("watchdog") == "ok", "diagnostics: watchdog ok",
                        bridge)
         rig.model = None  # the physics stops refreshing the local model
-        # 50 zero commands in a row: a local model the rig sent just before it stopped is fresh data, and may
-        # still render for a tick or two after a first zero
-        rig.wait_until(lambda: len(rig.forces) > 50 and not any(f.any() for f in rig.forces[-50:]),
-                       "an exactly zero force", bridge)
-        first_zero = len(rig.forces) - 50
-        del rig.diagnostics[:]
-        rig.wait_until(lambda: (rig.loop_status() or {}).get("watchdog") == "stale"
-                       and len(rig.forces) > first_zero + 200, "diagnostics: watchdog stale", bridge)
-        assert all(not f.any() for f in rig.forces[first_zero:]), "stays exactly zero until fresh data"
+        rig.wait_for_stale_zero(bridge)
         status = rig.loop_status()
         assert float(status["last_force_n"]) == 0.0 and float(status["rate_hz"]) > 0.0
         rig.model = local_model("plane")
