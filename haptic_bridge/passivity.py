@@ -23,7 +23,11 @@ import numpy as np
 
 
 class PassivityObserver:
-    """Energy the commands give the hand (module docstring), and the variable damping that takes it out."""
+    """Energy the commands give the hand (module docstring), and the variable damping that takes it out.
+
+    It runs in the 1 kHz tick, on Python floats (numpy on 3-vectors costs microseconds a call): the tick hands it
+    the tool tip in the liver frame and :meth:`set_map` the linear part of the liver → device map, Rᵀ/scale, which
+    turns a tip's motion into the stylus's."""
 
     def __init__(self, period_s: float, control: bool = False, max_damping_ns_per_m: float = 0.0):
         self.period_s = period_s
@@ -32,23 +36,35 @@ class PassivityObserver:
         self.energy_j = 0.0       # E_n: net energy given to the hand so far
         self.peak_energy_j = 0.0  # the largest E_n so far
         self.damping_ns_per_m = 0.0  # the controller's α at the last tick
-        self._position = None  # the stylus at the last tick (m)
-        self._step = None      # its motion over the last tick (m)
-        self._ahead = None     # the last non-zero motion: the prediction of the next tick's (the tool pose arrives
-        #                        asynchronously, so a tick may see no new sample and the next two)
-        self._force = np.zeros(3)
+        self._to_device = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
+        self._tip = None     # the tool tip at the last tick (m, liver frame)
+        self._ahead = None   # the stylus's last non-zero motion over a tick (m, device frame): the prediction of the
+        #                      next one (the tool pose arrives asynchronously, a tick may see no new sample)
+        self._force = (0.0, 0.0, 0.0)
 
-    def observe(self, position_m: np.ndarray | None) -> None:
-        """The stylus at this tick (m, device frame; None: not known): add F_{k-1}·Δx to the energy."""
-        self._step = None if position_m is None or self._position is None else position_m - self._position
-        self._position = position_m
-        if self._step is None:
+    def set_map(self, liver_to_device: np.ndarray) -> None:
+        """The 3×3 matrix taking a motion of the tip (liver frame) to the stylus's (device frame): Rᵀ/scale."""
+        self._to_device = tuple(tuple(row) for row in np.asarray(liver_to_device, dtype=float).tolist())
+
+    def observe(self, tip_m: np.ndarray | None) -> None:
+        """The tool tip at this tick (m, liver frame; None: not known): add F_{k-1}·Δx to the energy."""
+        if tip_m is None:
+            self._tip = self._ahead = None
+            return
+        x, y, z = tip_m.tolist()
+        last, self._tip = self._tip, (x, y, z)
+        if last is None:
             self._ahead = None
-        else:
-            self.energy_j += float(self._force @ self._step)
-            self.peak_energy_j = max(self.peak_energy_j, self.energy_j)
-            if self._step.any():
-                self._ahead = self._step
+            return
+        dx, dy, dz = x - last[0], y - last[1], z - last[2]
+        (a, b, c), (d, e, f), (g, h, i) = self._to_device
+        step = (a * dx + b * dy + c * dz, d * dx + e * dy + f * dz, g * dx + h * dy + i * dz)
+        fx, fy, fz = self._force
+        self.energy_j += fx * step[0] + fy * step[1] + fz * step[2]
+        if self.energy_j > self.peak_energy_j:
+            self.peak_energy_j = self.energy_j
+        if dx or dy or dz:
+            self._ahead = step
 
     def damp(self, force_n: np.ndarray) -> np.ndarray:
         """`force_n` (N, device frame), with the controller's damping when it is on and the force would give the
@@ -57,17 +73,18 @@ class PassivityObserver:
         step = self._ahead
         if not self.control or step is None:
             return force_n
-        squared = float(step @ step)
-        excess = float(force_n @ step) + self.energy_j  # J beyond what the hand put in, over a tick like the last
+        squared = step[0] * step[0] + step[1] * step[1] + step[2] * step[2]
+        fx, fy, fz = force_n.tolist()
+        excess = fx * step[0] + fy * step[1] + fz * step[2] + self.energy_j  # J beyond what the hand put in
         if squared <= 0.0 or excess <= 0.0:
             return force_n
         alpha = min(excess * self.period_s / squared, self.max_damping_ns_per_m)
         self.damping_ns_per_m = alpha
-        return force_n - alpha * step / self.period_s
+        return force_n - (alpha / self.period_s) * np.array(step)
 
     def commanded(self, force_n: np.ndarray) -> None:
         """The command actually sent at this tick (after the safety chain): held until the next tick."""
-        self._force = force_n
+        self._force = tuple(force_n.tolist())
 
     def report(self) -> dict:
         """For diagnostics: E (J), its peak (J), and the controller's state."""

@@ -169,6 +169,8 @@ class BridgeTick:
         self.glide = ModelGlide(p["model_glide_s"])
         self.passivity = PassivityObserver(1.0 / p["rate_hz"], p["passivity_control"],
                                            p["passivity_max_damping_ns_per_m"])
+        if device_map is not None:
+            self.passivity.set_map(device_map.liver_to_device_motion)
 
     def configure(self, p: dict) -> None:
         """Take parameters checked by :func:`checked_change`, from this tick on (called by the loop)."""
@@ -181,6 +183,7 @@ class BridgeTick:
     def set_device_map(self, device_map: DeviceMap) -> None:
         """Render through `device_map` from now on, restarting from zero force (soft start)."""
         self.device_map = device_map
+        self.passivity.set_map(device_map.liver_to_device_motion)
         self.safety.restart()
 
     def restart(self) -> None:
@@ -217,7 +220,7 @@ class BridgeTick:
             self.passivity.observe(None)
             command = self.safety.step(_ZERO, math.inf, math.inf)
         else:
-            self.passivity.observe(None if tip is None else self.device_map.liver_to_device(tip))
+            self.passivity.observe(tip)
             command = self.safety.step(self.passivity.damp(self.device_map.liver_to_device_force(force)),
                                        source_age_s, pose_age_s, min(lifetime, self.p["lifetime_s"]), now_s)
         self.passivity.commanded(command)

@@ -86,6 +86,11 @@ class DeviceMap:
         """Liver point (m) → device point (m): Rᵀ·(p − translation)/scale."""
         return self.rotation.T @ (point - self.translation) / self.scale
 
+    @property
+    def liver_to_device_motion(self) -> np.ndarray:
+        """Rᵀ/scale (3×3): a motion (m) in the liver frame → the stylus's in the device frame."""
+        return self.rotation.T / self.scale
+
     def liver_to_device_force(self, force: np.ndarray) -> np.ndarray:
         """Force (N) in the liver frame → device frame: Rᵀ·F (rotation only, no scale)."""
         return self.rotation.T @ force
