@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 import threading
 from collections import deque
+from pathlib import Path
 
 from liver_sim.nodes.garbage import GARBAGE
 
@@ -21,8 +22,8 @@ def rt_throttle_s() -> float | None:
     """How long (s) the kernel stops every SCHED_FIFO thread once they used their share of a period
     (sched_rt_period_us − sched_rt_runtime_us), or None when unknown or unlimited."""
     try:
-        period = int(open("/proc/sys/kernel/sched_rt_period_us").read())
-        runtime = int(open("/proc/sys/kernel/sched_rt_runtime_us").read())
+        period = int(Path("/proc/sys/kernel/sched_rt_period_us").read_text())
+        runtime = int(Path("/proc/sys/kernel/sched_rt_runtime_us").read_text())
     except (OSError, ValueError):
         return None
     return None if runtime < 0 else (period - runtime) * 1e-6

@@ -8,6 +8,7 @@ No rclpy here.
 from __future__ import annotations
 
 import struct
+from contextlib import contextmanager
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
@@ -261,26 +262,32 @@ def _complete_records_end(bio, data_start: int, size: int) -> int:
     return position
 
 
+@contextmanager
 def _salvaged_mcap(file: Path):
-    """(connections, messages) of the complete records of an MCAP file, with or without its summary."""
+    """(connections, messages) of the complete records of an MCAP file, with or without its summary; the file is
+    open while the block runs."""
 
     reader = McapReader(file)
-    reader.bio = file.open("rb")
-    if reader.bio.read(8) != b"\x89MCAP0\r\n" or reader.bio.read(1) != b"\x01":
-        raise ValueError("not an MCAP file")
-    read_sized(reader.bio)  # the header record
-    reader.data_start = reader.bio.tell()
-    reader.data_end = _complete_records_end(reader.bio, reader.data_start, file.stat().st_size)
-    reader.meta_scan()
-    return reader.connections, reader.messages_scan(reader.connections)
+    with file.open("rb") as reader.bio:
+        if reader.bio.read(8) != b"\x89MCAP0\r\n" or reader.bio.read(1) != b"\x01":
+            raise ValueError("not an MCAP file")
+        read_sized(reader.bio)  # the header record
+        reader.data_start = reader.bio.tell()
+        reader.data_end = _complete_records_end(reader.bio, reader.data_start, file.stat().st_size)
+        reader.meta_scan()
+        yield reader.connections, reader.messages_scan(reader.connections)
 
 
+@contextmanager
 def _salvaged_sqlite3(file: Path):
-    """(connections, messages) of the committed rows of a rosbag2 sqlite3 file."""
+    """(connections, messages) of the committed rows of a rosbag2 sqlite3 file, open while the block runs."""
 
     reader = Sqlite3Reader(file)
     reader.open()
-    return reader.connections, reader.messages(reader.connections)
+    try:
+        yield reader.connections, reader.messages(reader.connections)
+    finally:
+        reader.close()
 
 
 def repair_bag(path, out, progress=print) -> dict[str, int]:
@@ -293,18 +300,18 @@ def repair_bag(path, out, progress=print) -> dict[str, int]:
     if out.exists():
         raise BagError(out, "exists already; a bag is never overwritten")
     try:
-        connections, messages = (_salvaged_mcap if storage == "mcap" else _salvaged_sqlite3)(file)
-        qos = {}
-        for c in connections:
-            offered = c.ext.offered_qos_profiles
-            qos[c.id] = QosSpec(offered[0].reliability == QosReliability.RELIABLE,
-                                offered[0].durability == QosDurability.TRANSIENT_LOCAL,
-                                offered[0].depth) if offered else None
-        with BagWriter(out, storage) as writer:
-            for connection, timestamp, data in messages:
-                writer.write(connection.topic, connection.msgtype, timestamp, bytes(data), qos[connection.id])
-            writer.set_custom_data("repaired_from", str(path))
-            counts = dict(writer.counts)
+        with (_salvaged_mcap if storage == "mcap" else _salvaged_sqlite3)(file) as (connections, messages):
+            qos = {}
+            for c in connections:
+                offered = c.ext.offered_qos_profiles
+                qos[c.id] = QosSpec(offered[0].reliability == QosReliability.RELIABLE,
+                                    offered[0].durability == QosDurability.TRANSIENT_LOCAL,
+                                    offered[0].depth) if offered else None
+            with BagWriter(out, storage) as writer:
+                for connection, timestamp, data in messages:
+                    writer.write(connection.topic, connection.msgtype, timestamp, bytes(data), qos[connection.id])
+                writer.set_custom_data("repaired_from", str(path))
+                counts = dict(writer.counts)
     except _reader_errors() as exc:
         raise BagError(path, f"cannot be repaired ({type(exc).__name__}: {exc})") from None
     progress(f"wrote {out}: " + (", ".join(f"{t} {n}" for t, n in sorted(counts.items())) or "no messages")
