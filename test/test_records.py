@@ -11,7 +11,7 @@ import pytest
 
 from liver_sim.base.process_settings import cli_command_line
 from liver_sim.running.launcher import RunFile, _command_line, _process_start, run_dir, stop_leftovers
-from liver_sim.sessions.bag import BagError, BagWriter, bag_info, check_bag
+from liver_sim.sessions.bag import BagError, BagWriter, _salvaged_mcap, bag_info, check_bag
 from liver_sim.sessions.gaps import SequenceGaps
 
 from network_clients import Tally, wait_for
@@ -238,24 +238,31 @@ def run_processes(ros_env):
 
 def alive(pid):
     try:
-        stat = open(f"/proc/{pid}/stat").read()
+        with open(f"/proc/{pid}/stat") as file:
+            stat = file.read()
     except OSError:
         return False
     return stat.rsplit(")", 1)[1].split()[0] not in ("Z", "X")
 
 
-def recorded_messages(out) -> int:
-    """The message count of the recorder's newest progress line ("  T s: N messages") in out/logs/recorder.log."""
-    log = out / "logs" / "recorder.log"
-    lines = [line for line in (log.read_text() if log.exists() else "").splitlines() if line.endswith(" messages")]
-    return int(lines[-1].split(":")[1].split()[0]) if lines else 0
+def on_disk(bag, topic: str) -> int:
+    """How many messages of `topic` the MCAP file of the bag being recorded at `bag` holds so far (the recorder
+    closes a chunk every second; what a kill would leave there)."""
+    files = sorted(bag.glob("*.mcap"))
+    if not files:
+        return 0
+    try:
+        with _salvaged_mcap(files[0]) as (_, messages):
+            return sum(1 for connection, *_ in messages if connection.topic == topic)
+    except (ValueError, OSError):  # not even a header written yet
+        return 0
 
 
 def test_sigkill_of_the_demo_leaves_no_process_of_its_run(ros_env, tmp_path):
     demo = start_demo(ros_env, tmp_path)
-    # the recorder has matched the nodes and written (a kill before its first drain leaves an empty bag)
-    wait_for(lambda: recorded_messages(tmp_path) > 1000, START_TIMEOUT_S, "the recorder recording",
-             lambda: f"{recorded_messages(tmp_path)} messages")
+    # the recorder has matched the physics and written (a kill before its first drain leaves an empty bag)
+    wait_for(lambda: on_disk(tmp_path / "session", "/liver/nodes") > 0, START_TIMEOUT_S,
+             "the recorder writing /liver/nodes", lambda: f"{on_disk(tmp_path / 'session', '/liver/nodes')} on disk")
     children = run_processes(ros_env)
     assert set(children) == DEMO_PROCESSES
     demo.kill()
