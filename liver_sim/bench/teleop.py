@@ -202,7 +202,7 @@ def plot_teleop(traces: dict, rows: list[dict], out_dir: Path) -> list[str]:
     """teleop_forces.png (the command norm against script time, a panel per delay, every variant) and
     teleop_energy.png (energy given to the hand against delay); their paths. `traces`: (variant, delay ms) ->
     (script time s, commands N)."""
-    import matplotlib
+    import matplotlib  # heavy, and only for the commands that draw
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt

@@ -19,6 +19,8 @@ import signal
 import sys
 from pathlib import Path
 
+from liver_sim.base.link import LINK_PARAMETERS, LinkSettings
+from liver_sim.base.parameters import check_parameter
 from liver_sim.base.process_settings import DISCOVERY_RANGES, keep_dds_local, use_dds_profile
 from liver_sim.cli.arguments import positive_float, positive_int
 from liver_sim.cli.bench import add_bench_command
@@ -44,6 +46,7 @@ from liver_sim.mesh.tetmesh import TetMesh
 from liver_sim.nodes.occupants import DomainOccupied
 from liver_sim.running.launcher import NodeFailure
 from liver_sim.sessions.bag import STORAGES
+from liver_sim.view.defaults import DEFAULT_HOST, DEFAULT_PORT, VIEW_RATE_HZ
 
 PROG = "liver-sim"
 #: Exit status of a command that refused its input.
@@ -211,9 +214,6 @@ def add_link_arguments(parser) -> None:
 
 def link_settings(args):
     """The LinkSettings of --link-*, checked against the nodes' parameter ranges (ValueError naming the option)."""
-    from liver_sim.base.link import LINK_PARAMETERS, LinkSettings
-    from liver_sim.base.parameters import check_parameter
-
     settings = LinkSettings(args.link_delay, args.link_jitter, args.link_loss, args.link_seed)
     for (name, value), option in zip(settings.parameters().items(), ("delay", "jitter", "loss", "seed")):
         try:
@@ -232,23 +232,22 @@ def demo(args) -> int:
     progress = lambda line: print(line, flush=True)  # noqa: E731
     if args.mesh is None and args.scale != 1.0:
         raise ValueError("--scale applies to --mesh PATH; the default liver is in metres")
+    link = link_settings(args)  # refused before the liver is built
+    if args.offline and (args.record or args.view or args.scenario != "press" or link.emulated):
+        raise ValueError("--record, --view, --scenario and --link-* run the node network; --offline is the "
+                         "press without ROS")
     liver = DemoMesh(args.mesh, args.scale)
     if args.offline:
-        if args.record or args.view or args.scenario != "press" or link_settings(args).emulated:
-            raise ValueError("--record, --view, --scenario and --link-* run the node network; --offline is the "
-                             "press without ROS")
         run_offline_demo(args.out, args.duration, progress, liver)
     else:
         run_demo(args.out, args.duration, progress, record_storage=args.storage if args.record else None,
-                 scenario=args.scenario, liver=liver, link=link_settings(args),
+                 scenario=args.scenario, liver=liver, link=link,
                  view=(["--port", str(args.view_port)] if args.view_port is not None else []) if args.view else None)
     return 0
 
 
 def add_view_command(commands) -> None:
     """``liver-sim view [--host H] [--port P] [--rate HZ] [--allow-remote] [--picture PNG] [--duration S]``."""
-    from liver_sim.view.defaults import DEFAULT_HOST, DEFAULT_PORT, VIEW_RATE_HZ
-
     parser = commands.add_parser("view", help="serve the running network to the Foxglove app (a WebSocket on "
                                               f"{DEFAULT_HOST}:{DEFAULT_PORT}): the deforming liver, tool, local "
                                               "model, forces and diagnostics")

@@ -13,6 +13,7 @@ CLOSE_UP_HALF_M = 0.04
 
 
 def _draw(axis, scene: Scene, centre: np.ndarray, half: float, skin_alpha: float) -> None:
+    # matplotlib loads only when a picture is drawn (the live view itself never needs it)
     from mpl_toolkits.mplot3d.art3d import Line3DCollection, Poly3DCollection
 
     faces = scene.colours.mean(axis=1).copy()
@@ -47,7 +48,7 @@ def _draw(axis, scene: Scene, centre: np.ndarray, half: float, skin_alpha: float
 def draw_scene(scene: Scene, path: Path, title: str = "") -> Path:
     """Draw `scene` into the PNG `path`: the whole liver (skin coloured by displacement, tool, local model, force
     arrow, lips) and, with a tool, a close-up around it with the skin made see-through."""
-    import matplotlib
+    import matplotlib  # heavy, and only for the commands that draw
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt

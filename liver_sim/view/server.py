@@ -24,13 +24,36 @@ import time
 from contextlib import contextmanager
 from pathlib import Path
 
+import foxglove
 import numpy as np
+import rclpy
+from foxglove.channels import SceneUpdateChannel
+from foxglove.messages import (
+    ArrowPrimitive,
+    Color,
+    LinePrimitive,
+    LinePrimitiveLineType,
+    Point3,
+    Pose,
+    Quaternion,
+    SceneEntity,
+    SceneUpdate,
+    SpherePrimitive,
+    Timestamp,
+    TriangleListPrimitive,
+    Vector3,
+)
+from rclpy.experimental import EventsExecutor
 from rclpy.node import Node
+from rclpy.signals import SignalHandlerOptions
 
 from liver_sim.base.local_model import LocalModel
+from liver_sim.base.stop_request import stop_on_signals
 from liver_sim.nodes.inputs import LoopInputs
 from liver_sim.nodes.rate_loop import RateLoop
+from liver_sim.nodes.run import spin
 from liver_sim.view.defaults import DEFAULT_HOST, DEFAULT_PORT, VIEW_RATE_HZ, VIEW_SERVED
+from liver_sim.view.picture import draw_scene
 from liver_sim.view.scene import (
     FORCE_COLOUR,
     LIPS_COLOUR,
@@ -70,22 +93,16 @@ def check_host(host: str, allow_remote: bool) -> str:
 
 
 def _colour(rgba):
-    from foxglove.messages import Color
-
     r, g, b, a = (float(c) for c in rgba)
     return Color(r=r, g=g, b=b, a=a)
 
 
 def _point(xyz):
-    from foxglove.messages import Point3
-
     x, y, z = (float(c) for c in xyz)
     return Point3(x=x, y=y, z=z)
 
 
 def _pose(position=(0.0, 0.0, 0.0), orientation_xyzw=(0.0, 0.0, 0.0, 1.0)):
-    from foxglove.messages import Pose, Quaternion, Vector3
-
     x, y, z, w = (float(c) for c in orientation_xyzw)
     px, py, pz = (float(c) for c in position)
     return Pose(position=Vector3(x=px, y=py, z=pz), orientation=Quaternion(x=x, y=y, z=z, w=w))
@@ -107,18 +124,6 @@ def scene_update(scene: Scene, stamp_ns: int, frame_id: str = "liver", points=No
     """The foxglove.SceneUpdate of `scene`: entities `skin`, `tool`, `local_model`, `force`, `lips` (an absent
     one is sent empty, so that the app removes what it showed). `points` and `indices`: the skin as node positions
     and triangle indices, when the caller has them (fewer points than three corners per triangle)."""
-    from foxglove.messages import (
-        ArrowPrimitive,
-        LinePrimitive,
-        LinePrimitiveLineType,
-        SceneEntity,
-        SceneUpdate,
-        SpherePrimitive,
-        Timestamp,
-        TriangleListPrimitive,
-        Vector3,
-    )
-
     stamp = Timestamp(stamp_ns // 1_000_000_000, stamp_ns % 1_000_000_000)
 
     def entity(name, **primitives):
@@ -171,9 +176,6 @@ class LiveView(Node):
     def __init__(self, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, rate_hz: float = VIEW_RATE_HZ,
                  allow_remote: bool = False, on_scene=None, name: str = "liver_view", context=None):
         super().__init__(name, context=context)
-        import foxglove
-        from foxglove.channels import SceneUpdateChannel
-
         self._lock = threading.Lock()
         self._skin = self._rest = self._initial_skin = None
         self._nodes = self._tip = self._model = None
@@ -294,13 +296,6 @@ def serve(host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, rate_hz: float = V
           progress=print) -> int:
     """`liver-sim view`: a LiveView until an ending signal (or `duration_s`); with `picture`, the scene with the
     largest contact force (the last one if none) drawn into that PNG at exit. Returns the scenes served."""
-    import rclpy
-    from rclpy.experimental import EventsExecutor
-    from rclpy.signals import SignalHandlerOptions
-
-    from liver_sim.base.stop_request import stop_on_signals
-    from liver_sim.nodes.run import spin
-
     check_host(host, allow_remote)
     kept = {}
 
@@ -333,8 +328,6 @@ def serve(host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, rate_hz: float = V
     scenes = view.scenes if view is not None else 0
     progress(f"{VIEW_SERVED} {scenes} scenes in {elapsed:.1f} s ({scenes / max(elapsed, 1e-9):.1f} per second)")
     if picture is not None and "scene" in kept:
-        from liver_sim.view.picture import draw_scene
-
         force = float(np.linalg.norm(kept["scene"].force_n))
         draw_scene(kept["scene"], picture, f"liver-sim view: the scene at the largest contact force ({force:.2f} N)")
         progress(f"wrote {picture}")
