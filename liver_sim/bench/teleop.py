@@ -57,7 +57,8 @@ def run_teleop_bench(delays_ms=TELEOP_DELAYS_MS, jitter_ms: float = 0.0, loss: f
     out_dir = Path(out_dir or "out/bench_teleop")
     say = progress or (lambda line: None)
     say("reference: local model, no delay, no jitter, no loss")
-    reference = teleop_run("local_model", LinkSettings(), duration_s, out_dir / "logs" / "reference")
+    reference = teleop_run("local_model", LinkSettings(), duration_s, out_dir / "logs" / "reference",
+                           check_domain=True)
     rows, traces = [], {}
     for delay_ms in delays_ms:
         for rendering, control in VARIANTS:
@@ -108,10 +109,12 @@ def variant_name(rendering: str, passivity_control: bool) -> str:
     return rendering + ("+pc" if passivity_control else "")
 
 
-def teleop_run(rendering: str, link: LinkSettings, duration_s: float, log_dir: Path, passivity_control: bool = False):
-    """One closed-loop run with `rendering` over `link` (network.run_network's NetworkRun). The direct-force bridge
-    is a comparison bridge (drives_device false): its held physics force is not passive at 150 Hz, which a bridge
-    driving a real device refuses (haptic_bridge.tick.passivity_problem); phantom_sim obeys it all the same."""
+def teleop_run(rendering: str, link: LinkSettings, duration_s: float, log_dir: Path, passivity_control: bool = False,
+               check_domain: bool = False):
+    """One closed-loop run with `rendering` over `link` (network.run_network's NetworkRun; `check_domain` for the
+    bench's first run only). The direct-force bridge is a comparison bridge (drives_device false): its held physics
+    force is not passive at 150 Hz, which a bridge driving a real device refuses
+    (haptic_bridge.tick.passivity_problem); phantom_sim obeys it all the same."""
     over_link = link.parameters() if link.emulated else {}
     bridge = {"local_model": RENDERINGS[rendering], **over_link}
     if passivity_control:
@@ -120,7 +123,7 @@ def teleop_run(rendering: str, link: LinkSettings, duration_s: float, log_dir: P
         bridge["drives_device"] = False
     plan = closed_loop_plan(extra={"liver_physics": over_link, "haptic_bridge": bridge,
                                    "phantom_sim": {"loop_script": True, "script": "explore"}})
-    return run_network(plan, duration_s, log_dir, lambda line: None)
+    return run_network(plan, duration_s, log_dir, lambda line: None, check_domain=check_domain)
 
 
 def script_times(run) -> tuple[np.ndarray, np.ndarray]:

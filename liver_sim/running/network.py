@@ -128,12 +128,16 @@ class NetworkRun(NetworkSnapshot):
 
 
 def run_network(plan: NetworkPlan, duration_s: float, log_dir: Path, progress=print,
-                settle_s: float = 1.0, extra_load: int = 0) -> NetworkRun:
+                settle_s: float = 1.0, extra_load: int = 0, check_domain: bool = True) -> NetworkRun:
     """Start the plan's processes, listen for `duration_s` after they are up, stop them; return a NetworkRun:
     what the listener received, the window of those `duration_s`, what each process cost over it (each node,
     observer, `listener` — this process — and each of the `extra_load` CORE_BOUND_PROCESSes started at normal
     priority once the network is up), and the stalls of the machine within it, measured by a sentinel per CPU
     (liver_sim.running.machine_stalls).
+
+    With `check_domain` (the default), first refuses a domain where a product node or a device already runs
+    (nodes.occupants.refuse_occupied: DomainOccupied, after up to DISCOVERY_WAIT_S); a series of runs checks before
+    its first only (the domain then holds the series' own nodes, stopping).
 
     Raises NodeFailure naming any process that exited early or with a non-zero status at stop, with the tail
     of its log (in log_dir); RuntimeError if the network does not come up.
@@ -155,7 +159,8 @@ def run_network(plan: NetworkPlan, duration_s: float, log_dir: Path, progress=pr
     sentinels = Sentinels(log_dir)
     try:
         processes = NodeProcesses(log_dir, progress)  # first stops what a dead run of this user left
-        refuse_occupied(listener, "this run")
+        if check_domain:
+            refuse_occupied(listener, "this run")
         for label, args in plan.observers.items():
             processes.start(label, args, patient=True)
         _wait_until(listener, processes, f"the recorder(s) {', '.join(plan.observers)} (ready and subscribed)",
