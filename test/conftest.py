@@ -17,9 +17,13 @@
   ``liver-sim demo --record`` once per session, beside a core-bound process
   and an independent subscriber, and several tests assert on its summary,
   pictures, recording and what the subscriber saw.
-* Two workers: ``make test`` runs pytest-xdist with two workers; the ``ros``
-  tests form one group, run in order on one worker (their processes keep the
-  timing they would have alone), the ROS-free tests fill the other.
+* Two workers: ``make test`` runs pytest-xdist with two workers and the
+  ``ros`` tests in two groups, one per worker: ``ros-closed-loop`` (the tests
+  that run the whole network: the demo, the benches, the shared recorded demo
+  and every test that reads it) and ``ros-nodes`` (one node or two beside a
+  test side: the bridge rigs, the PHANToM and tool nodes, the recorder and
+  replay). So at most one closed loop runs at a time, beside at most one
+  node test; the ROS-free tests fill the gaps of both workers.
 * Test tiers: every test that takes ``ros_domain_id`` (directly, through
   ``ros_env`` or through another fixture), or is listed in
   ``ROS_WITHOUT_FIXTURE``, is marked ``ros``: it starts node processes or an
@@ -31,6 +35,7 @@ rclpy or matplotlib.
 """
 import fcntl
 import os
+import socket
 import subprocess
 import sys
 import tempfile
@@ -122,22 +127,35 @@ ROS_FIXTURES = frozenset({"ros_domain_id", "ros_env", "recorded_demo"})
 ROS_WITHOUT_FIXTURE = ("test_a_damaged_bag_is_refused_with_a_clear_error[replay-",)
 
 
+#: The modules whose ros tests run the whole closed loop (demo, benches, two hosts): the ``ros-closed-loop``
+#: group, with every test of the shared ``recorded_demo`` (a session fixture runs once per worker).
+CLOSED_LOOP_MODULES = frozenset({"test_network.py", "test_records.py", "test_teleoperation.py", "test_two_hosts.py",
+                                 "test_view.py"})
+
+
+def ros_group(item) -> str:
+    """The xdist group of a ros test: ``ros-closed-loop`` or ``ros-nodes`` (module docstring)."""
+    if "recorded_demo" in item.fixturenames or item.path.name in CLOSED_LOOP_MODULES:
+        return "ros-closed-loop"
+    return "ros-nodes"
+
+
 @pytest.hookimpl(tryfirst=True)  # before pytest-xdist reads the groups off the markers
 def pytest_collection_modifyitems(config, items):
     """Mark ``ros`` every test whose fixture closure holds one of ROS_FIXTURES, or named in ROS_WITHOUT_FIXTURE, and
-    put them in one xdist group: under ``pytest -n 2 --dist loadgroup`` (``make test``) they run one after the
-    other on one worker, sharing its session fixtures, while the other worker takes the ROS-free tests."""
+    put it in its xdist group (ros_group): under ``pytest -n 2 --dist loadgroup`` (``make test``) each group runs
+    in order on one worker, the closed loops sharing that worker's session fixtures."""
     for item in items:
         if (ROS_FIXTURES.intersection(getattr(item, "fixturenames", ()))
                 or item.name.startswith(ROS_WITHOUT_FIXTURE)):
             item.add_marker(pytest.mark.ros)
-            item.add_marker(pytest.mark.xdist_group("ros"))
+            item.add_marker(pytest.mark.xdist_group(ros_group(item)))
 
 
 class XdistGroupIds:
     """pytest-xdist 3.8 puts a test in its group by suffixing ``item._nodeid`` with ``@group``, which pytest 9 no
-    longer reads (a node keeps its id in ``_id``): carry the suffix over, so that ``--dist loadgroup`` keeps the
-    ros tests on one worker. Without it they spread over both workers, two closed loops at once."""
+    longer reads (a node keeps its id in ``_id``): carry the suffix over, so that ``--dist loadgroup`` keeps each
+    ros group on one worker. Without it they spread over both workers, two closed loops at once."""
 
     @pytest.hookimpl(trylast=True)
     def pytest_collection_modifyitems(self, items):
@@ -196,14 +214,22 @@ def rng():
 RECORDED_DEMO_S = 14.0
 
 
+#: Scenes per second the shared run's view is asked for.
+VIEW_RATE_HZ = 40.0
+
+
 @dataclass(frozen=True)
 class RecordedDemo:
-    """What the shared run left: `out` (summary.json/.md, pictures, logs/, the bag in session/), the demo's
-    `summary`, and `tally`, the independent subscriber's numbering of every writer (network_clients.Tally)."""
+    """What the shared run left: `out` (summary.json/.md, pictures, view.png, logs/, the bag in session/), the demo's
+    `summary`, `tally`, the independent subscriber's numbering of every writer (network_clients.Tally), and `view`,
+    what a Foxglove client received from the live view serving `view_rate_hz` scenes a second
+    (foxglove_client.listen's (serverInfo, channels, received), or None if it never connected)."""
 
     out: Path
     summary: dict
     tally: object
+    view: tuple | None
+    view_rate_hz: float = VIEW_RATE_HZ
 
     @cached_property
     def bag(self) -> dict:
@@ -213,13 +239,22 @@ class RecordedDemo:
         return read_bag(self.out / "session")
 
 
+def free_port() -> int:
+    """A TCP port on 127.0.0.1 that is free now."""
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        return probe.getsockname()[1]
+
+
 @pytest.fixture(scope="session")
 def recorded_demo(tmp_path_factory):
-    """`liver-sim demo --record` (the press scenario, RECORDED_DEMO_S) run once per session in a ROS domain of
-    its own, beside one more core-bound process at normal priority and an independent subscriber, as a rig
-    with a busy machine would run it. The tests that watch a closed loop share it instead of each starting
-    its own network."""
+    """`liver-sim demo --record --view` (the press scenario, RECORDED_DEMO_S) run once per session in a ROS domain
+    of its own, beside one more core-bound process at normal priority, an independent subscriber and a Foxglove
+    client of the live view, as a rig with a busy machine would run it. The tests that watch a closed loop share
+    it instead of each starting its own network."""
     # rclpy loads here, for the tests of the ros tier only: the ROS-free tier never starts this fixture
+    from foxglove_client import VIEW_TOPICS, Watcher
+
     from liver_sim.studies.demo import run_demo
 
     from network_clients import Tally
@@ -232,17 +267,20 @@ def recorded_demo(tmp_path_factory):
             patch.setenv("ROS_DOMAIN_ID", str(domain_id))
             busy = subprocess.Popen([sys.executable, "-c", "while True: pass"])
             tally = Tally()
+            port = free_port()
+            watcher = Watcher(port, list(VIEW_TOPICS))
             try:
                 summary = run_demo(out, duration_s=RECORDED_DEMO_S, progress=lambda line: None,
-                                   record_storage="mcap")
+                                   record_storage="mcap", view=["--port", str(port), "--rate", f"{VIEW_RATE_HZ:g}"])
             finally:
+                view = watcher.stop()
                 tally.close()
     finally:
         if busy is not None:
             busy.kill()
             busy.wait()
         handle.close()
-    return RecordedDemo(out, summary, tally)
+    return RecordedDemo(out, summary, tally, view)
 
 
 @pytest.fixture

@@ -8,12 +8,15 @@ import asyncio
 import base64
 import json
 import struct
+import threading
 import time
 
 import websockets
 
 SUBPROTOCOLS = ["foxglove.sdk.v1", "foxglove.websocket.v1"]
 MESSAGE_DATA = 0x01
+#: The channels `liver-sim view` serves, the scenes first.
+VIEW_TOPICS = ("/liver/scene", "/liver/forces", "/liver/diagnostics")
 
 
 def _varint(data: bytes, i: int) -> tuple[int, int]:
@@ -128,3 +131,34 @@ def schema_bytes(channel: dict) -> bytes:
     """The channel's schema as bytes (base64 for binary schema encodings such as protobuf)."""
     schema = channel["schema"]
     return base64.b64decode(schema) if channel.get("schemaEncoding") == "protobuf" else schema.encode()
+
+
+class Watcher:
+    """A client that keeps connecting to host:port in a thread of its own, each time for `seconds`, until a session
+    brings more than `enough` messages of `topics[0]` or stop() is called; `session` is then the (serverInfo,
+    channels, received) of `listen` with the most of them (None if it never connected)."""
+
+    def __init__(self, port: int, topics: list[str], enough: int = 10, seconds: float = 3.0):
+        self.session = None
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, args=(port, topics, enough, seconds), daemon=True)
+        self._thread.start()
+
+    def _run(self, port, topics, enough, seconds):
+        while not self._stop.is_set():
+            try:  # until the view serves and the physics publishes (scenes start with the surface and the nodes)
+                session = listen(port, topics, seconds)
+            except OSError:  # not serving yet
+                time.sleep(0.2)
+                continue
+            count = len(session[2].get(topics[0], ()))
+            if self.session is None or count > len(self.session[2].get(topics[0], ())):
+                self.session = session
+            if count > enough:
+                return
+
+    def stop(self, timeout_s: float = 10.0):
+        """Stop connecting, wait for the session under way, and return `session`."""
+        self._stop.set()
+        self._thread.join(timeout_s)
+        return self.session

@@ -1,15 +1,12 @@
 """The live view: its scene (no ROS), its Foxglove messages read back as the app reads them, its address check, the
 view of a running network through a real Foxglove WebSocket client, and recorded sessions Foxglove can open."""
-import socket
 import struct
 import subprocess
 import sys
-import threading
-import time
 
 import numpy as np
 import pytest
-from foxglove_client import field_numbers, fields, listen, packed_count, schema_bytes
+from foxglove_client import VIEW_TOPICS, field_numbers, fields, packed_count, schema_bytes
 
 from liver_sim.base.local_model import LocalModel
 from liver_sim.mesh.liver_shape import default_liver
@@ -119,41 +116,23 @@ def test_the_view_command_refuses_a_public_address_by_name():
     assert result.returncode == 2 and "--host 0.0.0.0" in result.stderr and "--allow-remote" in result.stderr
 
 
-def test_the_live_view_serves_the_running_network_to_a_foxglove_client(ros_domain_id, tmp_path):
-    """`demo --view` on a free port: a Foxglove client sees the three channels, decodes scenes whose skin is the
-    default liver's, at 20 scenes a second or more (asked for 40), and the demo leaves the view's picture."""
-    from liver_sim.studies.demo import run_demo
-
-    out = tmp_path / "demo"
-    with socket.socket() as probe:  # a port free now, for the view to serve on
-        probe.bind(("127.0.0.1", 0))
-        port = probe.getsockname()[1]
-    done = {}
-    demo = threading.Thread(target=lambda: done.update(summary=run_demo(
-        out, duration_s=12.0, progress=lambda line: None, view=["--port", str(port), "--rate", "40"])), daemon=True)
-    demo.start()
-    topics = ["/liver/scene", "/liver/forces", "/liver/diagnostics"]
-    scenes, channels, info, received = [], {}, {}, {}
-    deadline = time.monotonic() + 120.0
-    while len(scenes) <= 10 and time.monotonic() < deadline and demo.is_alive():
-        try:  # until the view serves and the physics publishes (scenes start with the surface and the nodes)
-            info, channels, received = listen(port, topics, 3.0)
-        except OSError:  # not serving yet
-            time.sleep(0.2)
-            continue
-        scenes = received["/liver/scene"]
+def test_the_live_view_serves_the_running_network_to_a_foxglove_client(recorded_demo):
+    """The shared `demo --view` on a free port: a Foxglove client sees the three channels, decodes scenes whose skin
+    is the default liver's, at 20 scenes a second or more (asked for 40), and the demo leaves the view's picture."""
+    assert recorded_demo.view is not None, "the Foxglove client never connected to the view"
+    info, channels, received = recorded_demo.view
+    scenes = received["/liver/scene"]
     assert len(scenes) > 10, f"scenes received: {len(scenes)}; channels: {sorted(channels)}"
-    demo.join(timeout=120.0)
-    assert set(topics) <= set(channels) and info["subprotocol"] in ("foxglove.sdk.v1", "foxglove.websocket.v1")
+    assert set(VIEW_TOPICS) <= set(channels) and info["subprotocol"] in ("foxglove.sdk.v1", "foxglove.websocket.v1")
     scene_channel = channels["/liver/scene"]
     assert scene_channel["schemaName"] == "foxglove.SceneUpdate" and scene_channel["encoding"] == "protobuf"
     schema = schema_bytes(scene_channel)
     entities = decode_scene(scenes[-1][2], schema)
     assert skin_triangles(entities, schema) == len(LIVER.skin)
     arrivals = np.array([arrival for arrival, _, _ in scenes])
-    assert len(scenes) / (arrivals[-1] - arrivals[0] + 1.0 / 40.0) >= 20.0
+    assert len(scenes) / (arrivals[-1] - arrivals[0] + 1.0 / recorded_demo.view_rate_hz) >= 20.0
     assert received["/liver/forces"] and b"device_command_norm_n" in received["/liver/forces"][-1][2]
-    assert "summary" in done and (out / "view.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert (recorded_demo.out / "view.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
 def mcap_schemas(path) -> dict[str, tuple[str, str, bytes]]:
