@@ -112,3 +112,19 @@ def test_the_ros_free_cores_import_no_ros_package():
             "print(sorted(m for m in sys.modules if m.startswith('rclpy') or m.split('.')[0].endswith('_msgs')))")
     imported = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert imported.strip() == "[]"
+
+
+def test_each_row_names_every_module_of_its_folder():
+    """A newcomer finds each module in its folder's row: its file name in backticks (a subfolder may stand for
+    its modules, as `geometry/` does)."""
+    section = (ROOT / "README.md").read_text().split("## Architecture", 1)[1].split("\n## ", 1)[0]
+    rows = dict(re.findall(r"^\| \d+ \| `([\w/.]+?)/?` \|(.*)$", section, flags=re.M))
+    unnamed = []
+    for folder, text in rows.items():
+        if not (ROOT / folder).is_dir():
+            continue
+        for path in sorted((ROOT / folder).rglob("*.py")):
+            relative = path.relative_to(ROOT / folder)
+            if path.name != "__init__.py" and f"`{relative.parts[0]}" not in text:
+                unnamed.append(f"{folder}/{relative}")
+    assert not unnamed, f"README Architecture: modules no row names: {unnamed}"
