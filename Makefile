@@ -77,8 +77,11 @@ help:
 # when its inputs change: the pinned requirements (slow, rarely), and the
 # editable install of liver_sim itself (a few seconds: after a change to the
 # packaging, a new top-level package, or a parameter file, which is copied to
-# $(VENV)/share/liver_sim/config). A failed step leaves no stamp, so the next
-# run tries again.
+# $(VENV)/share/liver_sim/config). The install ends with `liver-sim warm`:
+# numba compiles the physics kernels once into their on-disk cache (about 30 s
+# of one core), instead of in every process that first needs them, each node
+# start and test worker of a fresh clone. A failed step leaves no stamp, so
+# the next run tries again.
 venv: $(STAMP)
 
 $(REQ_STAMP): requirements.txt
@@ -92,6 +95,7 @@ $(REQ_STAMP): requirements.txt
 $(STAMP): $(REQ_STAMP) setup.py setup.cfg package.xml resource/liver_sim \
           $(wildcard */__init__.py) $(wildcard config/*.yaml)
 	$(PIP) install --no-deps --no-build-isolation -e .
+	$(VENV)/bin/liver-sim warm
 	@touch $@
 
 check-domain:

@@ -17,6 +17,7 @@ import argparse
 import json
 import signal
 import sys
+import time
 from pathlib import Path
 
 from liver_sim.base.link import LINK_PARAMETERS, LinkSettings
@@ -152,6 +153,23 @@ def validate(args) -> int:
     return main_validate(args.json, args.out, progress=lambda text: print(text, file=stream, flush=True))
 
 
+def add_warm_command(commands) -> None:
+    """``liver-sim warm``: compile the physics kernels into numba's on-disk cache."""
+    parser = commands.add_parser("warm", help="compile the physics' numba kernels into their on-disk cache, as the "
+                                              "first start of liver_physics would (about 30 s of one core, once)")
+    parser.set_defaults(handler=warm)
+
+
+def warm(args) -> int:
+    # this command's own modules, loaded when it runs (module docstring)
+    from liver_sim.physics.parameters import PARAMETERS, build_model
+
+    started = time.monotonic()
+    build_model({name: parameter.default for name, parameter in PARAMETERS.items()})  # builds and warms it up
+    print(f"the physics kernels are compiled and cached ({time.monotonic() - started:.1f} s)")
+    return 0
+
+
 def add_traction_command(commands) -> None:
     """``liver-sim traction [--out DIR]``: the traction test of Figs. 4–5."""
     parser = commands.add_parser("traction", help="traction test of a cylinder beside the connector law (Figs. 4-5)")
@@ -278,7 +296,7 @@ def view(args) -> int:
 #: The subcommands, in the order `liver-sim --help` lists them.
 COMMANDS = (add_mesh_command, add_traction_command, add_validate_command, add_bench_command, add_demo_command,
             add_record_command, add_replay_command, add_resimulate_command, add_fig8_command, add_report_command,
-            add_bag_command, add_view_command)
+            add_bag_command, add_view_command, add_warm_command)
 
 
 def build_parser() -> argparse.ArgumentParser:
