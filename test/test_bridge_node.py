@@ -9,6 +9,7 @@ import signal
 import subprocess
 import sys
 import time
+from datetime import datetime
 
 import numpy as np
 import pytest
@@ -25,6 +26,7 @@ from bridge_rig import (
     DEEP,
     EXPECTED_INSIDE,
     INSIDE,
+    LOOP,
     MAX_FORCE_N,
     QUARTER_TURN_X,
     ROTATION,
@@ -261,6 +263,17 @@ def test_ctrl_z_is_ignored_and_a_stop_and_continue_resumes_with_a_soft_start(rig
     assert_safe(rig.forces)
 
 
+def fault_start_s(rig: Rig, kind: str, cause: str, since_s: float) -> float:
+    """System-clock time (s) at which the first `kind` event naming `cause` began, at or after `since_s`, in the
+    bridge's loop statuses ("<kind> at <ISO time, ms>: <cause> (zero held …)", events joined by "; ")."""
+    starts = [datetime.fromisoformat(event[len(kind) + 4:].split(": ", 1)[0]).timestamp()
+              for array in rig.diagnostics for status in array.status if status.name == LOOP
+              for event in status.message.split("; ") if event.startswith(f"{kind} at ") and cause in event]
+    starts = [start for start in starts if start >= since_s - 0.001]
+    assert starts, f"no {kind} event naming {cause!r} since the fault was set"
+    return min(starts)
+
+
 @pytest.mark.parametrize("fault, kind, cause", [("raise RuntimeError('injected fault')", "error", "injected fault"),
                                                 ("time.sleep(0.05)", "stall", "no tick")])
 def test_a_loop_that_raises_or_stalls_yields_zero_and_an_error_diagnostic(rig_factory, ros_env, fault, kind, cause):
@@ -269,15 +282,21 @@ def test_a_loop_that_raises_or_stalls_yields_zero_and_an_error_diagnostic(rig_fa
     bridge = start_bridge(ros_env, [sys.executable, "-c", FAULTY_BRIDGE.replace("FAULT", fault)])
     try:
         rig.wait_for_force(CONTACT, bridge)
+        del rig.diagnostics[:]
+        deep_s = time.time()
         rig.tool = DEEP  # from now on every tick raises, or sleeps 50 ms (10× the stall bound)
         rig.wait_until(lambda: rig.forces and not rig.forces[-1].any(), "zero from the supervisor", bridge)
-        first_zero = len(rig.forces) - 1
-        del rig.diagnostics[:]
         rig.wait_until(lambda: (rig.loop_level() or (0, ""))[0] == 2, "an ERROR diagnostic", bridge)
         level, message = rig.loop_level()
         assert kind in message and cause in message and "T" in message.split(" at ")[1][:11], message
         rig.spin_for(0.3)
-        assert all(not f.any() for f in rig.forces[first_zero:]), "held at zero while the loop fails"
+        # every command stamped after the fault began is zero (its time is in ms: 1 ms more). Read by stamp: a
+        # starved test side may read, after a watchdog zero, commands sent before the fault.
+        fault_s = fault_start_s(rig, kind, cause, deep_s)
+        after = [(seconds_of(stamp) - fault_s, force) for force, stamp in zip(rig.forces, rig.stamps)
+                 if seconds_of(stamp) >= fault_s + 0.001]
+        assert not any(force.any() for _, force in after), \
+            ("held at zero while the loop fails", [(t, force) for t, force in after if force.any()][:3])
         rig.tool = INSIDE  # the loop is back: a soft start to the contact force
         rig.wait_for_force(CONTACT, bridge)
         assert int(rig.loop_status()[f"{kind}s"]) > 0
