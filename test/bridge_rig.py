@@ -26,7 +26,9 @@ from msg_defs.topics import TOPICS
 
 ROOT = Path(__file__).resolve().parent.parent
 CONFIG = ROOT / "config" / "haptic_bridge.yaml"
-WAIT_S = 15.0
+#: Deadline (s) of every wait: a bridge starting on a busy 2-core machine (a closed loop and a core-bound process
+#: beside it) may take 15 s before its first command; a wait that passes ends as soon as its condition holds.
+WAIT_S = 60.0
 PUBLISH_PERIOD_S = 0.01
 TOOL_RADIUS_M = 0.015
 STIFFNESS_N_PER_M = 190.0

@@ -36,8 +36,6 @@ rclpy or matplotlib.
 import fcntl
 import os
 import socket
-import subprocess
-import sys
 import tempfile
 from dataclasses import dataclass
 from functools import cached_property
@@ -249,8 +247,9 @@ def free_port() -> int:
 @pytest.fixture(scope="session")
 def recorded_demo(tmp_path_factory):
     """`liver-sim demo --record --view` (the press scenario, RECORDED_DEMO_S) run once per session in a ROS domain
-    of its own, beside one more core-bound process at normal priority, an independent subscriber and a Foxglove
-    client of the live view, as a rig with a busy machine would run it. The tests that watch a closed loop share
+    of its own, beside one more core-bound process at normal priority once the network is up (run_demo's
+    extra_load), an independent subscriber and a Foxglove client of the live view, as a rig with a busy machine
+    would run it. The tests that watch a closed loop share
     it instead of each starting its own network."""
     # rclpy loads here, for the tests of the ros tier only: the ROS-free tier never starts this fixture
     from foxglove_client import VIEW_TOPICS, Watcher
@@ -261,24 +260,20 @@ def recorded_demo(tmp_path_factory):
 
     out = tmp_path_factory.mktemp("recorded_demo")
     domain_id, handle = claim_domain_id(exclude={SESSION_DOMAIN_ID})
-    busy = None
     try:
         with pytest.MonkeyPatch.context() as patch:
             patch.setenv("ROS_DOMAIN_ID", str(domain_id))
-            busy = subprocess.Popen([sys.executable, "-c", "while True: pass"])
             tally = Tally()
             port = free_port()
             watcher = Watcher(port, list(VIEW_TOPICS))
             try:
                 summary = run_demo(out, duration_s=RECORDED_DEMO_S, progress=lambda line: None,
-                                   record_storage="mcap", view=["--port", str(port), "--rate", f"{VIEW_RATE_HZ:g}"])
+                                   record_storage="mcap", view=["--port", str(port), "--rate", f"{VIEW_RATE_HZ:g}"],
+                                   extra_load=1)
             finally:
                 view = watcher.stop()
                 tally.close()
     finally:
-        if busy is not None:
-            busy.kill()
-            busy.wait()
         handle.close()
     return RecordedDemo(out, summary, tally, view)
 

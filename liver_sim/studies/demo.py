@@ -50,7 +50,7 @@ TOPOLOGY_FIGURES = ("force.png", "before.png", "after.png")
 
 def run_demo(out_dir: Path, duration_s: float | None = None, progress=print, record_storage: str | None = None,
              scenario: str = "press", liver: DemoMesh = DemoMesh(), link: LinkSettings = LinkSettings(),
-             view: list[str] | None = None) -> dict:
+             view: list[str] | None = None, extra_load: int = 0) -> dict:
     """The main job: the four nodes in closed loop with the simulated PHANToM playing `scenario` on `liver`
     (the physics node loads the same file; the hand presses the top of it).
 
@@ -58,7 +58,8 @@ def run_demo(out_dir: Path, duration_s: float | None = None, progress=print, rec
     cut), and the nodes' logs in logs/. With `record_storage` (mcap or sqlite3), `liver-sim record`
     records the run into out_dir/session. `link` puts an emulated teleoperation link (delay, jitter, loss) between
     the operator's side (device, tool, bridge) and the physics, both ways. With `view` (the options of
-    `liver-sim view`), the live view runs beside the nodes and draws out_dir/view.png at the end.
+    `liver-sim view`), the live view runs beside the nodes and draws out_dir/view.png at the end. `extra_load`
+    core-bound processes run at normal priority beside the network once it is up, as a busy rig's would.
     """
     if scenario not in SCENARIOS:
         raise ValueError(f"--scenario must be one of {', '.join(SCENARIOS)}, got {scenario!r}")
@@ -76,7 +77,7 @@ def run_demo(out_dir: Path, duration_s: float | None = None, progress=print, rec
     if view is not None:
         plan.commands["view"] = cli_command_line("view", *view, "--picture", str(out_dir / "view.png"))
     progress(f"{spec.title}: starting the node network (the same command lines work in four terminals):")
-    run = run_network(plan, duration_s, out_dir / "logs", progress)
+    run = run_network(plan, duration_s, out_dir / "logs", progress, extra_load=extra_load)
     _, haptic_force = run.forces["local_model"]
     wrench = run.wrench_n
     peak_nodes = run.peak_nodes if run.peak_nodes is not None else mesh.points
