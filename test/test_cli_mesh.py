@@ -179,10 +179,12 @@ def test_module_entry_point_in_a_subprocess(prism, garbage):
 
 
 def test_warm_compiles_the_kernels_the_physics_node_steps_with(capsys):
-    """`liver-sim warm` (run by `make venv`) builds the default model and warms it up: afterwards the kernels of
-    an implicit frame are compiled in this process, so a node started next finds them in numba's cache."""
-    from liver_sim.physics import implicit_kernels, pcg
+    """`liver-sim warm` (run by `make venv`) builds the default model with each integrator and warms it up:
+    afterwards the kernels of an implicit and an explicit frame are compiled in this process, so a node started
+    next finds them in numba's cache."""
+    from liver_sim.physics import explicit_kernels, implicit_kernels, pcg
 
     assert main(["warm"]) == 0
     assert "compiled and cached" in capsys.readouterr().out
     assert implicit_kernels.implicit_step.signatures and pcg.pcg.signatures
+    assert explicit_kernels.run_frame.signatures

@@ -207,6 +207,7 @@ class LiverModel:
         state = self.positions.copy(), self.velocities.copy()
         self._implicit_frame(self._tool_state(ToolPose(np.full(3, 1e3))), 1)
         self._spring_forces()
+        max_speed(self.positions, self.velocities)  # the divergence guard's, after every frame
         self._solver.compliance(self.positions, self.inv_mass, np.ones_like(self.positions), 0.0,
                                 np.zeros_like(self.positions))
         self.positions[:], self.velocities[:] = state
