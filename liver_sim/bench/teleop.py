@@ -50,10 +50,11 @@ ROW_KEYS = ("rendering", "passivity_control", "delay_ms", "jitter_ms", "loss", "
 
 
 def run_teleop_bench(delays_ms=TELEOP_DELAYS_MS, jitter_ms: float = 0.0, loss: float = 0.0, out_dir=None,
-                     progress=None, duration_s: float = TELEOP_RUN_S, seed: int = 0) -> dict:
-    """The benchmark's JSON object: `rows` (one per delay and VARIANT, ROW_KEYS and the run's details), the
-    reference run, each variant's first unstable or active delay, `met` against TELEOP_TARGETS, and the plots
-    written to `out_dir` (force against script time per delay, energy against delay)."""
+                     progress=None, duration_s: float = TELEOP_RUN_S, seed: int = 0, variants=VARIANTS) -> dict:
+    """The benchmark's JSON object: `rows` (one per delay and variant of `variants`, VARIANTS by default: ROW_KEYS
+    and the run's details), the reference run, each variant's first unstable or active delay, `met` against
+    TELEOP_TARGETS, and the plots written to `out_dir` (force against script time per delay, energy against
+    delay)."""
     out_dir = Path(out_dir or "out/bench_teleop")
     say = progress or (lambda line: None)
     say("reference: local model, no delay, no jitter, no loss")
@@ -61,7 +62,7 @@ def run_teleop_bench(delays_ms=TELEOP_DELAYS_MS, jitter_ms: float = 0.0, loss: f
                            check_domain=True)
     rows, traces = [], {}
     for delay_ms in delays_ms:
-        for rendering, control in VARIANTS:
+        for rendering, control in variants:
             link = LinkSettings(delay_ms * 1e-3, jitter_ms * 1e-3, loss, seed)
             name = variant_name(rendering, control)
             say(f"{name}: delay {delay_ms:g} ms, jitter {jitter_ms:g} ms, loss {loss:g}")
@@ -73,9 +74,9 @@ def run_teleop_bench(delays_ms=TELEOP_DELAYS_MS, jitter_ms: float = 0.0, loss: f
                 f"mJ (peak {row['energy_generated_peak_j'] * 1e3:.2f}), peak force {row['peak_force_n']:.2f} N, "
                 f"error {row['force_error_rms_n']:.3f} N, penetration {row['penetration_max_mm']:.1f} mm")
     first_unstable = {variant_name(*v): next((r["delay_ms"] for r in rows if (r["rendering"], r["passivity_control"])
-                                              == v and not r["stable"]), None) for v in VARIANTS}
+                                              == v and not r["stable"]), None) for v in variants}
     first_active = {variant_name(*v): next((r["delay_ms"] for r in rows if (r["rendering"], r["passivity_control"])
-                                            == v and not r["passive"]), None) for v in VARIANTS}
+                                            == v and not r["passive"]), None) for v in variants}
     bound = TELEOP_TARGETS["local_model_stable_and_passive_up_to_delay_ms"]
     covered = [r for r in rows if r["rendering"] == "local_model" and r["passivity_control"] and r["delay_ms"] <= bound]
     met = {"local_model_stable_and_passive_up_to_delay_ms":
