@@ -174,7 +174,9 @@ def teleop_row(rendering: str, passivity_control: bool, link: LinkSettings, run,
     times, force = script_times(run)
     ref_times, ref_force = script_times(reference)
     common = times <= (ref_times[-1] if len(ref_times) else -1.0)
-    if common.any() and len(ref_times) > 1:
+    if run is reference:  # zero by definition (interpolating it onto itself is not, where commands share an arrival)
+        error = 0.0
+    elif common.any() and len(ref_times) > 1:
         expected = np.column_stack([np.interp(times[common], ref_times, ref_force[:, i]) for i in range(3)])
         error = float(np.sqrt(np.mean(np.sum((force[common] - expected) ** 2, axis=1))))
     else:
