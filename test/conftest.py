@@ -23,9 +23,7 @@
   and every test that reads it) and ``ros-nodes`` (one node or two beside a
   test side: the bridge rigs, the PHANToM and tool nodes, the recorder and
   replay). So at most one closed loop runs at a time, beside at most one
-  node test; the ROS-free tests fill the gaps of both workers. The shared
-  recorded demo, the heaviest run, runs alone among the ros tests
-  (``alone_among_ros_tests``): a node test waits for it, and it for them.
+  node test; the ROS-free tests fill the gaps of both workers.
 * Test tiers: every test that takes ``ros_domain_id`` (directly, through
   ``ros_env`` or through another fixture), or is listed in
   ``ROS_WITHOUT_FIXTURE``, is marked ``ros``: it starts node processes or an
@@ -39,7 +37,6 @@ import fcntl
 import os
 import socket
 import tempfile
-from contextlib import contextmanager
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
@@ -101,28 +98,6 @@ def claim_domain_id(exclude=()):
     raise RuntimeError(
         f"no free ROS domain id among {n}: too many liver_sim test sessions "
         f"on this machine (locks in {_LOCK_DIR})")
-
-
-#: The shared recorded demo runs alone among the ros tests of every session on this machine: it holds this lock
-#: exclusively, each other ros test shared (``_gate`` first, so that a waiting demo is not starved by them).
-_ALONE_LOCK = _LOCK_DIR / "alone.lock"
-
-
-@contextmanager
-def alone_among_ros_tests(exclusive: bool):
-    """Hold the ros tests' lock: exclusively (nothing else of the ros tier runs), or shared (beside any ros test
-    but one that runs alone). Blocks until it is free."""
-    _LOCK_DIR.mkdir(mode=0o777, parents=True, exist_ok=True)
-    with open(_LOCK_DIR / "alone.gate", "a+") as gate, open(_ALONE_LOCK, "a+") as lock:
-        fcntl.flock(gate, fcntl.LOCK_EX)
-        try:
-            fcntl.flock(lock, fcntl.LOCK_EX if exclusive else fcntl.LOCK_SH)
-        finally:
-            fcntl.flock(gate, fcntl.LOCK_UN)
-        try:
-            yield
-        finally:
-            fcntl.flock(lock, fcntl.LOCK_UN)
 
 
 def _session_domain():
@@ -211,8 +186,7 @@ def ros_domain_id(monkeypatch):
     domain_id, handle = claim_domain_id(exclude={SESSION_DOMAIN_ID})
     monkeypatch.setenv("ROS_DOMAIN_ID", str(domain_id))
     try:
-        with alone_among_ros_tests(exclusive=False):
-            yield domain_id
+        yield domain_id
     finally:
         handle.close()
 
@@ -287,7 +261,7 @@ def recorded_demo(tmp_path_factory):
     out = tmp_path_factory.mktemp("recorded_demo")
     domain_id, handle = claim_domain_id(exclude={SESSION_DOMAIN_ID})
     try:
-        with pytest.MonkeyPatch.context() as patch, alone_among_ros_tests(exclusive=True):
+        with pytest.MonkeyPatch.context() as patch:
             patch.setenv("ROS_DOMAIN_ID", str(domain_id))
             tally = Tally()
             port = free_port()
