@@ -109,9 +109,8 @@ check-domain:
 lint: venv
 	$(VENV)/bin/ruff check .
 
-# Two pytest-xdist workers, each running one group of ROS tests in order (test/conftest.py: the closed loops on one,
-# the single-node tests on the other), the ROS-free tests filling both, so the ROS tests' waiting overlaps the
-# physics tests' computing and at most one closed loop runs at a time.
+# Two pytest-xdist workers: the ROS tests run in order on one (one xdist group, test/conftest.py), the ROS-free
+# ones on the other, so the ROS tests' waiting overlaps the physics tests' computing.
 test: venv check-domain lint
 	@echo "ROS_DOMAIN_ID=$(ROS_DOMAIN_ID) ROS_AUTOMATIC_DISCOVERY_RANGE=$(ROS_AUTOMATIC_DISCOVERY_RANGE)"
 	$(VENV_PY) -m pytest -q -n 2 --dist loadgroup $(PYTEST_ARGS) test

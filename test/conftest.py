@@ -17,13 +17,11 @@
   ``liver-sim demo --record`` once per session, beside a core-bound process
   and an independent subscriber, and several tests assert on its summary,
   pictures, recording and what the subscriber saw.
-* Two workers: ``make test`` runs pytest-xdist with two workers and the
-  ``ros`` tests in two groups, one per worker: ``ros-closed-loop`` (the tests
-  that run the whole network: the demo, the benches, the shared recorded demo
-  and every test that reads it) and ``ros-nodes`` (one node or two beside a
-  test side: the bridge rigs, the PHANToM and tool nodes, the recorder and
-  replay). So at most one closed loop runs at a time, beside at most one
-  node test; the ROS-free tests fill the gaps of both workers.
+* Two workers: ``make test`` runs pytest-xdist with two workers; the ``ros``
+  tests form one group, run in order on one worker (their processes keep the
+  timing they would have alone: two closed loops side by side on two cores
+  made node tests miss their deadlines, even with nothing else running), the
+  ROS-free tests fill the other.
 * Test tiers: every test that takes ``ros_domain_id`` (directly, through
   ``ros_env`` or through another fixture), or is listed in
   ``ROS_WITHOUT_FIXTURE``, is marked ``ros``: it starts node processes or an
@@ -125,35 +123,22 @@ ROS_FIXTURES = frozenset({"ros_domain_id", "ros_env", "recorded_demo"})
 ROS_WITHOUT_FIXTURE = ("test_a_damaged_bag_is_refused_with_a_clear_error[replay-",)
 
 
-#: The modules whose ros tests run the whole closed loop (demo, benches, two hosts): the ``ros-closed-loop``
-#: group, with every test of the shared ``recorded_demo`` (a session fixture runs once per worker).
-CLOSED_LOOP_MODULES = frozenset({"test_network.py", "test_records.py", "test_teleoperation.py", "test_two_hosts.py",
-                                 "test_view.py"})
-
-
-def ros_group(item) -> str:
-    """The xdist group of a ros test: ``ros-closed-loop`` or ``ros-nodes`` (module docstring)."""
-    if "recorded_demo" in item.fixturenames or item.path.name in CLOSED_LOOP_MODULES:
-        return "ros-closed-loop"
-    return "ros-nodes"
-
-
 @pytest.hookimpl(tryfirst=True)  # before pytest-xdist reads the groups off the markers
 def pytest_collection_modifyitems(config, items):
     """Mark ``ros`` every test whose fixture closure holds one of ROS_FIXTURES, or named in ROS_WITHOUT_FIXTURE, and
-    put it in its xdist group (ros_group): under ``pytest -n 2 --dist loadgroup`` (``make test``) each group runs
-    in order on one worker, the closed loops sharing that worker's session fixtures."""
+    put them in one xdist group: under ``pytest -n 2 --dist loadgroup`` (``make test``) they run one after the
+    other on one worker, sharing its session fixtures, while the other worker takes the ROS-free tests."""
     for item in items:
         if (ROS_FIXTURES.intersection(getattr(item, "fixturenames", ()))
                 or item.name.startswith(ROS_WITHOUT_FIXTURE)):
             item.add_marker(pytest.mark.ros)
-            item.add_marker(pytest.mark.xdist_group(ros_group(item)))
+            item.add_marker(pytest.mark.xdist_group("ros"))
 
 
 class XdistGroupIds:
     """pytest-xdist 3.8 puts a test in its group by suffixing ``item._nodeid`` with ``@group``, which pytest 9 no
-    longer reads (a node keeps its id in ``_id``): carry the suffix over, so that ``--dist loadgroup`` keeps each
-    ros group on one worker. Without it they spread over both workers, two closed loops at once."""
+    longer reads (a node keeps its id in ``_id``): carry the suffix over, so that ``--dist loadgroup`` keeps the
+    ros tests on one worker. Without it they spread over both workers, two closed loops at once."""
 
     @pytest.hookimpl(trylast=True)
     def pytest_collection_modifyitems(self, items):
