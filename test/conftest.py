@@ -14,13 +14,14 @@
   pytest-xdist workers, or in another checkout's test run on the same machine
   -- ever share one.
 * One closed-loop run for the tests that watch one: ``recorded_demo`` runs
-  ``liver-sim demo --record`` once per session, beside a core-bound process
-  and an independent subscriber, and several tests assert on its summary,
-  pictures, recording and what the subscriber saw.
+  ``liver-sim demo --record --view`` once per session, beside a core-bound
+  process, an independent subscriber and a Foxglove client of the view, and
+  several tests assert on its summary, pictures, recording and what the
+  subscriber and the client saw.
 * Two workers: ``make test`` runs pytest-xdist with two workers; the ``ros``
   tests form one group, run in order on one worker (their processes keep the
-  timing they would have alone: two closed loops side by side on two cores
-  made node tests miss their deadlines, even with nothing else running), the
+  timing they would have alone: a closed loop and a node test side by side on
+  two cores missed their deadlines, even with nothing else running), the
   ROS-free tests fill the other.
 * Test tiers: every test that takes ``ros_domain_id`` (directly, through
   ``ros_env`` or through another fixture), or is listed in
