@@ -1,5 +1,10 @@
 """Cutting along the tool path (paper §3.5; P14, R5 of docs/paper.md): the cut follows the path, the mesh stays
 sound."""
+import json
+import subprocess
+import sys
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -315,3 +320,38 @@ def test_repeated_cuts_keep_one_implicit_step_per_frame(liver):
         assert all(model.step_frame().divergence is None for _ in range(30))
     assert model.divergences == 0 and np.isfinite(model.positions).all()
     assert kinetic_energy_j(model) < 0.5 * float((model.masses_kg * 0.05 ** 2 * 3).sum())
+
+
+#: A fresh interpreter builds the physics node's model (tearing on), then cuts, tears and steps it; it prints the
+#: numba kernels that gained a compiled version after the build's warm-up.
+COMPILES_AFTER_WARM_UP = """
+import importlib, json, pkgutil
+import numba, numpy as np
+import liver_sim.physics as physics
+from liver_sim.physics.parameters import PARAMETERS, build_model
+from liver_sim.physics.tearing import tear
+from test_cutting import liver_top_path, mean_edge_m
+
+def versions():
+    modules = [importlib.import_module(f"liver_sim.physics.{m.name}") for m in pkgutil.iter_modules(physics.__path__)]
+    return {f"{m.__name__}.{name}": len(f.signatures) for m in modules for name, f in vars(m).items()
+            if isinstance(f, numba.core.registry.CPUDispatcher)}
+
+model = build_model({**{name: p.default for name, p in PARAMETERS.items()}, "tearing": True})
+before = versions()
+assert model.cut(liver_top_path(model.mesh, 0.08), 2 * mean_edge_m(model.mesh))
+model.step_frame()
+change = tear(model.mesh.points, model.mesh.tets, model.positions * [1.5, 1.0, 1.0], model.capsule_triangles, 0.15, 0.2)
+model.apply_topology_change(change)
+model.step_frame()
+print(json.dumps({name: n for name, n in versions().items() if n != before.get(name)}))
+"""
+
+
+def test_after_the_warm_up_a_cut_and_a_tear_compile_nothing():
+    """The model's warm-up compiles what a frame, a tear and a cut run: a kernel compiled inside the 150 Hz loop
+    stalls it for seconds. In a fresh interpreter, so that kernels other tests compiled do not count."""
+    result = subprocess.run([sys.executable, "-c", COMPILES_AFTER_WARM_UP], cwd=Path(__file__).parent,
+                            capture_output=True, text=True, timeout=600)
+    assert result.returncode == 0, result.stderr
+    assert json.loads(result.stdout) == {}

@@ -34,7 +34,7 @@ from liver_sim.physics.spring_kernels import SpringArrays, spring_forces_serial,
 from liver_sim.physics.springs import build_springs, estimate_stable_time_step, stable_time_step
 from liver_sim.physics.support import build_support
 from liver_sim.physics.tearing import TearDetector, tear
-from liver_sim.physics.topology import NodeState, TopologyChange, carry_over
+from liver_sim.physics.topology import NodeState, TopologyChange, carry_over, separate_faces
 
 #: Above this many springs the parallel kernel is used (below it thread start-up costs more).
 PARALLEL_MIN_EDGES = 20_000
@@ -201,7 +201,8 @@ class LiverModel:
             self.hold(np.zeros(0, dtype=np.int64))
 
     def warm_up(self) -> None:
-        """Compile the kernels (numba, cached on disk) before a timed loop starts."""
+        """Compile the kernels (numba, cached on disk) before a timed loop starts: the frame's, and the node
+        duplication of a tear or a cut (a first tear in the loop would otherwise stall it while it compiles)."""
         self._advance(ToolPose(np.full(3, 1e3)), substeps=0)
         self._solver.warm_up()
         state = self.positions.copy(), self.velocities.copy()
@@ -216,6 +217,7 @@ class LiverModel:
         self._detector().stretches(self.positions)
         estimate_stable_time_step(self.springs, self.masses_kg, self.params.environment_damping_per_s,
                                   self.params.integrator, self.mesh.points, max_iterations=1)
+        separate_faces(self.mesh.tets, np.zeros((0, 3), dtype=np.int64))  # opens nothing
 
     @property
     def frame_period_s(self) -> float:
