@@ -37,25 +37,27 @@ FIG8_MAX_PERIOD_S = 0.0015
 
 
 def run_loop_bench(duration_s: float = 30.0, log_dir=None, progress=None, observers: dict | None = None,
-                   extra_load: bool = False, view: bool = False) -> dict:
+                   extra_load: bool = False, view: bool = False, check_domain: bool = True) -> dict:
     """The loop benchmark's JSON object (:func:`loop_run`); with `extra_load`, the same run follows with one
     core-bound process at normal priority beside the network, reported under `with_extra_load`; with `view`, the
-    live view (`liver-sim view`) runs beside the network, its figures under `results.view`."""
+    live view (`liver-sim view`) runs beside the network, its figures under `results.view`. `check_domain`: before
+    each run (network.run_network)."""
 
     log_dir = Path(log_dir or "out/bench_loop/logs")
-    report = loop_run(duration_s, log_dir, progress, observers, view=view)
+    report = loop_run(duration_s, log_dir, progress, observers, view=view, check_domain=check_domain)
     if view:
         report["results"]["view"] = view_figures(report["processes"], log_dir / f"{VIEW}.log")
     if extra_load:
         (progress or (lambda line: None))("the same run with one core-bound process at normal priority beside it:")
-        loaded = loop_run(duration_s, log_dir.with_name(log_dir.name + "_extra_load"), progress, observers, 1)
+        loaded = loop_run(duration_s, log_dir.with_name(log_dir.name + "_extra_load"), progress, observers, 1,
+                          check_domain=check_domain)
         report["with_extra_load"] = {key: loaded[key] for key in ("results", "processes", "cores_used",
                                                                    "load_average", "met")}
     return report
 
 
 def loop_run(duration_s: float, log_dir, progress=None, observers: dict | None = None, extra_load: int = 0,
-             view: bool = False) -> dict:
+             view: bool = False, check_domain: bool = True) -> dict:
     """One run of the four nodes in closed loop for `duration_s` (R4), watched by a listener as a rig would.
 
     Rates and period errors are given twice: as each node's own loop measured them (diagnostics)
@@ -81,7 +83,8 @@ def loop_run(duration_s: float, log_dir, progress=None, observers: dict | None =
     if view:  # the live view joins as a viewer would, beside the four nodes
         plan.commands[VIEW] = cli_command_line("view", "--port", "0")
     load_before = os.getloadavg()
-    run = run_network(plan, duration_s, log_dir, progress or (lambda line: None), extra_load=extra_load)
+    run = run_network(plan, duration_s, log_dir, progress or (lambda line: None), extra_load=extra_load,
+                      check_domain=check_domain)
     load_after = os.getloadavg()
     start, end = run.window_s
     sent = run.force_published_s["local_model"]

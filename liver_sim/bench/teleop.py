@@ -50,16 +50,17 @@ ROW_KEYS = ("rendering", "passivity_control", "delay_ms", "jitter_ms", "loss", "
 
 
 def run_teleop_bench(delays_ms=TELEOP_DELAYS_MS, jitter_ms: float = 0.0, loss: float = 0.0, out_dir=None,
-                     progress=None, duration_s: float = TELEOP_RUN_S, seed: int = 0, variants=VARIANTS) -> dict:
+                     progress=None, duration_s: float = TELEOP_RUN_S, seed: int = 0, variants=VARIANTS,
+                     check_domain: bool = True) -> dict:
     """The benchmark's JSON object: `rows` (one per delay and variant of `variants`, VARIANTS by default: ROW_KEYS
     and the run's details), the reference run, each variant's first unstable or active delay, `met` against
     TELEOP_TARGETS, and the plots written to `out_dir` (force against script time per delay, energy against
-    delay)."""
+    delay). `check_domain`: before the reference run (network.run_network)."""
     out_dir = Path(out_dir or "out/bench_teleop")
     say = progress or (lambda line: None)
     say("reference: local model, no delay, no jitter, no loss")
     reference = teleop_run("local_model", LinkSettings(), duration_s, out_dir / "logs" / "reference",
-                           check_domain=True)
+                           check_domain=check_domain)
     rows, traces = [], {}
     for delay_ms in delays_ms:
         for rendering, control in variants:

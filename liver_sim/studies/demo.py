@@ -50,7 +50,7 @@ TOPOLOGY_FIGURES = ("force.png", "before.png", "after.png")
 
 def run_demo(out_dir: Path, duration_s: float | None = None, progress=print, record_storage: str | None = None,
              scenario: str = "press", liver: DemoMesh = DemoMesh(), link: LinkSettings = LinkSettings(),
-             view: list[str] | None = None, extra_load: int = 0) -> dict:
+             view: list[str] | None = None, extra_load: int = 0, check_domain: bool = True) -> dict:
     """The main job: the four nodes in closed loop with the simulated PHANToM playing `scenario` on `liver`
     (the physics node loads the same file; the hand presses the top of it).
 
@@ -60,6 +60,8 @@ def run_demo(out_dir: Path, duration_s: float | None = None, progress=print, rec
     the operator's side (device, tool, bridge) and the physics, both ways. With `view` (the options of
     `liver-sim view`), the live view runs beside the nodes and draws out_dir/view.png at the end. `extra_load`
     core-bound processes run at normal priority beside the network once it is up, as a busy rig's would.
+    `check_domain`: first refuse a domain where a product node or a device runs (network.run_network); a caller
+    holding the domain for itself, as each test does, may skip it.
     """
     if scenario not in SCENARIOS:
         raise ValueError(f"--scenario must be one of {', '.join(SCENARIOS)}, got {scenario!r}")
@@ -77,7 +79,7 @@ def run_demo(out_dir: Path, duration_s: float | None = None, progress=print, rec
     if view is not None:
         plan.commands["view"] = cli_command_line("view", *view, "--picture", str(out_dir / "view.png"))
     progress(f"{spec.title}: starting the node network (the same command lines work in four terminals):")
-    run = run_network(plan, duration_s, out_dir / "logs", progress, extra_load=extra_load)
+    run = run_network(plan, duration_s, out_dir / "logs", progress, extra_load=extra_load, check_domain=check_domain)
     _, haptic_force = run.forces["local_model"]
     wrench = run.wrench_n
     peak_nodes = run.peak_nodes if run.peak_nodes is not None else mesh.points
