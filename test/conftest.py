@@ -19,10 +19,12 @@
   several tests assert on its summary, pictures, recording and what the
   subscriber and the client saw.
 * Two workers: ``make test`` runs pytest-xdist with two workers; the ``ros``
-  tests form one group, run in order on one worker (their processes keep the
-  timing they would have alone: a closed loop and a node test side by side on
-  two cores missed their deadlines, even with nothing else running), the
-  ROS-free tests fill the other.
+  tests that start processes keeping a rate (nodes, closed loops) form one
+  group, run in order on one worker (their processes keep the timing they
+  would have alone: a closed loop and a node test side by side on two cores
+  missed their deadlines, even with nothing else running). The ROS-free tests
+  and the ``no_rate_loops`` ones (recorders, replays and clients at normal
+  priority, which a closed loop beside them outranks) fill both workers.
 * Test tiers: every test that takes ``ros_domain_id`` (directly, through
   ``ros_env`` or through another fixture), or is listed in
   ``ROS_WITHOUT_FIXTURE``, is marked ``ros``: it starts node processes or an
@@ -127,13 +129,15 @@ ROS_WITHOUT_FIXTURE = ("test_a_damaged_bag_is_refused_with_a_clear_error[replay-
 @pytest.hookimpl(tryfirst=True)  # before pytest-xdist reads the groups off the markers
 def pytest_collection_modifyitems(config, items):
     """Mark ``ros`` every test whose fixture closure holds one of ROS_FIXTURES, or named in ROS_WITHOUT_FIXTURE, and
-    put them in one xdist group: under ``pytest -n 2 --dist loadgroup`` (``make test``) they run one after the
-    other on one worker, sharing its session fixtures, while the other worker takes the ROS-free tests."""
+    put those not marked ``no_rate_loops`` in one xdist group: under ``pytest -n 2 --dist loadgroup``
+    (``make test``) they run one after the other on one worker, sharing its session fixtures, while the other
+    worker takes the rest."""
     for item in items:
         if (ROS_FIXTURES.intersection(getattr(item, "fixturenames", ()))
                 or item.name.startswith(ROS_WITHOUT_FIXTURE)):
             item.add_marker(pytest.mark.ros)
-            item.add_marker(pytest.mark.xdist_group("ros"))
+            if item.get_closest_marker("no_rate_loops") is None:
+                item.add_marker(pytest.mark.xdist_group("ros"))
 
 
 class XdistGroupIds:

@@ -33,6 +33,9 @@ PUBLISHER = Path(__file__).with_name("session_publisher.py")
 POSE = "geometry_msgs/msg/PoseStamped"
 WRENCH = "geometry_msgs/msg/WrenchStamped"
 PNG = b"\x89PNG\r\n\x1a\n"
+#: A recorder, a replay, a test publisher and clients, at normal priority: nothing that keeps a rate in real time
+#: (conftest: such a test may run beside the closed loops).
+NO_RATE_LOOPS = pytest.mark.no_rate_loops
 
 
 def start_recorder(bag, ros_env, storage):
@@ -47,6 +50,7 @@ def stop(process, sig):
     return process.returncode, output
 
 
+@NO_RATE_LOOPS
 def test_recorded_bag_holds_every_published_message_read_back_by_rosbags(ros_env, tmp_path):
     bag = tmp_path / "session"
     recorder = start_recorder(bag, ros_env, "mcap")
@@ -67,6 +71,7 @@ def test_recorded_bag_holds_every_published_message_read_back_by_rosbags(ros_env
     assert read["/liver/nodes"][0][2].width == read["/liver/nodes"][-1][2].width > 100
 
 
+@NO_RATE_LOOPS
 def test_a_recording_stopped_mid_stream_by_sigterm_is_a_complete_sqlite3_bag(ros_env, tmp_path):
     bag = tmp_path / "session"
     recorder = start_recorder(bag, ros_env, "sqlite3")
@@ -164,6 +169,7 @@ def test_the_physics_topic_parameters_default_to_the_topics_table():
         assert PARAMETERS[f"{key}_topic"].default == TOPICS[key].name
 
 
+@NO_RATE_LOOPS
 def test_replay_republishes_the_recorded_messages_in_order(ros_env, tmp_path, ros_domain_id):
     import rclpy
     from geometry_msgs.msg import WrenchStamped
@@ -255,6 +261,7 @@ def damage(kind, bag):
         bag.write_text("hello")
 
 
+@NO_RATE_LOOPS
 @pytest.mark.parametrize("kind, says", [("missing", "does not exist"), ("no metadata", "no metadata.yaml"),
                                         ("truncated storage", "unreadable"), ("garbage storage", ""),
                                         ("metadata promises more", "truncated"), ("not a bag", "not a bag folder")])
@@ -289,6 +296,7 @@ def test_demo_records_its_run_and_the_report_reads_it(recorded_demo, tmp_path):
     assert report["diagnostics_last"]["haptic_bridge: loop"]["rate_hz"]
 
 
+@NO_RATE_LOOPS
 def test_recorder_follows_the_published_type_and_records_other_topics(ros_env, tmp_path):
     bag = tmp_path / "session"
     recorder = subprocess.Popen(cli_command_line("record", "--out", str(bag), "--topics", "/phantom/servo_cf",
@@ -321,6 +329,7 @@ while time.monotonic() < end:
 """
 
 
+@NO_RATE_LOOPS
 def test_a_recorder_started_mid_run_counts_nothing_lost_of_a_running_publisher(ros_env, tmp_path):
     publisher = subprocess.Popen([sys.executable, "-c", RUNNING_PUBLISHER, "60"], env=ros_env,
                                  stdout=subprocess.PIPE, text=True)
@@ -365,6 +374,7 @@ def test_replay_leaves_out_device_commands_unless_remapped():
         output_topics(recorded, "/phantom/servo_cf")
 
 
+@NO_RATE_LOOPS
 def test_replay_puts_nothing_on_the_device_topic(ros_env, tmp_path, ros_domain_id):
     import rclpy
     from geometry_msgs.msg import WrenchStamped
