@@ -65,14 +65,15 @@ def start_bridge(env: dict, program: list[str] | None = None, **params) -> subpr
                             start_new_session=True)
 
 
-def stop(process: subprocess.Popen) -> None:
+def stop(process: subprocess.Popen) -> str:
+    """SIGINT the bridge if it still runs (SIGKILL after 2 s); its log (standard error)."""
     if process.poll() is None:
         process.send_signal(signal.SIGINT)
     try:
-        process.communicate(timeout=2.0)
+        return process.communicate(timeout=2.0)[1]
     except subprocess.TimeoutExpired:
         process.kill()
-        process.communicate()
+        return process.communicate()[1]
 
 
 class Rig:

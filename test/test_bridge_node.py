@@ -18,6 +18,7 @@ import rclpy
 from haptic_bridge.parameters import PARAMETERS as BRIDGE
 from liver_sim.base.geometry.device_map import DeviceMap
 from liver_sim.base.local_model import LocalModel
+from liver_sim.nodes.bridge_node import ZERO_NOT_ACKED
 from msg_defs.device_map import device_map_message
 from msg_defs.forces import force_message_type
 from msg_defs.topics import TOPICS
@@ -243,8 +244,9 @@ def test_a_signal_in_contact_leaves_zero_as_the_last_command_after_a_soft_start(
         bridge.send_signal(sig)
         wait_for_exit(rig, bridge)
     finally:
-        stop(bridge)
+        log = stop(bridge)
     assert bridge.returncode == 0
+    assert ZERO_NOT_ACKED not in log, "this test side acknowledges every command it reads"
     assert np.linalg.norm(rig.forces[in_contact - 1]) > 0.9, "in contact when the signal came"
     assert not rig.forces[-1].any(), f"last command on the wire {rig.forces[-1].tolist()} N, not zero"
     assert_safe(rig.forces)

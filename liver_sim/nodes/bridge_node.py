@@ -56,6 +56,8 @@ RIVAL_CHECK_S = 0.1
 OWN_FORCE_WRITERS = 2
 #: How long (s) close waits for the driver to acknowledge the last zero (and a recorder the last diagnostics).
 ZERO_ACK_TIMEOUT_S = 1.0
+#: The warning of a close whose last zero a reliable subscriber (the driver) has not acknowledged.
+ZERO_NOT_ACKED = "the last zero force was not acknowledged"
 
 
 def wall_time(monotonic_s: float) -> str:
@@ -138,16 +140,21 @@ class BridgeShell:
     def stop(self, cause: str) -> None:
         """Zero force as the last command (nothing after it), the loop stopped, the zero acknowledged, and the
         last diagnostics too: `destroy` would take messages not yet acknowledged with their publisher (a recorded
-        demo lost the bridge's last /diagnostics). Both within ZERO_ACK_TIMEOUT_S, the zero first."""
+        demo lost the bridge's last /diagnostics). Both within ZERO_ACK_TIMEOUT_S, the zero first; a zero not
+        acknowledged by then is logged as a warning (the profile's writers send a heartbeat, which asks for the
+        acknowledgement, every 0.1 s)."""
         if self.supervisor is not None and not self.supervisor.closed:
             self.supervisor.close(cause)
             self._loop.stop()
             deadline = time.monotonic() + ZERO_ACK_TIMEOUT_S
             for publisher in (self._publisher, self._zero_publisher, self._diagnostics):
                 try:
-                    publisher.wait_for_all_acked(Duration(seconds=max(0.0, deadline - time.monotonic())))
+                    acked = publisher.wait_for_all_acked(Duration(seconds=max(0.0, deadline - time.monotonic())))
                 except Exception:  # noqa: BLE001 — a context already gone: nothing more can be done here
-                    pass
+                    continue
+                if not acked and publisher is not self._diagnostics:
+                    self.node.get_logger().warning(
+                        f"{ZERO_NOT_ACKED} on {publisher.topic_name} within {ZERO_ACK_TIMEOUT_S:g} s")
 
     def destroy(self) -> None:
         self._inputs.destroy()
