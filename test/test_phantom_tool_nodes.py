@@ -77,9 +77,13 @@ class Ros:
         self.executor.add_node(self.node)
 
     def collect(self, key: str, topic: str | None = None, msg_type=None) -> list:
+        """Every message of the topic (its contract QoS, but a history of 1000: a test side starved of CPU, as on
+        a busy machine, reads each sample late instead of only the newest of those it missed)."""
         received = []
         spec = TOPICS[key]
-        self.node.create_subscription(msg_type or spec.type, topic or spec.name, received.append, spec.qos)
+        qos = spec.qos
+        qos.depth = max(qos.depth, 1000)
+        self.node.create_subscription(msg_type or spec.type, topic or spec.name, received.append, qos)
         return received
 
     def wait_until(self, condition, what: str, process: subprocess.Popen | None = None) -> None:
