@@ -109,8 +109,9 @@ check-domain:
 lint: venv
 	$(VENV)/bin/ruff check .
 
-# Two pytest-xdist workers: the ROS tests run in order on one (one xdist group, test/conftest.py), the ROS-free
-# ones on the other, so the ROS tests' waiting overlaps the physics tests' computing.
+# Two pytest-xdist workers: the ROS tests whose processes keep a rate in real time run in order on one (one xdist
+# group, test/conftest.py); the ROS-free ones and the no_rate_loops ones (recorders, replays) fill both, so the
+# closed loops' waiting overlaps the physics tests' computing.
 test: venv check-domain lint
 	@echo "ROS_DOMAIN_ID=$(ROS_DOMAIN_ID) ROS_AUTOMATIC_DISCOVERY_RANGE=$(ROS_AUTOMATIC_DISCOVERY_RANGE)"
 	$(VENV_PY) -m pytest -q -n 2 --dist loadgroup $(PYTEST_ARGS) test
