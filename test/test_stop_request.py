@@ -9,7 +9,8 @@ import time
 
 from liver_sim.base.stop_request import StopRequest, stop_on_signals
 
-#: A loop waiting on a StopRequest, sent a burst of SIGTERMs and SIGINTs by a thread of its own.
+#: A loop waiting on a StopRequest, sent a burst of SIGTERMs and SIGINTs by a thread of its own; it leaves the block
+#: once the burst is over (the handlers it restores would end the process on a late signal of the burst).
 BURST = r"""
 import os, signal, threading, time
 from liver_sim.base.stop_request import stop_on_signals
@@ -18,9 +19,11 @@ def burst():
     for k in range(500):
         os.kill(os.getpid(), signal.SIGTERM if k % 2 else signal.SIGINT)
 with stop_on_signals() as stop:
-    threading.Thread(target=burst, daemon=True).start()
+    sender = threading.Thread(target=burst, daemon=True)
+    sender.start()
     while not stop.wait(0.001):
         pass
+    sender.join()
 print("stopped", flush=True)
 """
 
