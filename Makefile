@@ -117,9 +117,10 @@ test: venv check-domain lint
 	$(VENV_PY) -m pytest -q -n 2 --dist loadgroup $(PYTEST_ARGS) test
 
 # The tiers are pytest markers (setup.cfg, applied in test/conftest.py): `ros`
-# marks the tests that start node processes or an rclpy context.
+# marks the tests that start node processes or an rclpy context. The ROS-free
+# tier is computing only, so it fills both workers.
 test-quick: venv check-domain
-	$(VENV_PY) -m pytest -q -m "not ros" $(PYTEST_ARGS) test
+	$(VENV_PY) -m pytest -q -n 2 -m "not ros" $(PYTEST_ARGS) test
 
 demo: venv check-domain
 	$(VENV)/bin/liver-sim demo --out out/demo $(DEMO_ARGS)
