@@ -129,15 +129,17 @@ def teleop_run(rendering: str, link: LinkSettings, duration_s: float, log_dir: P
 
 
 def script_times(run) -> tuple[np.ndarray, np.ndarray]:
-    """(script time s, command (K, 3) N) of the commands the listener received within the run's window; script
-    time counts from the arrival of the first tool pose that moved (the hand's first move)."""
-    arrival, force = run.forces["local_model"]
+    """(script time s, command (K, 3) N) of the commands published within the run's window, in order of their
+    publication (DDS source times: unlike the listener's arrivals, which a burst delivers at one instant, no two
+    are equal); script time counts from the arrival of the first tool pose that moved (the hand's first move)."""
+    published, force = run.force_published_s["local_model"], run.forces["local_model"][1]
+    order = np.argsort(published, kind="stable")
+    published, force = published[order], force[order]
     positions = run.tool_position_m
     moved = np.linalg.norm(positions - positions[0], axis=1) > SCRIPT_START_MOTION_M if len(positions) else []
-    start = run.tool_arrival_s[np.argmax(moved)] if np.any(moved) else arrival[0] if len(arrival) else 0.0
-    end = run.window_s[1]
-    keep = (arrival >= start) & (arrival <= end)
-    return arrival[keep] - start, force[keep]
+    start = run.tool_arrival_s[np.argmax(moved)] if np.any(moved) else published[0] if len(published) else 0.0
+    keep = (published >= start) & (published <= run.window_s[1])
+    return published[keep] - start, force[keep]
 
 
 def oscillation_n(times_s: np.ndarray, force_n: np.ndarray, windows_s: np.ndarray) -> np.ndarray:
@@ -175,9 +177,7 @@ def teleop_row(rendering: str, passivity_control: bool, link: LinkSettings, run,
     times, force = script_times(run)
     ref_times, ref_force = script_times(reference)
     common = times <= (ref_times[-1] if len(ref_times) else -1.0)
-    if run is reference:  # zero by definition (interpolating it onto itself is not, where commands share an arrival)
-        error = 0.0
-    elif common.any() and len(ref_times) > 1:
+    if common.any() and len(ref_times) > 1:
         expected = np.column_stack([np.interp(times[common], ref_times, ref_force[:, i]) for i in range(3)])
         error = float(np.sqrt(np.mean(np.sum((force[common] - expected) ** 2, axis=1))))
     else:
