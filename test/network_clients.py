@@ -9,7 +9,7 @@ import rclpy
 from rosbags.rosbag2 import Reader
 from rosbags.typesys import Stores, get_typestore
 
-from liver_sim.sessions.rcl_take import SerializedTake
+from liver_sim.nodes.rcl_take import SerializedTake
 from liver_sim.sessions.record import _rclpy_qos, default_topics, known_topics
 
 

@@ -4,7 +4,7 @@ No executor: a loop takes every waiting message of every subscription each DRAIN
 them in order of arrival, each logged at its receive time (the rmw's reception timestamp).  The
 history of each subscription (HISTORY_DEPTH) holds several seconds at 1 kHz, so a slow write never
 drops a message; the bag notes the deepest backlog seen.  Every message is taken with its writer's GID
-and publication sequence number (sessions.rcl_take), so every message lost to the recording is counted
+and publication sequence number (nodes.rcl_take), so every message lost to the recording is counted
 (sessions.gaps) into metadata.yaml's custom_data; a recording that lost messages of a reliable topic, or
 whose history overflowed, ends with EXIT_LOST.
 `ready:` is printed once the subscriptions exist and have matched the publishers already in the graph:
@@ -25,9 +25,9 @@ from rclpy.signals import SignalHandlerOptions
 from liver_sim.base.process_settings import cli_command_line, set_realtime_priority
 from liver_sim.base.stop_request import StopRequest, stop_on_signals
 from liver_sim.base.topic_names import BASELINE_FORCE_TOPIC
+from liver_sim.nodes.rcl_take import SerializedTake
 from liver_sim.sessions.bag import BagWriter, QosSpec
 from liver_sim.sessions.gaps import SequenceGaps
-from liver_sim.sessions.rcl_take import SerializedTake
 from msg_defs.topics import TOPICS
 
 RECORDER_NODE = "liver_sim_recorder"
