@@ -26,9 +26,17 @@ PARAMETERS = {
                               "model's force; 0 by default: the physics force the local model carries already "
                               "holds Eq. 3's damping, so any B makes the rendered force differ from it at each "
                               "update", 0.0, 10.0),
-    "passivity_control": Param(False, "time-domain passivity controller (Hannaford and Ryu): when the passivity "
-                               "observer finds that the commands gave the hand more energy than they took, add the "
-                               "damping that takes it out (haptic_bridge.passivity); read at start"),
+    "passive_model_update": Param("auto", "render each new local model only as far as the energy it puts into "
+                                  "the contact was taken out by earlier updates (haptic_bridge.rendering."
+                                  "PassiveModelUpdate), so that a delayed model never gives the hand more than it "
+                                  "put in; the rendered force then lags the physics force where it would. always, "
+                                  "never, or auto: when the inputs come over an emulated link (link_delay_s, "
+                                  "link_jitter_s or link_loss_fraction set; over a real link, declare always); "
+                                  "read at start", choices=("auto", "always", "never")),
+    "passivity_control": Param(False, "time-domain passivity controller (Hannaford and Ryu; "
+                               "haptic_bridge.passivity): when the current contact has given the hand more energy "
+                               "than the hand put in, damp the stylus's measured motion until it is taken out; "
+                               "read at start"),
     "passivity_max_damping_ns_per_m": Param(20.0, "the controller's largest damping (N·s/m, device frame); read "
                                             "at start", 0.0, 100.0),
     "device_damping_ns_per_m": Param(0.5, "physical damping b of the device at the stylus (N·s/m), for the "

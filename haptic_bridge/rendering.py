@@ -1,5 +1,5 @@
-"""Rendering the local model at 1 kHz (paper §2.5; P11 of docs/paper.md): glide between physics updates, penalty force,
-passivity bounds.
+"""Rendering the local model at 1 kHz (paper §2.5; P11 of docs/paper.md): glide between physics updates, passive model
+updates over a delayed link, penalty force, passivity bounds.
 
 The physics (150 Hz) approximates the surface near the tool by a plane or a sphere
 (liver_sim.base.local_model); between its updates the haptic loop renders that primitive analytically.
@@ -96,3 +96,80 @@ def max_passive_stiffness(damping: float, period: float, virtual_damping: float 
     """
     margin = non_negative(damping, "damping") - non_negative(abs(virtual_damping), "virtual_damping")
     return max(2.0 * margin / positive(period, "period"), 0.0)
+
+
+def contact_potential(depth_m: float, stiffness_n_per_m: float, max_force_n: float) -> float:
+    """Energy (J) a rendered contact stores at penetration `depth_m` (m): ∫ min(K·d, F_max) dd, i.e. ½·K·d² up to
+    the clamp's depth F_max/K, then growing by F_max per metre; 0 out of contact."""
+    if depth_m <= 0.0 or stiffness_n_per_m <= 0.0:
+        return 0.0
+    clamp_depth = max_force_n / stiffness_n_per_m
+    if depth_m <= clamp_depth:
+        return 0.5 * stiffness_n_per_m * depth_m * depth_m
+    return max_force_n * depth_m - 0.5 * max_force_n * clamp_depth
+
+
+def depth_for_potential(energy_j: float, stiffness_n_per_m: float, max_force_n: float) -> float:
+    """The penetration (m) at which a contact stores `energy_j` (J): the inverse of :func:`contact_potential`."""
+    if energy_j <= 0.0 or stiffness_n_per_m <= 0.0:
+        return 0.0
+    clamp_depth = max_force_n / stiffness_n_per_m
+    if energy_j <= 0.5 * max_force_n * clamp_depth:
+        return math.sqrt(2.0 * energy_j / stiffness_n_per_m)
+    return energy_j / max_force_n + 0.5 * clamp_depth
+
+
+def retreated(model: LocalModel, depth_m: float) -> LocalModel:
+    """`model` moved back from the tool by `depth_m` (m) along its normal (a plane) or shrunk (a sphere), so that a
+    tool `depth_m` deep in `model` just touches it."""
+    if model.kind == "plane":
+        point = model.point - depth_m * model.normal
+        return LocalModel.derived(model, point=point, centre=point)
+    return LocalModel.derived(model, radius_m=max(model.radius_m - depth_m, 1e-9))
+
+
+class PassiveModelUpdate:
+    """A passive model update (energy bounding, after Ryu et al. and Mitra and Niemeyer's model-mediated
+    telemanipulation): a new local model is rendered only as far as the energy the contact then stores stays
+    within what the hand has put into it.
+
+    A model change at the tool's current place changes the energy U the rendered contact stores
+    (:func:`contact_potential` of the tool's depth and the model's K). The hand has put `budget_j` = E(t0) − E(t) into
+    the contact since it began (haptic_bridge.passivity: t0 the last instant of zero force). A change that lowers U
+    (the surface moving away from the tool, a softer K) is rendered at once; one that raises U is rendered as far as
+    U stays within the budget, along the way from the shown model to the new one, the rest when the budget or the
+    tool allows (a surface moved up to touching the tool stores nothing, so it always may); when the contact already
+    stores more than the budget (the estimate lags the hand) the shown model stays. The contact then never holds
+    more than the hand put in, so it cannot give the hand back more: E(t) ≤ E(t0) within a contact."""
+
+    def __init__(self, max_force_n: float):
+        self.max_force_n = max_force_n
+        self.shown: LocalModel | None = None
+        self.held_back = False  # the last admitted model stopped short of its target
+
+    def admit(self, target: LocalModel | None, depth, stiffness, budget_j: float) -> LocalModel | None:
+        """The model to render this tick, on the way from the one shown to `target`. `depth(model)`: the tool's
+        penetration of a model (m) this tick; `stiffness(model)`: the K it is rendered with (N/m); `budget_j`: the
+        energy the hand has put into the contact since it began (J)."""
+        def energy(model: LocalModel) -> float:
+            return contact_potential(depth(model), stiffness(model), self.max_force_n)
+
+        shown = self.shown if self.shown is not None and self.shown.valid else None
+        self.held_back = False
+        if target is None or not target.valid:
+            self.shown = target
+            return target
+        before, after = (energy(shown) if shown is not None else 0.0), energy(target)
+        if after <= max(before, budget_j) and (after <= budget_j or after <= before):
+            self.shown = target
+            return target
+        self.held_back = True
+        start = shown if shown is not None and shown.kind == target.kind else retreated(target, depth(target))
+        if budget_j <= energy(start):
+            self.shown = start  # no way toward the target lowers the energy already stored
+            return start
+        depth_before, depth_after = depth(start), depth(target)
+        wanted = depth_for_potential(budget_j, stiffness(target), self.max_force_n)
+        fraction = (wanted - depth_before) / (depth_after - depth_before) if depth_after > depth_before else 0.0
+        self.shown = blend(start, target, fraction) if fraction > 0.0 else start
+        return self.shown

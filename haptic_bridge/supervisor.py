@@ -5,12 +5,13 @@ The loop calls :meth:`Supervisor.beat` at the start of each tick, sends its comm
 :meth:`Supervisor.send` and reports an exception of its step with :meth:`Supervisor.error`. A thread that is
 not the loop (:meth:`Supervisor.start`) checks, when the bound would run out, that the loop has ticked within `bound_s`;
 when it has not, or the loop has ended, it publishes a zero force and repeats it every `bound_s` until the
-loop is back. The zeros go through a publisher of their own (`publish_zero`): a publish of the loop held up
-in the middleware (a transient-local reader joining holds the writer ~50 ms) holds up neither the trip nor
-its zero. While tripped the loop's own commands are dropped, and a command the loop was publishing when the
-zero went is followed by another zero once its publish returns, so the last word on the wire is zero; the
-loop's first tick after a trip is told to restart its output from zero (soft start). :meth:`close` sends the
-last zero and lets nothing after it but zero.
+loop is back. The zeros go through a publisher of their own (`publish_zero`): a publish of the loop held up in
+the middleware (a transient-local reader joining holds the writer while its history is sent) holds up neither the
+trip nor its zero; each zero then goes on the loop's writer too, so that each writer's newest sample is zero (DDS
+keeps order only within a writer). While tripped the loop's own commands are dropped, and a command the loop was
+publishing when the zero went is followed by other zeros once its publish returns, so the last word on the wire
+is zero; the loop's first tick after a trip is told to restart its output from zero (soft start). :meth:`close`
+sends the last zero and lets nothing after it but zero.
 
 A supervisor in the loop's own interpreter cannot preempt a loop that holds the GIL: the device driver's own
 command timeout stays the last line of defence (docs/haptic-safety.md).
@@ -92,6 +93,8 @@ class Supervisor:
         self._beat = clock()
         self._last_zero = -math.inf
         self._closed = False
+        self._publishing = False           # the loop is inside a publish of its own writer
+        self._loop_writer_zero_due = False  # a zero went on the supervisor's writer, not yet on the loop's
         self._stopping = threading.Event()
         self._thread = None
         self.realtime_priority = realtime_priority
@@ -123,16 +126,19 @@ class Supervisor:
 
     def send(self, message) -> bool:
         """Publish the loop's command unless the output is held at zero; whether it was published. The publish
-        runs outside the lock: if the output was tripped or closed meanwhile, a zero follows it."""
+        runs outside the lock: if the output was tripped or closed meanwhile, zeros follow it on both writers."""
         with self._lock:
             if self.tripped is not None or self._closed:
                 return False
+            self._publishing = True
         try:
             self._publish(message)
         finally:
             with self._lock:
+                self._publishing = False
                 if self.tripped is not None or self._closed:
                     self._send_zero(self._clock())
+            self._zero_loop_writer()
         return True
 
     def error(self, now_s: float, exc: BaseException) -> None:
@@ -140,6 +146,7 @@ class Supervisor:
         with self._lock:
             if not self._closed:
                 self._trip("error", now_s, f"{type(exc).__name__}: {exc}")
+        self._zero_loop_writer()
 
     # -- the supervisor's side
     def check(self, now_s: float) -> None:
@@ -155,6 +162,7 @@ class Supervisor:
                     self._trip("stall", self._beat, f"no tick within {self.bound_s * 1e3:g} ms")
             elif now_s - self._last_zero >= self.bound_s:
                 self._send_zero(now_s)
+        self._zero_loop_writer()
 
     def start(self) -> None:
         """Run :meth:`check` in a thread of its own, woken when the bound would run out (WAKE_SLACK_S after the
@@ -169,6 +177,7 @@ class Supervisor:
             if not self._closed:
                 self._trip("stop", self._clock(), cause)
                 self._closed = True
+        self._zero_loop_writer()
         self._stopping.set()
         if self._thread is not None and self._thread is not threading.current_thread():
             self._thread.join(timeout=1.0)
@@ -199,11 +208,28 @@ class Supervisor:
         self._send_zero(self._clock())
 
     def _send_zero(self, now_s: float) -> None:
+        """A zero on the supervisor's writer (under the lock: no publish of the loop holds it up), and one due on
+        the loop's (:meth:`_zero_loop_writer`)."""
         self._last_zero = now_s
         try:
             self._publish_zero(self._zero_message())
             self.zeros_sent += 1
         except Exception:  # the context is gone: nothing can be sent any more
+            self.publish_failures += 1
+        self._loop_writer_zero_due = self._publish_zero is not self._publish
+
+    def _zero_loop_writer(self) -> None:
+        """The zero due on the loop's writer, outside the lock: DDS keeps order only within one writer, so each
+        writer's newest sample must be zero for a retransmitted command of the loop never to arrive after the last
+        zero. Left to :meth:`send` while the loop publishes (its writer may be held up; send follows its command
+        with zeros)."""
+        with self._lock:
+            if not self._loop_writer_zero_due or self._publishing:
+                return
+            self._loop_writer_zero_due = False
+        try:
+            self._publish(self._zero_message())
+        except Exception:  # the context is gone
             self.publish_failures += 1
 
     # -- diagnostics

@@ -11,9 +11,10 @@ import math
 import numpy as np
 
 from haptic_bridge.passivity import PassivityObserver
-from haptic_bridge.rendering import ModelGlide, contact_force, max_passive_stiffness
+from haptic_bridge.rendering import ModelGlide, PassiveModelUpdate, contact_force, max_passive_stiffness
 from haptic_bridge.safety import SafeForceOutput
 from liver_sim.base.geometry.device_map import DeviceMap
+from liver_sim.base.link import LinkSettings
 from liver_sim.base.local_model import LocalModel, penetration
 
 _ZERO = np.zeros(3)
@@ -57,19 +58,15 @@ def check_passivity(p: dict, scale: float = 1.0) -> None:
         raise ValueError(problem)
 
 
-#: Parameters a running bridge takes from its next tick on (each change checked like a start-up value).
-RUNTIME_PARAMETERS = frozenset({
-    "max_force_n", "max_force_rate_n_per_s", "lifetime_s", "ramp_time_s", "soft_start_s", "stiffness_n_per_m",
-    "damping_ns_per_m", "depth_rate_cutoff_hz", "model_glide_s", "contact_stiffness_n_per_m",
-    "contact_damping_ns_per_m"})
-
-#: The safety envelope: run-time parameters whose start value bounds every later one, from above ("at most")
-#: or from below ("at least"). A run-time change may tighten the envelope, and loosen it back up to where it
-#: started, never beyond (device_damping_ns_per_m, the workspace and the rate are read at start only).
+#: The safety envelope: the parameters a running bridge takes from its next tick on, each bounded by its value at
+#: the process's start from above ("at most") or from below ("at least"). A run-time change may tighten the
+#: envelope, and loosen it back up to where it started, never beyond. The start is the process's: a managed
+#: bridge's lifecycle (cleanup, configure) does not move it. Every other parameter is read at the start.
 ENVELOPE = {"max_force_n": "at most", "max_force_rate_n_per_s": "at most", "lifetime_s": "at most",
             "ramp_time_s": "at most", "stiffness_n_per_m": "at most", "damping_ns_per_m": "at most",
             "contact_stiffness_n_per_m": "at most", "contact_damping_ns_per_m": "at most",
-            "soft_start_s": "at least"}
+            "model_glide_s": "at most", "soft_start_s": "at least"}
+RUNTIME_PARAMETERS = frozenset(ENVELOPE)
 
 
 def checked_change(p: dict, changes: dict, scale: float = 1.0, start: dict | None = None) -> dict:
@@ -146,16 +143,26 @@ class DepthRate:
         return self.rate
 
 
+def passive_model_update_on(p: dict) -> bool:
+    """Whether the bridge renders new local models through a PassiveModelUpdate: `passive_model_update` always, or
+    auto with an emulated link (a delay, jitter or loss between the physics and the bridge)."""
+    mode = p["passive_model_update"]
+    return mode == "always" or (mode == "auto" and LinkSettings.from_parameters(p).emulated)
+
+
 class BridgeTick:
     """F_device = SafeForceOutput(Rᵀ·F_liver [− α·v]): F_liver is the local model's penalty force on the tool sphere
-    (`local_model` plane/sphere, rendered through a ModelGlide of `model_glide_s`) or the held physics
-    contact force (`local_model: none`, Fig. 8 baseline). A PassivityObserver (`passivity`) counts the energy
-    the commands give the hand; with `passivity_control` its damping −α·v joins the force before the safety chain.
+    (`local_model` plane/sphere, rendered through a ModelGlide of `model_glide_s`, then through a
+    PassiveModelUpdate when :func:`passive_model_update_on`) or the held physics contact force (`local_model: none`,
+    Fig. 8 baseline). A PassivityObserver (`passivity`) estimates the energy the commands give the hand from the
+    stylus samples (:meth:`sample`); with `passivity_control` its damping −α·v joins the force before the safety
+    chain.
 
     `device_map` maps the force into the device frame (default: the identity, as offline); None renders zero
-    until :meth:`set_device_map`. Refuses (ValueError naming the parameter) a non-passive local-model stiffness
-    and a rate limit too low for the watchdog ramp; the node also checks the passivity of `none`
-    (:func:`check_passivity`), which offline baselines that drive no device skip.
+    until :meth:`set_device_map`. A different map replaces the one in use only once the force has ramped to zero
+    (`map_waiting` meanwhile), then the force rises again over the soft start. Refuses (ValueError naming the
+    parameter) a non-passive local-model stiffness and a rate limit too low for the watchdog ramp; the node also
+    checks the passivity of `none` (:func:`check_passivity`), which offline baselines that drive no device skip.
     """
 
     def __init__(self, p: dict, device_map: DeviceMap | None = DeviceMap()):
@@ -164,26 +171,38 @@ class BridgeTick:
         self.p = p
         self.mode = p["local_model"]
         self.device_map = device_map
+        self.map_waiting: DeviceMap | None = None
+        self.maps_taken = 0 if device_map is None else 1
         self.safety = safe_output(p)
         self.depth_rate = DepthRate(1.0 / p["rate_hz"], p["depth_rate_cutoff_hz"])
         self.glide = ModelGlide(p["model_glide_s"])
         self.passivity = PassivityObserver(1.0 / p["rate_hz"], p["passivity_control"],
                                            p["passivity_max_damping_ns_per_m"])
-        if device_map is not None:
-            self.passivity.set_map(device_map.liver_to_device_motion)
+        self.passive_update = PassiveModelUpdate(p["max_force_n"]) if passive_model_update_on(p) else None
 
     def configure(self, p: dict) -> None:
         """Take parameters checked by :func:`checked_change`, from this tick on (called by the loop)."""
         self.safety.configure(p["max_force_n"], p["max_force_rate_n_per_s"], p["lifetime_s"], p["ramp_time_s"],
                               p["soft_start_s"])
-        self.depth_rate.set_cutoff(p["depth_rate_cutoff_hz"])
         self.glide.duration_s = p["model_glide_s"]
+        if self.passive_update is not None:
+            self.passive_update.max_force_n = p["max_force_n"]
         self.p = p
 
-    def set_device_map(self, device_map: DeviceMap) -> None:
-        """Render through `device_map` from now on, restarting from zero force (soft start)."""
-        self.device_map = device_map
-        self.passivity.set_map(device_map.liver_to_device_motion)
+    def set_device_map(self, device_map: DeviceMap | None) -> None:
+        """Render through `device_map` (class docstring); None: zero force now, until a map comes."""
+        if device_map is None:
+            self.device_map = self.map_waiting = None
+            self.safety.restart()
+        elif device_map.same_as(self.device_map):
+            self.map_waiting = None
+        else:
+            self.map_waiting = device_map
+
+    def _take_waiting_map(self) -> None:
+        self.device_map, self.map_waiting = self.map_waiting, None
+        self.maps_taken += 1
+        self.passivity.forget_motion()
         self.safety.restart()
 
     def restart(self) -> None:
@@ -203,8 +222,24 @@ class BridgeTick:
         return contact_force(depth, rate, direction, rendered_stiffness(model, self.p["stiffness_n_per_m"]),
                              self.p["damping_ns_per_m"])
 
-    def step(self, now_s: float, tip: np.ndarray | None, pose_age_s: float, source, source_age_s: float) -> np.ndarray:
-        """The (3,) command (N, device frame) of the tick at `now_s` (s, any clock that ticks in seconds).
+    def _admit(self, model: LocalModel | None, tip: np.ndarray | None) -> LocalModel | None:
+        """`model` through the PassiveModelUpdate, the energies taken at `tip` with the rendered K, the budget the
+        passivity observer's: what the hand put into the contact since it began."""
+        radius, cap = self.p["tool_radius_m"], self.p["stiffness_n_per_m"]
+        return self.passive_update.admit(
+            model, lambda m: penetration(m, tip, radius)[0] if tip is not None else 0.0,
+            lambda m: rendered_stiffness(m, cap), self.passivity.episode_energy_j - self.passivity.energy_j)
+
+    def sample(self, stamp_s: float, arrival_s: float, tip: np.ndarray) -> None:
+        """A new stylus sample for the passivity observer: its stamp and arrival (s, the clock of the `sent_s` of
+        :meth:`step`) and the tool tip it gives (m, liver frame)."""
+        if self.device_map is not None:
+            self.passivity.sample(stamp_s, arrival_s, (self.device_map.liver_to_device_motion @ tip).tolist())
+
+    def step(self, now_s: float, tip: np.ndarray | None, pose_age_s: float, source, source_age_s: float,
+             sent_s: float | None = None) -> np.ndarray:
+        """The (3,) command (N, device frame) of the tick at `now_s` (s, any clock that ticks in seconds), sent at
+        `sent_s` (s, the stylus samples' clock; default `now_s`).
 
         `source` is the newest input with its age `source_age_s` (s, from its reception): with local_model none
         the physics force (3,) N, else (local model or None, lifetime s), the lifetime capped at `lifetime_s`;
@@ -215,13 +250,20 @@ class BridgeTick:
             lifetime = self.p["lifetime_s"]
         else:
             model, lifetime = source if source is not None else (None, self.p["lifetime_s"])
-            force = self.render(self.glide.update(model, now_s), tip)
+            model = self.glide.update(model, now_s)
+            if self.passive_update is not None:
+                model = self._admit(model, tip)
+            force = self.render(model, tip)
+        if self.map_waiting is not None and (self.device_map is None or self.safety.watchdog.gain == 0.0):
+            self._take_waiting_map()
         if self.device_map is None:  # no map yet: nothing is fresh
-            self.passivity.observe(None)
             command = self.safety.step(_ZERO, math.inf, math.inf)
+        elif self.map_waiting is not None:  # ramp to zero (as on stale inputs) before the map changes
+            command = self.safety.step(_ZERO, math.inf, math.inf, None, now_s)
         else:
-            self.passivity.observe(tip)
             command = self.safety.step(self.passivity.damp(self.device_map.liver_to_device_force(force)),
                                        source_age_s, pose_age_s, min(lifetime, self.p["lifetime_s"]), now_s)
-        self.passivity.commanded(command)
+        if pose_age_s > self.p["lifetime_s"]:
+            self.passivity.forget_motion()
+        self.passivity.commanded(now_s if sent_s is None else sent_s, command)
         return command

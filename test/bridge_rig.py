@@ -15,14 +15,16 @@ from geometry_msgs.msg import PoseStamped
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.signals import SignalHandlerOptions
 
+from haptic_bridge.parameters import PARAMETERS as BRIDGE
 from liver_sim.base.geometry.device_map import DeviceMap
 from liver_sim.base.geometry.rotations import quaternion_to_matrix
 from liver_sim.base.local_model import LocalModel
+from liver_sim.nodes.rcl_take import SerializedTake
 from msg_defs.device_map import device_map_message
-from msg_defs.forces import force_from_message, force_message_type, wrench_stamped
+from msg_defs.forces import force_from_bytes, force_from_message, force_message_type, wrench_stamped
 from msg_defs.local_model import local_model_marker
 from msg_defs.poses import pose_stamped
-from msg_defs.topics import TOPICS
+from msg_defs.topics import TOPICS, device_command_qos
 
 ROOT = Path(__file__).resolve().parent.parent
 CONFIG = ROOT / "config" / "haptic_bridge.yaml"
@@ -43,6 +45,14 @@ INSIDE = np.array([0.0, 0.0, TOOL_RADIUS_M - 0.005])
 DEEP = np.array([0.0, 0.0, TOOL_RADIUS_M - 0.015])
 EXPECTED_INSIDE = ROTATION.T @ (STIFFNESS_N_PER_M * 0.005 * UP)  # 0.95 N along the normal, in the device frame
 LOOP = "haptic_bridge: loop"
+#: The contact force of INSIDE with the identity device map (N).
+CONTACT = STIFFNESS_N_PER_M * 0.005 * UP  # 0.95 N, identity device map
+#: A soft start has (nearly) reached the contact force.
+NEARLY_CONTACT_N = 0.95 * float(np.linalg.norm(CONTACT))
+#: The bridge's soft start (s): its force rises from zero over it after every restart.
+SOFT_START_S = BRIDGE["soft_start_s"].default
+#: A device map turned half a turn about x.
+HALF_TURN_X = (1.0, 0.0, 0.0, 0.0)
 
 
 def local_model(kind: str) -> LocalModel:
@@ -210,6 +220,58 @@ class Rig:
         self.executor.shutdown()
         self.node.destroy_node()
         rclpy.shutdown(context=self.context)
+
+
+class WriterLog:
+    """The force commands as a device receives them (reliable, volatile), each with the GID of the writer that sent
+    it (liver_sim.nodes.rcl_take): a node of the rig's context that no executor spins, read by :meth:`read`."""
+
+    def __init__(self, rig: Rig):
+        self._node = rclpy.create_node("test_device_writers", context=rig.context)
+        subscription = self._node.create_subscription(force_message_type("wrench_stamped"), TOPICS["servo_cf"].name,
+                                                      lambda _: None, device_command_qos(TOPICS["servo_cf"]),
+                                                      raw=True)
+        self._take = SerializedTake(subscription)
+        self.received: list[tuple[bytes, np.ndarray]] = []  # (writer GID, force N), in order of reception
+
+    def read(self) -> None:
+        while (taken := self._take()) is not None:
+            self.received.append((taken.gid, force_from_bytes("wrench_stamped", taken.data)))
+
+    def last_by_writer(self) -> dict[bytes, np.ndarray]:
+        return {gid: force for gid, force in self.received}
+
+    def close(self) -> None:
+        self._take.close()
+        self._node.destroy_node()
+
+
+def seconds_of(stamp) -> float:
+    """Seconds of a command's (sec, nanosec) header stamp."""
+    return stamp[0] + stamp[1] * 1e-9
+
+
+def wait_for_exit(rig: Rig, bridge: subprocess.Popen) -> None:
+    """Spin until the bridge has exited, then until every command it sent has been read."""
+    deadline = time.monotonic() + WAIT_S
+    while bridge.poll() is None:
+        assert time.monotonic() < deadline, "the bridge did not exit"
+        rig.executor.spin_once(timeout_sec=0.005)
+    rig.drain()
+
+
+def terminate_to_zero(rig: Rig, bridge: subprocess.Popen) -> None:
+    """SIGTERM the bridge; its last command on the wire is zero."""
+    bridge.send_signal(signal.SIGTERM)
+    wait_for_exit(rig, bridge)
+    assert bridge.returncode == 0 and not rig.forces[-1].any()
+
+
+def fresh_loop_status(rig: Rig, bridge: subprocess.Popen) -> dict:
+    """The bridge's next loop status published after this call."""
+    del rig.diagnostics[:]
+    rig.wait_until(lambda: rig.loop_status() is not None, "diagnostics", bridge)
+    return rig.loop_status()
 
 
 def assert_safe(forces: list, max_force: float = MAX_FORCE_N) -> None:

@@ -6,40 +6,43 @@ force command. Every wait is bounded; nothing asserts on timing. The bridge is s
 SIGKILL) in `finally`.
 """
 import signal
-import subprocess
 import sys
 import time
 from datetime import datetime
 
 import numpy as np
 import pytest
-import rclpy
 
 from haptic_bridge.parameters import PARAMETERS as BRIDGE
-from liver_sim.base.geometry.device_map import DeviceMap
 from liver_sim.base.local_model import LocalModel
 from liver_sim.nodes.bridge_node import ZERO_NOT_ACKED
-from msg_defs.device_map import device_map_message
 from msg_defs.forces import force_message_type
 from msg_defs.topics import TOPICS
 
 from bridge_rig import (
     ABOVE,
+    CONTACT,
     DEEP,
     EXPECTED_INSIDE,
     INSIDE,
     LOOP,
     MAX_FORCE_N,
+    NEARLY_CONTACT_N,
     QUARTER_TURN_X,
     ROTATION,
+    SOFT_START_S,
     STIFFNESS_N_PER_M,
     UP,
     WAIT_S,
     Rig,
+    WriterLog,
     assert_safe,
     local_model,
+    seconds_of,
     start_bridge,
     stop,
+    terminate_to_zero,
+    wait_for_exit,
 )
 
 
@@ -170,11 +173,6 @@ def test_without_local_model_the_physics_wrench_is_held(rig_factory, ros_env):
 
 # ---------------------------------------------------------------- zero on every exit (issue 13)
 
-CONTACT = STIFFNESS_N_PER_M * 0.005 * UP  # 0.95 N, identity device map
-#: A soft start has (nearly) reached the contact force.
-NEARLY_CONTACT_N = 0.95 * float(np.linalg.norm(CONTACT))
-#: The bridge's soft start (s): its force rises from zero over it after every restart.
-SOFT_START_S = BRIDGE["soft_start_s"].default
 #: A bridge process whose tick misbehaves while the tool is DEEP (z below 7.5 mm): FAULT runs first.
 FAULTY_BRIDGE = """
 import sys, time
@@ -188,27 +186,6 @@ tick.BridgeTick.step = faulty
 from liver_sim.nodes.bridge_node import main
 sys.exit(main())
 """
-
-
-def wait_for_exit(rig: Rig, bridge: subprocess.Popen) -> None:
-    """Spin until the bridge has exited, then until every command it sent has been read."""
-    deadline = time.monotonic() + WAIT_S
-    while bridge.poll() is None:
-        assert time.monotonic() < deadline, "the bridge did not exit"
-        rig.executor.spin_once(timeout_sec=0.005)
-    rig.drain()
-
-
-def terminate_to_zero(rig: Rig, bridge: subprocess.Popen) -> None:
-    """SIGTERM the bridge; its last command on the wire is zero."""
-    bridge.send_signal(signal.SIGTERM)
-    wait_for_exit(rig, bridge)
-    assert bridge.returncode == 0 and not rig.forces[-1].any()
-
-
-def seconds_of(stamp) -> float:
-    """Seconds of a command's (sec, nanosec) header stamp."""
-    return stamp[0] + stamp[1] * 1e-9
 
 
 def assert_soft_start(rig: Rig, start_s: float) -> None:
@@ -346,67 +323,17 @@ def test_the_parameter_service_lowers_the_clamp_and_never_loosens_the_envelope(r
         for name, looser in (("stiffness_n_per_m", 10000.0), ("lifetime_s", 10.0), ("max_force_n", 3.0)):
             loosened = rig.call(client, request(name, looser), bridge).results[0]
             assert not loosened.successful and "would loosen the safety envelope" in loosened.reason, name
-        damping = rig.call(client, request("device_damping_ns_per_m", 100.0), bridge).results[0]
-        assert not damping.successful and "read at start only" in damping.reason
+        for name, looser in (("model_glide_s", 0.1), ("soft_start_s", 0.1)):  # more lag, a faster rise
+            loosened = rig.call(client, request(name, looser), bridge).results[0]
+            assert not loosened.successful and "would loosen the safety envelope" in loosened.reason, name
+        for name, value in (("device_damping_ns_per_m", 100.0), ("depth_rate_cutoff_hz", 1.0)):
+            fixed = rig.call(client, request(name, value), bridge).results[0]
+            assert not fixed.successful and "read at start only" in fixed.reason, name
         restored = rig.call(client, request("max_force_n", 2.0), bridge).results[0]  # back to the start's clamp
         assert restored.successful, restored.reason
         rig.wait_for_force(CONTACT, bridge)
     finally:
         stop(bridge)
-    assert_safe(rig.forces)
-
-
-HALF_TURN_X = (1.0, 0.0, 0.0, 0.0)
-
-
-def fresh_loop_status(rig: Rig, bridge: subprocess.Popen) -> dict:
-    """The bridge's next loop status published after this call."""
-    del rig.diagnostics[:]
-    rig.wait_until(lambda: rig.loop_status() is not None, "diagnostics", bridge)
-    return rig.loop_status()
-
-
-def test_a_map_from_another_node_or_in_contact_is_refused_one_out_of_contact_applies(rig_factory, ros_env):
-    rig = rig_factory()
-    rig.model, rig.tool = local_model("plane"), INSIDE
-    bridge = start_bridge(ros_env)
-    intruder_context = rclpy.Context()
-    rclpy.init(context=intruder_context)
-    intruder = rclpy.create_node("intruder", context=intruder_context)
-    try:
-        rig.wait_for_force(CONTACT, bridge)
-        taken = int(fresh_loop_status(rig, bridge)["device_maps_taken"])
-        for _ in range(10):  # a stall of the loop or inputs gone stale (a busy machine) restart the force: retry
-            published = rig.node.get_clock().now().seconds_nanoseconds()
-            rig.publish_map((0.0, 0.0, 0.0, 1.0))  # the same map again: nothing changes, no restart
-            rig.wait_until(lambda: sum(stamp > published for stamp in rig.stamps[-600:]) >= 500, "commands", bridge)
-            after = [f for f, stamp in zip(rig.forces, rig.stamps) if stamp > published]  # by stamps: this side lags
-            if all(np.allclose(f, CONTACT, atol=1e-3) for f in after):
-                break
-            rig.wait_for_force(CONTACT, bridge)
-        assert all(np.allclose(f, CONTACT, atol=1e-3) for f in after), "an equal map changes nothing"
-        assert int(fresh_loop_status(rig, bridge)["device_maps_taken"]) == taken, "an equal map is not taken again"
-        foreign = intruder.create_publisher(TOPICS["device_map"].type, TOPICS["device_map"].name,
-                                            TOPICS["device_map"].qos)
-        foreign.publish(device_map_message(DeviceMap(HALF_TURN_X)))  # would turn the force 180° about x
-        rig.wait_until(lambda: int((rig.loop_status() or {}).get("bad_device_map", 0)) >= 1, "a refused map",
-                       bridge)
-        rig.wait_for_force(CONTACT, bridge)
-        intruder.destroy_publisher(foreign)
-        rig.publish_map(HALF_TURN_X)  # its own node, but in contact: refused
-        rig.wait_until(lambda: int(rig.loop_status()["bad_device_map"]) >= 2, "a map refused in contact", bridge)
-        rig.wait_for_force(CONTACT, bridge)
-        rig.tool = ABOVE
-        rig.wait_for_force(np.zeros(3), bridge)
-        taken = int(fresh_loop_status(rig, bridge)["device_maps_taken"])
-        rig.publish_map(HALF_TURN_X)  # out of contact: taken
-        rig.wait_until(lambda: int(rig.loop_status()["device_maps_taken"]) > taken, "the map taken", bridge)
-        rig.tool = INSIDE
-        rig.wait_for_force(-CONTACT, bridge)  # turned 180° about x: z flips
-    finally:
-        stop(bridge)
-        intruder.destroy_node()
-        rclpy.shutdown(context=intruder_context)
     assert_safe(rig.forces)
 
 
@@ -471,3 +398,26 @@ def test_a_managed_bridge_zeroes_the_force_on_deactivate(rig_factory, ros_env):
     finally:
         stop(bridge)
     assert_safe(rig.forces)
+
+
+def test_after_a_stop_each_writer_of_the_bridge_ends_on_zero(rig_factory, ros_env):
+    """DDS keeps order within one writer only: the bridge's loop and its supervisor publish on writers of their own,
+    so each must end on zero, or a retransmitted command could arrive after the last zero and a driver that holds
+    the last command would keep pushing."""
+    rig = rig_factory()
+    writers = WriterLog(rig)
+    rig.model, rig.tool = local_model("plane"), INSIDE
+    bridge = start_bridge(ros_env)
+    try:
+        rig.wait_for_force(CONTACT, bridge)
+        writers.read()
+        bridge.send_signal(signal.SIGTERM)
+        wait_for_exit(rig, bridge)
+        writers.read()
+    finally:
+        stop(bridge)
+        writers.close()
+    last = writers.last_by_writer()
+    assert len(last) == 2, "the loop's writer and the supervisor's"
+    assert all(not force.any() for force in last.values()), {gid.hex(): f.tolist() for gid, f in last.items()}
+    assert any(force.any() for _, force in writers.received), "in contact before the stop"

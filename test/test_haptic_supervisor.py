@@ -56,12 +56,13 @@ def test_a_stall_publishes_zero_holds_it_and_drops_the_loops_late_command():
 
 
 def test_a_publish_held_up_in_the_middleware_holds_up_neither_the_trip_nor_its_zero():
-    wire = Wire()  # one topic, two writers: the loop's and the supervisor's
+    wire, loop_writer = Wire(), Wire()  # one topic, two writers: the supervisor's and the loop's
     held, release = threading.Event(), threading.Event()
 
-    def slow_publish(message) -> None:  # the loop's writer, held ~50 ms by a transient-local reader joining
+    def slow_publish(message) -> None:  # the loop's writer, held by a transient-local reader joining
         held.set()
         release.wait(5.0)
+        loop_writer.publish(message)
         wire.publish(message)
 
     now = [0.001]
@@ -71,11 +72,35 @@ def test_a_publish_held_up_in_the_middleware_holds_up_neither_the_trip_nor_its_z
     loop.start()
     assert held.wait(5.0)
     now[0] = 0.0065
-    sup.check(now[0])  # returns at once: the loop's publish does not hold the lock
+    started = time.monotonic()
+    sup.check(now[0])  # returns at once: the loop's publish holds neither the lock nor the supervisor's writer
+    assert time.monotonic() - started < 1.0
     assert wire.sent == [ZERO] and sup.tripped is not None
     release.set()
     loop.join(5.0)
-    assert wire.sent == [ZERO, "F held", ZERO], "a zero follows the command that was held up"
+    assert wire.sent[:2] == [ZERO, "F held"] and set(wire.sent[2:]) == {ZERO}, "zeros follow the held command"
+    assert loop_writer.sent == ["F held", ZERO], "the loop's writer ends on zero too (DDS orders per writer)"
+
+
+def test_every_writer_ends_on_zero_after_a_trip_and_a_close():
+    """DDS keeps order within one writer only: a retransmitted command of the loop's writer could arrive after the
+    supervisor's zero, so the loop's writer must end on zero too, at a stall, an error and a close."""
+    zero_writer, loop_writer = Wire(), Wire()
+    now = [0.001]
+    sup = Supervisor(0.005, 0.001, loop_writer.publish, lambda: ZERO, clock=lambda: now[0],
+                     publish_zero=zero_writer.publish)
+    sup.beat(0.001)
+    sup.send("F1")
+    now[0] = 0.0065
+    sup.check(now[0])  # a stall
+    assert zero_writer.sent == [ZERO] and loop_writer.sent == ["F1", ZERO]
+    assert sup.beat(0.007) and sup.send("F2")
+    sup.error(0.0075, RuntimeError("boom"))
+    assert zero_writer.sent[-1] == ZERO and loop_writer.sent[-2:] == ["F2", ZERO]
+    assert sup.beat(0.008) and sup.send("F3")
+    sup.close("SIGTERM")
+    assert zero_writer.sent[-1] == ZERO and loop_writer.sent[-2:] == ["F3", ZERO]
+    assert not sup.send("F4") and loop_writer.sent[-1] == ZERO
 
 
 def test_an_error_zeroes_and_the_next_tick_restarts():

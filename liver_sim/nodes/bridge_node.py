@@ -1,21 +1,20 @@
 """`haptic_bridge`: the 1 kHz haptic loop between the physics (150 Hz) and the device driver.
 
-Each tick of a RateLoop (own thread) turns the newest tool pose and local model into a contact
-force (paper §2.5, P11 of docs/paper.md) — or, with `local_model: none`, holds the newest physics contact wrench
-(the "without local model" baseline of Fig. 8, R4) — maps it into the device frame with the device
-map `liver_tool` publishes (latched on device_map_topic; zero force before it arrives) and sends it
-through SafeForceOutput (clamp, rate limit, watchdog, soft start) to the driver's force topic.
-The loop reads its inputs itself; each input's age counts from its reception by DDS, an input
-without a matched publisher is stale, and an implausible one is refused and counted.  The command
-is stamped with the stamp of the input it was computed from (the tool pose; the wrench in `none`
-mode), or the node's clock before any.
+Each tick of a RateLoop (own thread) turns the newest tool pose and local model into a contact force (paper §2.5,
+P11 of docs/paper.md) — or, with `local_model: none`, holds the newest physics contact wrench (the "without local
+model" baseline of Fig. 8, R4) — maps it into the device frame with the device map `liver_tool` publishes
+(liver_sim.nodes.device_map_source: taken from `device_map_node` only, judged by each sample's writer; zero force
+before one arrives) and sends it through SafeForceOutput (clamp, rate limit, watchdog, soft start) to the driver's
+force topic. The loop reads its inputs itself; each input's age counts from its reception by DDS, an input without
+a matched publisher is stale, and an implausible one is refused and counted. The command is stamped with the
+stamp of the input it was computed from (the tool pose; the wrench in `none` mode), or the node's clock before any.
 
-A Supervisor thread (haptic_bridge.supervisor) publishes zero whenever the loop stalls beyond
-stall_bound_s, raises, or ends, and holds it until the loop is back; on an ending signal (run_node)
-or close the last message is a zero force, acknowledged before the context goes.  Run-time
-parameter changes are checked like start-up values and applied from the next tick, or refused with
-the reason.  `haptic_bridge --managed` runs the same bridge as a lifecycle node: activate starts the
-loop, deactivate and shutdown zero the force and stop it.
+A Supervisor thread (haptic_bridge.supervisor) publishes zero whenever the loop stalls beyond stall_bound_s, raises,
+or ends, and holds it until the loop is back; on an ending signal (run_node) or close the last message on each of
+its writers is a zero force, acknowledged before the context goes. Run-time parameter changes are checked like
+start-up values and within the envelope fixed when the process started (haptic_bridge.tick.ENVELOPE), and applied
+from the next tick, or refused with the reason. `haptic_bridge --managed` runs the same bridge as a lifecycle node:
+activate starts the loop, deactivate and shutdown zero the force and stop it; its envelope is still the process's.
 The tick itself is haptic_bridge.tick.BridgeTick; the parameters are haptic_bridge.parameters.PARAMETERS.
 """
 from __future__ import annotations
@@ -23,7 +22,6 @@ from __future__ import annotations
 import math
 import sys
 import time
-from datetime import datetime, timezone
 
 import numpy as np
 from rclpy.duration import Duration
@@ -33,95 +31,93 @@ from rclpy.node import Node
 from haptic_bridge.inputs import InputCheck
 from haptic_bridge.parameters import PARAMETERS
 from haptic_bridge.supervisor import Supervisor
-from haptic_bridge.tick import BridgeTick, check_passivity, checked_change, passivity_problem
+from haptic_bridge.tick import BridgeTick, check_passivity, checked_change
 from liver_sim.base.link import link_text
-from liver_sim.nodes.diagnostics import diagnostic_status, on_rate, publish_diagnostics
-from liver_sim.nodes.inputs import Latest, LoopInputs, emulated_link, link_report
-from liver_sim.nodes.occupants import node_path, publisher_nodes
+from liver_sim.nodes.bridge_diagnostics import BridgeState, bridge_status
+from liver_sim.nodes.device_map_source import DeviceMapSource
+from liver_sim.nodes.diagnostics import publish_diagnostics
+from liver_sim.nodes.inputs import Handoff, Latest, LoopInputs, emulated_link, link_report
+from liver_sim.nodes.occupants import UNKNOWN_NODE_NAME, node_path
 from liver_sim.nodes.parameters import declare_parameters, on_parameter_changes
 from liver_sim.nodes.rate_loop import RateLoop, warn
+from liver_sim.nodes.rcl_take import endpoint_gid, publisher_gid
 from liver_sim.nodes.run import run_node
-from msg_defs.device_map import device_map_from_message
 from msg_defs.forces import force_message_bytes, force_message_type, stamped_force_from_bytes
 from msg_defs.local_model import local_model_from_bytes
 from msg_defs.poses import pose_from_bytes
 from msg_defs.topics import TOPICS, loop_input_qos
 
-#: How long (s) after a device map arrives the bridge checks who publishes on its topic: the graph learns of a new
-#: publisher about when its first message arrives.
-MAP_SOURCE_CHECK_S = 0.2
 #: How often (s) the bridge looks for another publisher on its force topic (a second bridge on the device).
 RIVAL_CHECK_S = 0.1
-#: The bridge's own writers on its force topic: the loop's and the supervisor's zeros.
-OWN_FORCE_WRITERS = 2
 #: How long (s) close waits for the driver to acknowledge the last zero (and a recorder the last diagnostics).
 ZERO_ACK_TIMEOUT_S = 1.0
 #: The warning of a close whose last zero a reliable subscriber (the driver) has not acknowledged.
 ZERO_NOT_ACKED = "the last zero force was not acknowledged"
-
-
-def wall_time(monotonic_s: float) -> str:
-    """ISO-8601 UTC time (ms) of a monotonic time of this process."""
-    if not math.isfinite(monotonic_s):
-        return "-"
-    wall = time.time() - (time.monotonic() - monotonic_s)
-    return datetime.fromtimestamp(wall, tz=timezone.utc).isoformat(timespec="milliseconds")
+#: The bridge's inputs: name → (topic parameter, TOPICS key, decoder of the serialized message). Each decoded value
+#: is a tuple whose first item InputCheck judges (the tip, the local model, the force).
+INPUTS = {"tool_pose": ("tool_pose_topic", "tool_pose", pose_from_bytes),
+          "local_model": ("local_model_topic", "contact_plane", local_model_from_bytes),
+          "tool_wrench": ("tool_wrench_topic", "tool_wrench", stamped_force_from_bytes)}
 
 
 class BridgeShell:
-    """The ROS side of one bridge on `node` with checked parameters `p`: inputs, outputs, loop, supervisor,
-    diagnostics, run-time parameters. :meth:`start` runs the loop; :meth:`stop` leaves zero on the wire."""
+    """The ROS side of one bridge on `node` with checked parameters `p` (and the envelope of `start_p`, default
+    `p`): inputs, device map, outputs, loop, supervisor, diagnostics, run-time parameters. :meth:`start` runs the
+    loop; :meth:`stop` leaves zero on the wire."""
 
-    def __init__(self, node, p: dict):
+    def __init__(self, node, p: dict, start_p: dict | None = None):
         if p["drives_device"]:
             check_passivity(p)  # every mode; again with the device map's scale when it arrives
-        self.node, self.p, self.start_p = node, p, p
+        self.node, self.p, self.start_p = node, p, start_p or p
         self.tick = BridgeTick(p, device_map=None)
-        self.checks = InputCheck(p["workspace_centre_m"], p["workspace_radius_m"])
         self.mode = p["local_model"]
-        self.scale = 1.0
-        self._pose = Latest()    # (tip position (3,) m, stamp)
-        self._source = Latest()  # (local model or None, lifetime s), or (force (3,) N, stamp) in none mode
-        self._bad = {"tool_pose": 0, "local_model": 0, "tool_wrench": 0, "device_map": 0}
-        self._bad_reason = {}
-        self._bad_logged = dict(self._bad)
-        self._pending = (0, None)      # (version, parameters) for the loop's next tick
-        self._pending_map = (0, None)  # (version, DeviceMap or None)
-        self._applied = self._applied_map = 0
+        self.source = "tool_wrench" if self.mode == "none" else "local_model"
+        checks = InputCheck(p["workspace_centre_m"], p["workspace_radius_m"])
+        self._checks = {"tool_pose": checks.tip, "local_model": checks.model, "tool_wrench": checks.force}
+        self._params, self._maps = Handoff(), Handoff()  # for the loop's next tick
+        self._latest = {"tool_pose": Latest(), self.source: Latest()}
+        self._bad = {kind: 0 for kind in (*INPUTS, "device_map")}
+        self._bad_reason, self._bad_logged = {}, dict(self._bad)
         self._map_problem = f"waiting for the device map on {p['device_map_topic']}"
-        self._device_map = None        # the map the loop renders through (executor thread's view)
-        self._map_resubscribe = False  # a map was refused for its source: take the latched one again later
-        self._offered_map = self._offer_timer = None  # the newest map received, until MAP_SOURCE_CHECK_S later
-        self._maps_taken = 0
+        self._sampled = None  # the tool pose last handed to the passivity observer
         self._last_force = np.zeros(3)
         self._last_report = time.monotonic()
         self._loop = self.supervisor = None
-        self._publisher = node.create_publisher(force_message_type(p["force_output"]), p["force_topic"],
-                                                TOPICS["servo_cf"].qos)
+        self._rivals: list[str] = []  # the other publishers on force_topic: while any, the bridge sends zero
+        force_type, qos = force_message_type(p["force_output"]), TOPICS["servo_cf"].qos
+        self._publisher = node.create_publisher(force_type, p["force_topic"], qos)
         # the supervisor's zeros: a writer of their own, not held up by a publish of the loop
-        self._zero_publisher = node.create_publisher(force_message_type(p["force_output"]), p["force_topic"],
-                                                     TOPICS["servo_cf"].qos)
+        self._zero_publisher = node.create_publisher(force_type, p["force_topic"], qos)
+        self._own_gids = {publisher_gid(self._publisher), publisher_gid(self._zero_publisher)}
         self._diagnostics = node.create_publisher(TOPICS["diagnostics"].type, TOPICS["diagnostics"].name,
                                                   TOPICS["diagnostics"].qos)
-        self._map_subscription = self._subscribe_map()
+        self.map_source = DeviceMapSource(node, p["device_map_topic"], p["device_map_node"], self._on_map,
+                                          self._on_refused_map)
         self._inputs = LoopInputs(node)  # read by the 1 kHz loop itself, not by the executor
         self.link = emulated_link(p)  # the teleoperation link from the physics' side, if emulated
-        self._pose_input = self._inputs.subscribe(TOPICS["tool_pose"].type, p["tool_pose_topic"],
-                                                  loop_input_qos(TOPICS["tool_pose"]), self._on_pose, raw=True,
-                                                  received=True)
-        if self.mode == "none":
-            self.source_topic = p["tool_wrench_topic"]
-            self._source_input = self._inputs.subscribe(TOPICS["tool_wrench"].type, self.source_topic,
-                                                        loop_input_qos(TOPICS["tool_wrench"]), self._on_wrench,
-                                                        raw=True, received=True, link=self.link)
-        else:
-            self.source_topic = p["local_model_topic"]
-            self._source_input = self._inputs.subscribe(TOPICS["contact_plane"].type, self.source_topic,
-                                                        loop_input_qos(TOPICS["contact_plane"]), self._on_marker,
-                                                        raw=True, received=True, link=self.link)
-        self._rivals: list[str] = []  # the other publishers on force_topic: while any, the bridge sends zero
+        self._subscriptions = {kind: self._subscribe(kind) for kind in self._latest}
         self._timer = node.create_timer(1.0, self._publish_diagnostics)
         self._rival_timer = node.create_timer(RIVAL_CHECK_S, self._check_rivals)
+
+    def _subscribe(self, kind: str):
+        topic_parameter, key, decode = INPUTS[kind]
+        check, latest = self._checks[kind], self._latest[kind]
+
+        def on_message(data: bytes, received: float) -> None:  # in the loop's poll
+            try:
+                value = decode(data)
+                problem = check(value[0])
+            except ValueError as exc:
+                problem = str(exc)
+            if problem:
+                self._bad[kind] += 1
+                self._bad_reason[kind] = problem  # logged by the diagnostics timer, not here in the loop
+            else:
+                latest.set(value, received)
+
+        return self._inputs.subscribe(TOPICS[key].type, self.p[topic_parameter], loop_input_qos(TOPICS[key]),
+                                      on_message, raw=True, received=True,
+                                      link=None if kind == "tool_pose" else self.link)
 
     # -- life cycle
     def start(self) -> None:
@@ -138,11 +134,9 @@ class BridgeShell:
         self.supervisor.start()
 
     def stop(self, cause: str) -> None:
-        """Zero force as the last command (nothing after it), the loop stopped, the zero acknowledged, and the
-        last diagnostics too: `destroy` would take messages not yet acknowledged with their publisher (a recorded
-        demo lost the bridge's last /diagnostics). Both within ZERO_ACK_TIMEOUT_S, the zero first; a zero not
-        acknowledged by then is logged as a warning (the profile's writers send a heartbeat, which asks for the
-        acknowledgement, every 0.1 s)."""
+        """Zero force as the last command on each writer (nothing after it), the loop stopped, the zero
+        acknowledged, and the last diagnostics too (`destroy` would take messages not yet acknowledged with their
+        publisher), within ZERO_ACK_TIMEOUT_S, the zero first; a zero not acknowledged by then is logged."""
         if self.supervisor is not None and not self.supervisor.closed:
             self.supervisor.close(cause)
             self._loop.stop()
@@ -158,33 +152,30 @@ class BridgeShell:
 
     def destroy(self) -> None:
         self._inputs.destroy()
-        self.node.destroy_timer(self._rival_timer)
-        if self._offer_timer is not None:
-            self.node.destroy_timer(self._offer_timer)
-        self.node.destroy_timer(self._timer)
-        self.node.destroy_subscription(self._map_subscription)
-        self.node.destroy_publisher(self._publisher)
-        self.node.destroy_publisher(self._zero_publisher)
-        self.node.destroy_publisher(self._diagnostics)
+        self.map_source.destroy()
+        for timer in (self._rival_timer, self._timer):
+            self.node.destroy_timer(timer)
+        for publisher in (self._publisher, self._zero_publisher, self._diagnostics):
+            self.node.destroy_publisher(publisher)
 
     # -- run-time parameters (executor thread)
     def apply(self, changes: dict) -> str | None:
-        """Check `changes` as at start; the loop takes them at its next tick. Refusal: ValueError with the reason."""
-        self.p = checked_change(self.p, changes, self.scale, self.start_p)
-        self._pending = (self._pending[0] + 1, self.p)
+        """Check `changes` as at start and within the start's envelope; the loop takes them at its next tick.
+        Refusal: ValueError with the reason."""
+        scale = self.tick.device_map.scale if self.tick.device_map is not None else 1.0
+        self.p = checked_change(self.p, changes, scale, self.start_p)
+        self._params.offer(self.p)
         return None
 
     # -- one bridge per device (executor thread)
     def _check_rivals(self) -> None:
-        """Note every publisher on force_topic but this bridge's own: two bridges interleaving their commands
-        would defeat the rate limit and the watchdog, so while any other publishes there, this one sends zero."""
-        names = publisher_nodes(self.node, self._publisher.topic_name)
-        own = node_path(self.node.get_namespace(), self.node.get_name())
-        for _ in range(OWN_FORCE_WRITERS):  # the loop's and the supervisor's
-            if own in names:
-                names.remove(own)
-            elif names:
-                names.pop()  # ours, under a name the graph has not caught up with
+        """Note every publisher on force_topic but this bridge's own two writers (known by their GIDs): two bridges
+        interleaving their commands would defeat the rate limit and the watchdog, so while any other publishes
+        there, this one sends zero."""
+        names = sorted(node_path(info.node_namespace, info.node_name) if info.node_name != UNKNOWN_NODE_NAME
+                       else "a node not yet named by the graph"
+                       for info in self.node.get_publishers_info_by_topic(self._publisher.topic_name)
+                       if endpoint_gid(info) not in self._own_gids)
         if names and not self._rivals:
             self.node.get_logger().error(f"another publisher on {self.p['force_topic']} ({', '.join(names)}): "
                                          "sending zero, not driving the device while it publishes there")
@@ -192,148 +183,66 @@ class BridgeShell:
             self.node.get_logger().info(f"{self.p['force_topic']} has no other publisher: driving again (soft start)")
         self._rivals = names
 
-    # -- the device map (executor thread): one source, never re-aimed in contact
-    def _subscribe_map(self):
-        return self.node.create_subscription(TOPICS["device_map"].type, self.p["device_map_topic"],
-                                             self._on_device_map, TOPICS["device_map"].qos)
-
-    def _foreign_map_publishers(self) -> list[str]:
-        """The nodes other than device_map_node that publish on device_map_topic."""
-        return sorted(set(publisher_nodes(self.node, self._map_subscription.topic_name)) - {self.p["device_map_node"]})
-
-    def _refuse_map(self, reason: str) -> None:
-        self._bad["device_map"] += 1
-        self.node.get_logger().error(f"device map refused: {reason}")
-
-    def _retake_map(self) -> None:
-        """After a map refused for its source while the bridge has none (its own may have come in the meantime,
-        refused with it): once device_map_node alone publishes, subscribe again, so that its latched map
-        arrives again. With a map in use nothing is done (a new reader can hold up the loop's publish)."""
-        if self._map_resubscribe and self._device_map is None and not self._foreign_map_publishers():
-            self._map_resubscribe = False
-            self.node.destroy_subscription(self._map_subscription)
-            self._map_subscription = self._subscribe_map()
-
-    def _on_device_map(self, message) -> None:
-        """A map is taken MAP_SOURCE_CHECK_S after it arrived, when the graph has caught up with whoever sent it
-        (:meth:`_take_offered_map`); a map that cannot be decoded or is not passive is refused at once."""
-        try:
-            device_map = device_map_from_message(message)
-            if self.p["drives_device"]:
+    # -- the device map (executor thread): from device_map_node only, changed only through zero force
+    def _on_map(self, device_map) -> None:
+        scale_problem = None
+        if self.p["drives_device"]:
+            try:
                 check_passivity(self.p, device_map.scale)
-        except ValueError as exc:
-            self._bad["device_map"] += 1
-            self._map_problem = f"device map refused: {exc}"
-            self.node.get_logger().error(f"{self._map_problem}; the force stays zero")
-            self._device_map = None
-            self._pending_map = (self._pending_map[0] + 1, None)
+            except ValueError as exc:
+                scale_problem = str(exc)
+        if scale_problem:
+            self._on_refused_map(f"from {self.p['device_map_node']}: {scale_problem}", True)
             return
-        self._offered_map = device_map
-        if self._offer_timer is None:
-            self._offer_timer = self.node.create_timer(MAP_SOURCE_CHECK_S, self._take_offered_map)
-
-    def _take_offered_map(self) -> None:
-        """Take the newest offered map from device_map_node only (checked against the topic's publishers: a
-        message carries no sender); equal to the current one: nothing; new while in contact: refused; else
-        rendered from the next tick with a soft start."""
-        if self._offer_timer is not None:
-            self.node.destroy_timer(self._offer_timer)
-            self._offer_timer = None
-        device_map, self._offered_map = self._offered_map, None
-        if device_map is None:  # a timer event queued before the timer was destroyed
-            return
-        foreign = self._foreign_map_publishers()
-        if foreign:
-            self._map_resubscribe = True
-            self._refuse_map(f"{', '.join(foreign)} also publish(es) on {self.p['device_map_topic']}; only "
-                             f"{self.p['device_map_node']} may (parameter device_map_node)")
-            return
-        if device_map.same_as(self._device_map):
-            return
-        if self._device_map is not None and self._last_force.any():
-            self._refuse_map("a new map while the tool is in contact (the force would turn); the current map "
-                             "stays")
-            return
-        self.scale, self._map_problem, self._device_map = device_map.scale, None, device_map
-        self._maps_taken += 1
-        self._pending_map = (self._pending_map[0] + 1, device_map)
+        self._map_problem = None
+        self._maps.offer(device_map)
         self.node.get_logger().info(
-            f"device map from {self.p['device_map_topic']}: R {np.round(device_map.rotation, 6).tolist()}, "
-            f"t {device_map.translation.tolist()} m, scale {device_map.scale:g}")
+            f"device map from {self.p['device_map_node']} on {self.p['device_map_topic']}: "
+            f"R {np.round(device_map.rotation, 6).tolist()}, t {device_map.translation.tolist()} m, "
+            f"scale {device_map.scale:g} (a change applies once the force is zero, then a soft start)")
+
+    def _on_refused_map(self, reason: str, from_source: bool) -> None:
+        """A refused map sample: from another node it changes nothing; from device_map_node the force goes to zero
+        until a good one comes (the tool places the tool with a map the bridge cannot use)."""
+        self._bad["device_map"] += 1
+        if from_source:
+            self._map_problem = f"device map refused: {reason}"
+            self._maps.offer(None)
+            self.node.get_logger().error(f"{self._map_problem}; the force stays zero")
+        else:
+            self.node.get_logger().error(f"device map refused, the map in use stays: {reason}")
 
     # -- the loop (its own thread)
-    def _on_pose(self, data: bytes, received: float) -> None:
-        try:
-            position, _, stamp = pose_from_bytes(data)
-        except ValueError as exc:
-            self._refuse("tool_pose", str(exc))
-            return
-        problem = self.checks.tip(position)
-        if problem:
-            self._refuse("tool_pose", problem)
-            return
-        self._pose.set((position, stamp), received)
-
-    def _on_marker(self, data: bytes, received: float) -> None:
-        try:
-            model, lifetime = local_model_from_bytes(data)
-        except ValueError as exc:
-            self._refuse("local_model", str(exc))
-            return
-        problem = self.checks.model(model)
-        if problem:
-            self._refuse("local_model", problem)
-            return
-        cap = self.p["lifetime_s"]
-        self._source.set((model, min(lifetime, cap) if lifetime > 0.0 else cap), received)
-
-    def _on_wrench(self, data: bytes, received: float) -> None:
-        try:
-            force, stamp = stamped_force_from_bytes(data)
-        except ValueError as exc:
-            self._refuse("tool_wrench", str(exc))
-            return
-        problem = self.checks.force(force)
-        if problem:
-            self._refuse("tool_wrench", problem)
-            return
-        self._source.set((force, stamp), received)
-
-    def _refuse(self, kind: str, reason: str) -> None:
-        self._bad[kind] += 1
-        self._bad_reason[kind] = reason  # logged by the diagnostics timer, not here in the loop
-
     def _step(self, now: float) -> None:
+        tick = self.tick
         if self.supervisor.beat(now):
-            self.tick.restart()
-        version, p = self._pending
-        if version != self._applied:
-            self._applied = version
-            self.tick.configure(p)
-        version, device_map = self._pending_map
-        if version != self._applied_map:
-            self._applied_map = version
-            if device_map is None:
-                self.tick.device_map = None  # a refused map: zero until a good one
-            else:
-                self.tick.set_device_map(device_map)
+            tick.restart()
+        if (p := self._params.take()) is not Handoff.NOTHING:
+            tick.configure(p)
+        if (device_map := self._maps.take()) is not Handoff.NOTHING:
+            tick.set_device_map(device_map)
         self._inputs.poll()
-        pose, pose_received = self._pose.get()
-        tip, stamp = pose if pose is not None else (None, None)
-        source, source_received = self._source.get()
+        wall = time.time()
+        pose, pose_received = self._latest["tool_pose"].get()
+        source, source_received = self._latest[self.source].get()
+        pose_age = now - pose_received if self._subscriptions["tool_pose"].get_publisher_count() else math.inf
+        source_age = now - source_received if self._subscriptions[self.source].get_publisher_count() else math.inf
+        tip, stamp = (pose[0], pose[2]) if pose is not None else (None, None)
+        if pose is not None and pose is not self._sampled:
+            self._sampled = pose
+            tick.sample(stamp[0] + stamp[1] * 1e-9, wall - (now - pose_received), tip)
         if self.mode == "none":
-            source, stamp = source if source is not None else (None, None)
-        pose_age = now - pose_received if self._pose_input.get_publisher_count() else math.inf
-        source_age = now - source_received if self._source_input.get_publisher_count() else math.inf
-        command = self.tick.step(now, tip, pose_age, source, source_age)
+            source, stamp = (source[0], source[1]) if source is not None else (None, None)
+        elif source is not None:
+            source = (source[0], min(source[1], self.p["lifetime_s"]) if source[1] > 0.0 else self.p["lifetime_s"])
+        command = tick.step(now, tip, pose_age, source, source_age, wall)
         if self._rivals:  # another bridge on the device: zero, and a soft start once it has gone
-            self.tick.restart()
+            tick.restart()
             command = np.zeros(3)
         self._last_force = command
         if stamp is None or (source_age if self.mode == "none" else pose_age) > self.p["lifetime_s"]:
             stamp = self.node.get_clock().now().seconds_nanoseconds()  # no fresh input: the command holds now
-        self.supervisor.send(force_message_bytes(self.p["force_output"], command, stamp,
-                                                 self.p["device_frame_id"]))
+        self.supervisor.send(force_message_bytes(self.p["force_output"], command, stamp, self.p["device_frame_id"]))
 
     def _on_error(self, now: float, exc: Exception) -> None:
         self.supervisor.error(now, exc)
@@ -344,7 +253,6 @@ class BridgeShell:
 
     # -- diagnostics (executor thread)
     def _publish_diagnostics(self) -> None:
-        self._retake_map()
         now = time.monotonic()
         logger = self.node.get_logger()
         for kind, count in self._bad.items():
@@ -355,56 +263,31 @@ class BridgeShell:
             return
         report = self.supervisor.report(now, self._last_report)
         self._last_report = now
-        events = [f"{e.kind} at {wall_time(e.start_s)}: {e.cause}"
-                  + (f" (zero held {(e.end_s - e.start_s) * 1e3:.1f} ms)" if e.end_s is not None else " (now)")
-                  for e in report.pop("events")]
+        stats = self._loop.report()
+        state = BridgeState(
+            {"tool_pose": now - self._latest["tool_pose"].get()[1], "source": now - self._latest[self.source].get()[1]},
+            {kind: self._subscriptions[self.source if kind == "source" else kind].get_publisher_count()
+             for kind in ("tool_pose", "source")},
+            self._bad, self._map_problem, self._rivals, float(np.linalg.norm(self._last_force)))
+        status, events = bridge_status(self.node.get_name(), self.p, self.tick, stats, report, state,
+                                       link_report(self.link, self._inputs))
         for line in events:
             logger.error(line)
-        stats = self._loop.report()
-        _, pose_received = self._pose.get()
-        _, source_received = self._source.get()
-        state = self.tick.safety.state
-        extra = {"watchdog": state, "local_model": self.mode, "drives_device": self.p["drives_device"],
-                 "bad_messages": sum(self._bad.values()), **{f"bad_{k}": v for k, v in self._bad.items()},
-                 "last_force_n": float(np.linalg.norm(self._last_force)), "max_force_n": self.p["max_force_n"],
-                 "tool_pose_age_s": float(now - pose_received),
-                 ("tool_wrench_age_s" if self.mode == "none" else "local_model_age_s"): float(now - source_received),
-                 "tool_pose_publishers": self._pose_input.get_publisher_count(),
-                 "source_publishers": self._source_input.get_publisher_count(),
-                 "device_scale": self.scale if self._map_problem is None else float("nan"),
-                 "device_maps_taken": self._maps_taken, **self.tick.passivity.report(),
-                 **link_report(self.link, self._inputs), **report,
-                 "max_gap_1s_at": wall_time(report["max_gap_1s_at_s"]), "max_gap_at": wall_time(report["max_gap_at_s"])}
-        del extra["max_gap_1s_at_s"], extra["max_gap_at_s"], extra["error"]
         if stats["new_gaps"]:
             logger.warning(f"loop {stats['new_gaps']}")
-        problems = [] if on_rate(stats, self.p["rate_hz"]) else ["below rate"]
-        if stats["new_gaps"]:
-            problems.append(stats["new_gaps"])
-        if state != "ok":
-            problems.append(f"watchdog {state}")
-        if self._map_problem:
-            problems.append(self._map_problem)
-        if self._rivals:
-            problems.append(f"another publisher on {self.p['force_topic']} ({', '.join(self._rivals)}): not driving")
-        if not self.p["drives_device"]:
-            problems += filter(None, [passivity_problem(self.p, self.scale)])
-        error = report["error"] or (self._map_problem or "").startswith("device map refused") or bool(self._rivals)
-        message = "; ".join(events + problems) or "ok"
-        publish_diagnostics(self.node, self._diagnostics, [diagnostic_status(
-            f"{self.node.get_name()}: loop", stats, not problems, message, extra, error=error)])
+        publish_diagnostics(self.node, self._diagnostics, [status])
 
     def describe(self) -> str:
         p = self.p
         rendering = ("physics wrench held between updates" if self.mode == "none" else
                      f"local model (K {p['stiffness_n_per_m']:g} N/m, B {p['damping_ns_per_m']:g} N·s/m, "
                      f"glide {p['model_glide_s']:g} s, tool radius {p['tool_radius_m']:g} m)")
-        return (f"haptic_bridge: {p['rate_hz']:g} Hz, local_model {self.mode}: {rendering}; "
-                f"in: {p['tool_pose_topic']}, {self.source_topic}{link_text(self.link)}, "
-                f"device map {p['device_map_topic']}; "
-                f"out: {p['force_topic']} ({p['force_output']}, frame {p['device_frame_id']}, max "
-                f"{p['max_force_n']:g} N, {p['max_force_rate_n_per_s']:g} N/s, soft start {p['soft_start_s']:g} s); "
-                f"watchdog: lifetime {p['lifetime_s']:g} s, ramp {p['ramp_time_s']:g} s; supervisor: zero after "
+        return (f"haptic_bridge: {p['rate_hz']:g} Hz, local_model {self.mode}: {rendering}; passivity controller "
+                f"{'on' if self.tick.passivity.control else 'off'}; in: {p['tool_pose_topic']}, "
+                f"{p[INPUTS[self.source][0]]}{link_text(self.link)}, device map {p['device_map_topic']} from "
+                f"{p['device_map_node']}; out: {p['force_topic']} ({p['force_output']}, frame {p['device_frame_id']}, "
+                f"max {p['max_force_n']:g} N, {p['max_force_rate_n_per_s']:g} N/s, soft start {p['soft_start_s']:g} "
+                f"s); watchdog: lifetime {p['lifetime_s']:g} s, ramp {p['ramp_time_s']:g} s; supervisor: zero after "
                 f"{p['stall_bound_s'] * 1e3:g} ms without a tick")
 
 
@@ -426,24 +309,25 @@ class HapticBridge(Node):
 
 
 class ManagedHapticBridge(LifecycleNode):
-    """The bridge as a lifecycle node: configure builds it, activate runs the loop, deactivate and shutdown
-    leave zero force on the wire and stop it, cleanup removes it. Parameters set before configure apply then."""
+    """The bridge as a lifecycle node: configure builds it, activate runs the loop, deactivate and shutdown leave
+    zero force on the wire and stop it, cleanup removes it. The envelope is the one of the process's start, in
+    every state: a change while unconfigured is checked against it as a running bridge's would be."""
 
     def __init__(self):
         super().__init__("haptic_bridge")
-        self.p = declare_parameters(self, PARAMETERS)
+        self.p = self.start_p = declare_parameters(self, PARAMETERS)
         self.shell = None
         on_parameter_changes(self, PARAMETERS, self._apply)
 
     def _apply(self, changes: dict) -> str | None:
         if self.shell is not None:
             return self.shell.apply(changes)
-        self.p = {**self.p, **changes}  # checked at configure
+        self.p = checked_change(self.p, changes, 1.0, self.start_p)
         return None
 
     def on_configure(self, state) -> TransitionCallbackReturn:
         try:
-            self.shell = BridgeShell(self, self.p)
+            self.shell = BridgeShell(self, self.p, self.start_p)
         except ValueError as exc:
             self.get_logger().error(f"configure refused: {exc}")
             return TransitionCallbackReturn.FAILURE

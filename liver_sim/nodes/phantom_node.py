@@ -1,12 +1,13 @@
 """`phantom_sim`: a simulated PHANToM for use without hardware (paper P12, docs/paper.md).
 
 A RateLoop at `rate_hz` (1 kHz) steps `liver_sim.phantom.device.PhantomSim` — a stylus with mass held by a
-virtual hand playing a `tool_scripts` script — and publishes the stylus on /phantom/measured_cp
-(frame `phantom_base`, stamped with the sample's time). The newest force command from
-/phantom/servo_cf (format `force_output`) pushes the stylus; a command older than
-`command_timeout_s` (counted from its reception), or a malformed one, counts as zero, as a real
-driver's safety would do. A running node changes only `command_timeout_s`; every other parameter
-change is refused with the reason.
+virtual hand playing a `tool_scripts` script — and publishes the stylus on /phantom/measured_cp (frame
+`phantom_base`, stamped with the sample's time). The newest force command from /phantom/servo_cf (format
+`force_output`) pushes the stylus; a command older than `command_timeout_s` (counted from its reception), or a
+malformed one, counts as zero, as a real driver's safety would do. Its diagnostics carry the energy the commands
+really gave the hand (the applied force times the stylus's own motion) and the largest energy generated in a
+window (haptic_bridge.passivity): the truth a bridge's passivity observer estimates. A running node changes only
+`command_timeout_s`; every other parameter change is refused with the reason.
 Its parameters are liver_sim.phantom.parameters.PARAMETERS.
 """
 from __future__ import annotations
@@ -16,6 +17,7 @@ import time
 import numpy as np
 from rclpy.node import Node
 
+from haptic_bridge.passivity import GenerationMonitor
 from liver_sim.base.geometry.device_map import DeviceMap
 from liver_sim.nodes.diagnostics import loop_status, publish_diagnostics
 from liver_sim.nodes.inputs import Latest, LoopInputs
@@ -56,6 +58,7 @@ class PhantomNode(Node):
         self._loop = RateLoop(p["rate_hz"], self._step, "phantom_sim", realtime_priority=p["realtime_priority"],
                               on_refused=warn(self))
         self._start = None
+        self._generation = GenerationMonitor(self._loop.period_s)
         self.get_logger().info(
             f"phantom_sim: {p['rate_hz']:g} Hz stylus ({p['stylus_mass_kg']:g} kg, hand "
             f"{p['hand_stiffness_n_per_m']:g} N/m, {p['hand_damping_ns_per_m']:g} N·s/m) playing "
@@ -93,6 +96,7 @@ class PhantomNode(Node):
             force = _ZERO
         if self.sim.advance_to(now - self._start, force, self._loop.period_s) == 0 and self.sim.time_s > 0.0:
             return  # a late tick already caught up with this one's sample
+        self._generation.record(now, self.sim.energy_to_hand_j, bool(self.sim.force.any()))
         stamp = self.get_clock().now().seconds_nanoseconds()  # the sample holds now: the stylus is advanced to it
         self._publisher.publish(pose_stamped_bytes(self.sim.position, IDENTITY_XYZW, stamp,
                                                    self.p["frame_id"]))
@@ -101,7 +105,8 @@ class PhantomNode(Node):
         _, received = self._command.get()
         extra = {"commanded_force_n": float(np.linalg.norm(self.sim.force)),
                  "command_age_s": float(time.monotonic() - received), "bad_commands": self.bad_commands,
-                 "script_time_s": self.sim.time_s}
+                 "script_time_s": self.sim.time_s, "energy_to_hand_j": self.sim.energy_to_hand_j,
+                 "energy_generated_max_j": self._generation.update()}
         status = loop_status(f"{self.get_name()}: loop", self._loop.report(), self.p["rate_hz"], extra)
         publish_diagnostics(self, self._diagnostics, [status])
 

@@ -1,10 +1,13 @@
-"""Taking a serialized message with the publisher's GID and publication sequence number.
+"""Taking a serialized message with the publisher's GID and publication sequence number; a publisher's own GID.
 
 rclpy 7.1 (Jazzy) hands a subscription's message info over as a dict with `source_timestamp`,
 `received_timestamp`, `publication_sequence_number` and `reception_sequence_number`, but without
 `publisher_gid`; Fast DDS numbers publications per writer (1, 2, …), so a gap can only be counted
 per writer. `SerializedTake` calls `rcl_take_serialized_message` of the rcl library rclpy itself
 loaded, with the Jazzy layout of `rmw_message_info_t` (rmw/types.h, RMW_GID_STORAGE_SIZE 16).
+rclpy has no publisher GID either: :func:`publisher_gid` asks the loaded rmw implementation
+(`rmw_get_gid_for_publisher`). A GID is the one the graph gives the writer
+(`get_publishers_info_by_topic(...)[i].endpoint_gid`), so a sample names the node that wrote it.
 """
 from __future__ import annotations
 
@@ -50,6 +53,43 @@ def _loaded_library(name: str) -> ctypes.CDLL:
             if os.path.basename(path).split(".so")[0] == name.split(".so")[0] and ".so" in path:
                 return ctypes.CDLL(path)
     raise RuntimeError(f"{name} is not loaded: import rclpy first")
+
+
+def _loaded_symbol(symbol: str):
+    """`symbol` from whichever shared library this process mapped exports it (the rmw implementation)."""
+    with open("/proc/self/maps") as maps:
+        paths = sorted({line.split()[-1] for line in maps if ".so" in line and "rmw" in line})
+    for path in paths:
+        function = getattr(ctypes.CDLL(path), symbol, None)
+        if function is not None:
+            return function
+    raise RuntimeError(f"no loaded rmw library exports {symbol}: import rclpy first")
+
+
+@lru_cache(maxsize=1)
+def _gid_functions():
+    rcl = _loaded_library("librcl.so")
+    handle = rcl.rcl_publisher_get_rmw_handle
+    handle.argtypes, handle.restype = [ctypes.c_void_p], ctypes.c_void_p
+    gid = _loaded_symbol("rmw_get_gid_for_publisher")
+    gid.argtypes, gid.restype = [ctypes.c_void_p, ctypes.POINTER(_Gid)], ctypes.c_int
+    return handle, gid
+
+
+def publisher_gid(publisher) -> bytes:
+    """The GID (GID_SIZE bytes) of an rclpy publisher, as the graph and a sample's message info name it."""
+    handle, get_gid = _gid_functions()
+    gid = _Gid()
+    with publisher.handle:
+        status = get_gid(handle(publisher.handle.pointer), ctypes.byref(gid))
+    if status != RCL_RET_OK:
+        raise RuntimeError(f"rmw_get_gid_for_publisher failed ({status}) for {publisher.topic_name}")
+    return bytes(gid.data)
+
+
+def endpoint_gid(info) -> bytes:
+    """The GID of a graph endpoint (rclpy TopicEndpointInfo), as :func:`publisher_gid` gives it."""
+    return bytes(info.endpoint_gid)[:GID_SIZE]
 
 
 @lru_cache(maxsize=1)

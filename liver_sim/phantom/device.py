@@ -53,7 +53,9 @@ class PhantomSim:
     liver-frame position mapped through `device_map` inverted (the same device→liver map as the
     tool node's, so the mapped stylus follows the script in the liver frame), and F the
     commanded force clamped to `max_force_n` (non-finite → zero). `position` (m), `velocity`
-    (m/s) and `time_s` (s since the script's start) are the state; `force` (N) the last applied.
+    (m/s) and `time_s` (s since the script's start) are the state; `force` (N) the last applied;
+    `energy_to_hand_j` (J) the work the applied forces did on the stylus, Σ F·Δx over every step: the
+    energy the device gave the hand, the truth a bridge's passivity observer estimates.
     """
 
     def __init__(self, trajectory: ScriptedTrajectory, device_map: DeviceMap = DeviceMap(),
@@ -66,6 +68,7 @@ class PhantomSim:
         self.position = self._in_workspace(self._hand.copy(), np.zeros(3))
         self.velocity = np.zeros(3)
         self.force = np.zeros(3)
+        self.energy_to_hand_j = 0.0
 
     def hand_target(self, t: float) -> np.ndarray:
         """Where the hand holds the stylus at time `t` (s), device frame (m)."""
@@ -90,7 +93,9 @@ class PhantomSim:
         acceleration = (p.hand_stiffness_n_per_m * (self._hand - self.position)
                         + p.hand_damping_ns_per_m * (hand_velocity - self.velocity) + self.force) / p.mass_kg
         self.velocity = self.velocity + dt * acceleration
-        self.position = self._in_workspace(self.position + dt * self.velocity, self.velocity)
+        position = self._in_workspace(self.position + dt * self.velocity, self.velocity)
+        self.energy_to_hand_j += float(self.force @ (position - self.position))
+        self.position = position
         self.time_s += dt
         self._hand = hand_next
         return self.position

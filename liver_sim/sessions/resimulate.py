@@ -120,6 +120,7 @@ class _Session:
             pose_tip = self._receive(message, t)
             if pose_tip is not None:
                 tip, tip_time = pose_tip, t
+                self.tick.sample(seconds_from_stamp(message.header.stamp), t, tip)
             self.emit(self.p["tool_pose_topic"], "tool_pose", t, data)
             command = self.tick.step(t, tip, t - tip_time, held if self.b["local_model"] == "none" else local,
                                      t - source_time)
