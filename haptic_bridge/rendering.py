@@ -147,6 +147,11 @@ class PassiveModelUpdate:
         self.shown: LocalModel | None = None
         self.held_back = False  # the last admitted model stopped short of its target
 
+    def forget(self) -> None:
+        """The force went to zero (a restart, stale inputs): the contact is built again from touching, so that the
+        soft start that follows stores no energy the hand did not put in."""
+        self.shown = None
+
     def admit(self, target: LocalModel | None, depth, stiffness, budget_j: float) -> LocalModel | None:
         """The model to render this tick, on the way from the one shown to `target`. `depth(model)`: the tool's
         penetration of a model (m) this tick; `stiffness(model)`: the K it is rendered with (N/m); `budget_j`: the

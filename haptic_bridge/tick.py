@@ -209,6 +209,9 @@ class BridgeTick:
         """Zero force now, a soft start from the next fresh inputs (after a stall or an error of the loop)."""
         self.safety.restart()
         self.depth_rate = DepthRate(self.depth_rate.period_s, self.p["depth_rate_cutoff_hz"])
+        if self.passive_update is not None:
+            self.passive_update.forget()
+        self.passivity.episode_energy_j = self.passivity.energy_j  # zero force now: a new contact begins
 
     def render(self, model: LocalModel | None, tip: np.ndarray | None) -> np.ndarray:
         """Local-model force on the tool (N, liver frame); zero without a model or a tip.  The stiffness is the
@@ -265,5 +268,7 @@ class BridgeTick:
                                        source_age_s, pose_age_s, min(lifetime, self.p["lifetime_s"]), now_s)
         if pose_age_s > self.p["lifetime_s"]:
             self.passivity.forget_motion()
+        if self.passive_update is not None and self.safety.watchdog.gain == 0.0:
+            self.passive_update.forget()
         self.passivity.commanded(now_s if sent_s is None else sent_s, command)
         return command

@@ -312,7 +312,9 @@ def test_teleop_bench_rows_carry_every_key_and_the_reference_matches_itself(ros_
     report = json.loads(json.dumps(teleop.run_teleop_bench((50.0,), 10.0, 0.05, out_dir=tmp_path, duration_s=5.0,
                                                            variants=variants, check_domain=False), default=float))
     assert report["machine"] and set(report["met"]) == {"default_stable_and_passive_up_to_delay_ms"}
-    assert report["reference"]["force_error_rms_n"] == 0.0 and report["reference"]["oscillating_s"] == 0.0
+    reference = report["references"]["local_model"]
+    assert reference["force_error_rms_n"] == 0.0 and reference["oscillating_s"] == 0.0 and set(report["references"]) \
+        == {"local_model"}
     assert [r["variant"] for r in report["rows"]] == list(variants)
     assert set(report["first_unstable_delay_ms"]) == {"local_model"}
     for row in report["rows"]:
@@ -321,7 +323,7 @@ def test_teleop_bench_rows_carry_every_key_and_the_reference_matches_itself(ros_
         assert np.isfinite(row["bridge_energy_to_hand_j"]) and row["bridge_energy_generated_max_j"] >= 0.0
         assert 0.0 < row["peak_force_n"] <= BRIDGE["max_force_n"].default + 1e-9
         assert row["force_error_rms_n"] > 0.0 and row["penetration_max_mm"] > 0.0
-    assert {"stable", "passive", "energy_to_hand_j", "estimate_agrees"} <= set(report["definitions"])
+    assert {"stable", "passive", "energy_to_hand_j", "estimate_agrees", "references"} <= set(report["definitions"])
     for path in report["plots"]:
         assert open(path, "rb").read(8) == b"\x89PNG\r\n\x1a\n"
 
@@ -403,3 +405,21 @@ def test_a_passive_model_update_stores_no_more_than_the_hand_put_in():
     assert admit(update, 0.005, paid) == pytest.approx(0.003) and update.held_back  # 5 mm asked: 3 mm paid
     assert admit(update, 0.001, 0.0) == pytest.approx(0.001)                         # backing off: at once
     assert admit(update, 0.005, 1.0) == pytest.approx(0.005) and not update.held_back
+
+
+def test_after_a_restart_in_contact_a_passive_update_builds_the_contact_again_from_touching():
+    """A stall while the hand rests 5 mm deep: a soft start back to the full force would store energy the hand never
+    put in. With passive updates the surface comes back touching the tool, and the force with the hand's push."""
+    p = {name: spec.default for name, spec in BRIDGE.items()}
+    tick = BridgeTick({**p, "passive_model_update": "always", "soft_start_s": 0.1})
+    plane = LocalModel("plane", True, np.zeros(3), np.array([0.0, 0.0, 1.0]), np.zeros(3), 0.0, 0.0, True, 190.0)
+    depths = np.concatenate([np.linspace(-0.005, 0.005, 500), np.full(300, 0.005)])
+    forces = []
+    for k, depth in enumerate(depths):
+        tip = np.array([0.0, 0.0, 0.015 - depth])
+        tick.sample(k * T, k * T, tip)
+        forces.append(float(np.linalg.norm(tick.step(k * T, tip, 0.0, (plane, 1.0), 0.0))))
+        if k == 600:
+            tick.restart()  # a stall of the loop, 5 mm deep
+    assert forces[599] == pytest.approx(0.95, abs=0.02), "pressed in by the hand: the full force"
+    assert max(forces[601:]) < 0.01, "after the restart: no force the hand did not build"

@@ -6,8 +6,8 @@ gave the hand; the bridge's estimate of it is reported beside.
 
 The operator's side is phantom_sim (a stylus held by a virtual hand playing `explore`), liver_tool and
 haptic_bridge; the remote side is liver_physics. The link delays the tool pose into the physics and the local
-model (or the physics wrench) into the bridge. Each run is one row (ROW_KEYS); the rows are compared with a
-reference run, the default rendering with no delay, jitter or loss, at the same script time.
+model (or the physics wrench) into the bridge. Each run is one row (ROW_KEYS); the rows are compared with
+reference runs with no delay, jitter or loss, at the same script time.
 """
 from __future__ import annotations
 
@@ -66,21 +66,25 @@ def run_teleop_bench(delays_ms=TELEOP_DELAYS_MS, jitter_ms: float = 0.0, loss: f
                      progress=None, duration_s: float = TELEOP_RUN_S, seed: int = 0, variants=VARIANTS,
                      check_domain: bool = True) -> dict:
     """The benchmark's JSON object: `rows` (one per delay and variant of `variants`, VARIANTS by default: ROW_KEYS
-    and the run's details), the reference run, each variant's first unstable or active delay, `met` against
-    TELEOP_TARGETS, and the plots written to `out_dir` (force against script time per delay, energy against
-    delay). `check_domain`: before the reference run (network.run_network)."""
+    and the run's details), each variant's reference run (no delay, jitter or loss), each variant's first unstable
+    or active delay, `met` against TELEOP_TARGETS, and the plots written to `out_dir` (force against script time
+    per delay, energy against delay). Oscillation is judged against the variant's own reference (the oscillation
+    the delay adds: direct force steps at every physics frame, delay or not), the force error against the default
+    rendering's. `check_domain`: before the first run (network.run_network)."""
     out_dir = Path(out_dir or "out/bench_teleop")
     say = progress or (lambda line: None)
-    say("reference: local model, no delay, no jitter, no loss")
-    reference = teleop_run("local_model", LinkSettings(), duration_s, out_dir / "logs" / "reference",
-                           check_domain=check_domain)
+    references = {}
+    for name in dict.fromkeys(("local_model", *variants)):
+        say(f"reference of {name}: no delay, no jitter, no loss")
+        references[name] = teleop_run(name, LinkSettings(), duration_s, out_dir / "logs" / f"{name}_reference",
+                                      check_domain=check_domain and not references)
     rows, traces = [], {}
     for delay_ms in delays_ms:
         for name in variants:
             link = LinkSettings(delay_ms * 1e-3, jitter_ms * 1e-3, loss, seed)
             say(f"{name}: delay {delay_ms:g} ms, jitter {jitter_ms:g} ms, loss {loss:g}")
             run = teleop_run(name, link, duration_s, out_dir / "logs" / f"{name}_{delay_ms:g}ms")
-            row = teleop_row(name, link, run, reference)
+            row = teleop_row(name, link, run, references[name], references["local_model"])
             rows.append(row)
             traces[name, delay_ms] = script_times(run)
             say(f"  stable {row['stable']}, passive {row['passive']}: "
@@ -94,7 +98,8 @@ def run_teleop_bench(delays_ms=TELEOP_DELAYS_MS, jitter_ms: float = 0.0, loss: f
                     for v in variants}
     return {"benchmark": "teleop", "machine": machine(), "run_s": duration_s, "script": "explore",
             "jitter_ms": jitter_ms, "loss": loss, "seed": seed, "definitions": DEFINITIONS,
-            "reference": teleop_row("local_model", LinkSettings(), reference, reference),
+            "references": {name: teleop_row(name, LinkSettings(), run, run, references["local_model"])
+                           for name, run in references.items()},
             "rows": rows, "first_unstable_delay_ms": first_unstable, "first_active_delay_ms": first_active,
             "targets": TELEOP_TARGETS, "met": targets_met(rows, jitter_ms, loss),
             "plots": plot_teleop(traces, rows, out_dir)}
@@ -114,9 +119,10 @@ def targets_met(rows: list[dict], jitter_ms: float, loss: float) -> dict:
 DEFINITIONS = {
     "stable": "no sustained oscillation: the RMS of the command vector (each component: magnitude and direction) "
               f"band-passed in each of {[list(b) for b in OSCILLATION_BANDS_HZ]} Hz (Butterworth order "
-              f"{OSCILLATION_ORDER}, forward and back) in {OSCILLATION_WINDOW_S:g} s windows exceeds the reference "
-              f"run's in the same band and script time by {OSCILLATION_RATIO:g}x + {OSCILLATION_MARGIN_N:g} N in "
-              f"windows covering less than {OSCILLATION_SUSTAINED_S:g} s",
+              f"{OSCILLATION_ORDER}, forward and back) in {OSCILLATION_WINDOW_S:g} s windows exceeds the same "
+              f"variant's reference run's (no delay, jitter or loss) in the same band and script time by "
+              f"{OSCILLATION_RATIO:g}x + {OSCILLATION_MARGIN_N:g} N in windows covering less than "
+              f"{OSCILLATION_SUSTAINED_S:g} s",
     "passive": f"judged by the device's own measure (phantom_sim: its applied force times its own motion): no "
                f"window of {WINDOW_S:g} s in which the rendering generated more than {GENERATED_LIMIT_J * 1e3:g} mJ, "
                "the generated energy between t1 and t2 being E(t2) - E(t1) - S(t1), E the energy given to the "
@@ -133,12 +139,12 @@ DEFINITIONS = {
     "passive_model_update": "whether the bridge rendered new local models through its energy tank "
                             "(haptic_bridge.rendering.PassiveModelUpdate)",
     "controller_on": "whether the bridge ran the passivity controller (passivity_control)",
-    "force_error_rms_n": "RMS of the command minus the reference run's at the same script time (from the tool's "
-                         "first motion)",
+    "force_error_rms_n": "RMS of the command minus the default rendering's reference run's at the same script "
+                         "time (from the tool's first motion)",
     "penetration_max_mm": "largest physics contact force over the contact stiffness: how deep the remote tool went "
                           "into the tissue",
     "variants": {name: parameters for name, parameters in VARIANT_PARAMETERS.items()},
-    "reference": "the default rendering (local_model) with no delay, jitter or loss"}
+    "references": "each variant run with no delay, jitter or loss"}
 
 
 def teleop_run(variant: str, link: LinkSettings, duration_s: float, log_dir: Path, check_domain: bool = False):
@@ -198,10 +204,11 @@ def estimate_agrees(estimate_j: float, truth_j: float) -> bool:
     return abs(estimate_j - truth_j) <= max(ESTIMATE_TOLERANCE * abs(truth_j), ESTIMATE_FLOOR_J)
 
 
-def teleop_row(variant: str, link: LinkSettings, run, reference) -> dict:
-    """One row of the benchmark (ROW_KEYS, then `oscillating_s` and details)."""
+def teleop_row(variant: str, link: LinkSettings, run, reference, default_reference) -> dict:
+    """One row of the benchmark (ROW_KEYS, then `oscillating_s` and details): oscillation against the variant's own
+    `reference` run, the force error against the default rendering's."""
     times, force = script_times(run)
-    ref_times, ref_force = script_times(reference)
+    ref_times, ref_force = script_times(default_reference)
     common = times <= (ref_times[-1] if len(ref_times) else -1.0)
     if common.any() and len(ref_times) > 1:
         expected = np.column_stack([np.interp(times[common], ref_times, ref_force[:, i]) for i in range(3)])
@@ -214,7 +221,7 @@ def teleop_row(variant: str, link: LinkSettings, run, reference) -> dict:
     estimate = float(bridge.get("energy_to_hand_j", "nan"))
     stiffness = node_parameters(())["liver_physics"]["contact_stiffness_n_per_m"]
     wrench = np.linalg.norm(run.wrench_n, axis=1) if len(run.wrench_n) else np.zeros(1)
-    oscillation = oscillating_s((times, force), (ref_times, ref_force))
+    oscillation = oscillating_s((times, force), script_times(reference))
     norm = np.linalg.norm(force, axis=1) if len(force) else np.zeros(1)
     return {"variant": variant, "passive_model_update": bridge.get("passive_model_update") == "True",
             "controller_on": bridge.get("passivity_control") == "True", "delay_ms": link.delay_s * 1e3,
