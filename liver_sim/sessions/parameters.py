@@ -10,7 +10,7 @@ from __future__ import annotations
 import yaml
 
 from haptic_bridge.parameters import PARAMETERS as BRIDGE
-from liver_sim.base.parameters import check_parameter
+from liver_sim.base.parameters import check_parameter, typed_value
 from liver_sim.base.process_settings import config_dir
 from liver_sim.physics.parameters import PARAMETERS as PHYSICS
 
@@ -31,27 +31,6 @@ def _config_values(node: str) -> dict:
         return (yaml.safe_load(path.read_text()) or {})[node]["ros__parameters"]
     except (yaml.YAMLError, KeyError, TypeError) as exc:
         raise ValueError(f"{path}: not a parameter file of {node} ({exc})") from None
-
-
-def _typed(name: str, default, value):
-    """`value` in the type of `default` (an integer is taken for a float), or ValueError naming `name`."""
-    if isinstance(default, bool):
-        ok = isinstance(value, bool)
-    elif isinstance(default, int):
-        ok = isinstance(value, int) and not isinstance(value, bool)
-    elif isinstance(default, float):
-        ok = isinstance(value, (int, float)) and not isinstance(value, bool)
-        value = float(value) if ok else value
-    elif isinstance(default, list):
-        ok = isinstance(value, list)
-        if ok and default:
-            value = [_typed(name, default[0], v) for v in value]
-    else:
-        ok = isinstance(value, str)
-    if not ok:
-        raise ValueError(f"parameter {name}={value!r} must be a {type(default).__name__} like its default "
-                         f"{default!r}")
-    return value
 
 
 def parse_override(text: str) -> tuple[str | None, str, object]:
@@ -88,5 +67,5 @@ def node_parameters(overrides=()) -> dict[str, dict]:
             values[target][name] = value
     for node in NODES:
         for name, spec in declared[node].items():
-            values[node][name] = check_parameter(name, spec, _typed(name, spec.default, values[node][name]))
+            values[node][name] = check_parameter(name, spec, typed_value(name, spec.default, values[node][name]))
     return values
