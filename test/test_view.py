@@ -3,6 +3,8 @@ view of a running network through a real Foxglove WebSocket client, and recorded
 import struct
 import subprocess
 import sys
+import threading
+import time
 
 import numpy as np
 import pytest
@@ -108,6 +110,71 @@ def test_scene_updates_read_back_with_the_advertised_schema():
         assert skin_triangles(entities, bytes(schema.data)) == len(LIVER.skin)
         assert len(entities["tool"]["spheres"]) == 1 and len(entities["force"]["arrows"]) == 1
         assert len(entities["local_model"]["triangles"]) == 1 and "lines" not in entities["lips"]
+
+
+def wait_for(condition, timeout_s: float, what: str, every=None) -> None:
+    """Wait until `condition()` holds (calling `every()` between polls), or fail naming `what`."""
+    deadline = time.monotonic() + timeout_s
+    while not condition():
+        assert time.monotonic() < deadline, f"timed out waiting for {what}"
+        if every is not None:
+            every()
+        time.sleep(0.02)
+
+
+@pytest.mark.no_rate_loops
+def test_the_live_view_refuses_a_bad_mesh_and_goes_on_after_a_failing_tick(ros_domain_id):
+    """A running view fed a shape_msgs/Mesh whose triangles index missing vertices refuses and counts it and keeps
+    serving scenes of the last good surface; a tick that raises is counted and the next ticks serve as before."""
+    import rclpy
+    from geometry_msgs.msg import Point
+    from rclpy.executors import SingleThreadedExecutor
+    from shape_msgs.msg import Mesh, MeshTriangle
+
+    from liver_sim.view.server import LiveView
+    from msg_defs.point_cloud import nodes_to_pointcloud2
+    from msg_defs.skin import skin_mesh_msg
+    from msg_defs.topics import TOPICS
+
+    failed = []
+
+    def fail_once(scene, stamp_ns):
+        if not failed:
+            failed.append(stamp_ns)
+            raise RuntimeError("a tick that fails")
+
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    executor = SingleThreadedExecutor(context=context)
+    view = LiveView(port=0, rate_hz=50.0, on_scene=fail_once, context=context)
+    source = rclpy.create_node("view_test_source", context=context)
+    try:
+        surface = source.create_publisher(TOPICS["surface"].type, TOPICS["surface"].name, TOPICS["surface"].qos)
+        nodes = source.create_publisher(TOPICS["nodes"].type, TOPICS["nodes"].name, TOPICS["nodes"].qos)
+        executor.add_node(view)
+        executor.add_node(source)
+        spinner = threading.Thread(target=executor.spin, daemon=True)
+        spinner.start()
+
+        def publish_nodes():
+            nodes.publish(nodes_to_pointcloud2(LIVER.points, (1, 0), "liver"))
+
+        surface.publish(skin_mesh_msg(LIVER.skin, LIVER.points))
+        wait_for(lambda: view.scenes >= 5 and view.tick_errors == 1, 30.0, "scenes and the failing tick",
+                 publish_nodes)
+        bad = Mesh(triangles=[MeshTriangle(vertex_indices=[0, 1, 4000])],
+                   vertices=[Point(x=0.0, y=0.0, z=0.0), Point(x=0.01, y=0.0, z=0.0)])
+        surface.publish(bad)
+        wait_for(lambda: view.refused == 1, 30.0, "the bad Mesh refused", publish_nodes)
+        served = view.scenes
+        wait_for(lambda: view.scenes >= served + 10, 30.0, "scenes after the bad Mesh", publish_nodes)
+        assert view.tick_errors == 1 and view.refused == 1 and view._loop.is_alive()
+    finally:
+        view.close()
+        executor.shutdown()
+        view.destroy_node()
+        source.destroy_node()
+        context.try_shutdown()
 
 
 def test_the_view_command_refuses_a_public_address_by_name():

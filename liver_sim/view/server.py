@@ -11,8 +11,10 @@ scheduling) builds the Scene (liver_sim.view.scene) and logs, on the server's ch
   (`/liver/tool_wrench`), their norms, for a Plot panel;
 - `/liver/diagnostics` (JSON): each node's newest status, its level, message and key-values.
 
-Each message is logged at the ROS time of the state it shows (the nodes' stamp). The server binds to a
-loopback address unless `allow_remote` (the view carries no authentication).
+Each message is logged at the ROS time of the state it shows (the nodes' stamp). A malformed message is refused
+and counted (`refused`), an exception in a tick counted (`tick_errors`); both are logged, throttled, and the view
+goes on with the last good state. The server binds to a loopback address unless `allow_remote` (the view carries
+no authentication).
 """
 from __future__ import annotations
 
@@ -75,6 +77,8 @@ from msg_defs.topics import TOPICS, loop_input_qos
 #: The server's channels.
 SCENE_TOPIC, FORCES_TOPIC, DIAGNOSTICS_TOPIC = "/liver/scene", "/liver/forces", "/liver/diagnostics"
 LEVELS = {0: "OK", 1: "WARN", 2: "ERROR", 3: "STALE"}
+#: Seconds between two log lines of refused messages, and of failed ticks.
+LOG_THROTTLE_S = 5.0
 
 
 def check_host(host: str, allow_remote: bool) -> str:
@@ -183,6 +187,7 @@ class LiveView(Node):
         self._command = np.zeros(3)
         self._physics_force = np.zeros(3)
         self._statuses: dict[str, dict] = {}
+        #: scenes served, malformed messages refused, ticks that raised
         self.scenes = self.refused = 0
         self._on_scene = on_scene
         self._inputs = LoopInputs(self)
@@ -208,12 +213,18 @@ class LiveView(Node):
         self._scene_channel = SceneUpdateChannel(SCENE_TOPIC)
         self._forces_channel = foxglove.Channel(FORCES_TOPIC, message_encoding="json")
         self._diagnostics_channel = foxglove.Channel(DIAGNOSTICS_TOPIC, message_encoding="json")
-        self._loop = RateLoop(rate_hz, self._step, name, freeze=False)
+        self._loop = RateLoop(rate_hz, self._step, name, freeze=False, on_error=self._tick_failed,
+                              context=self.context)
         self._loop.start()
 
     @property
     def port(self) -> int:
         return self.server.port
+
+    @property
+    def tick_errors(self) -> int:
+        """Ticks that raised (each logged, throttled); the loop went on."""
+        return self._loop.errors
 
     def close(self) -> None:
         self._loop.stop()
@@ -224,10 +235,10 @@ class LiveView(Node):
     def _on_surface(self, message) -> None:
         with self._refused():
             skin, rest = mesh_msg_to_arrays(message)
-        with self._lock:
-            if self._initial_skin is None:
-                self._initial_skin = skin
-            self._skin, self._rest = skin, rest
+            with self._lock:
+                if self._initial_skin is None:
+                    self._initial_skin = skin
+                self._skin, self._rest = skin, rest
 
     def _on_nodes(self, message) -> None:
         with self._refused():
@@ -241,7 +252,13 @@ class LiveView(Node):
             yield
         except ValueError as exc:
             self.refused += 1
-            self.get_logger().warning(f"view: ignored a message: {exc}", throttle_duration_sec=5.0)
+            self.get_logger().warning(f"view: ignored a message ({self.refused} so far): {exc}",
+                                      throttle_duration_sec=LOG_THROTTLE_S)
+
+    def _tick_failed(self, now: float, exc: Exception) -> None:
+        """A tick that raised: counted by the loop, logged (throttled); the next tick runs as usual."""
+        self.get_logger().error(f"view: a tick failed ({self.tick_errors} so far): {type(exc).__name__}: {exc}",
+                                throttle_duration_sec=LOG_THROTTLE_S)
 
     def _on_pose(self, data: bytes) -> None:
         with self._refused():
