@@ -54,7 +54,7 @@ def test_lips_are_the_rim_of_the_triangles_a_cut_added():
 @pytest.mark.parametrize("host, allowed", [("127.0.0.1", True), ("localhost", True), ("::1", True),
                                            ("0.0.0.0", False), ("192.168.1.20", False), ("liver.example", False)])
 def test_a_non_loopback_address_is_refused_unless_asked_for(host, allowed):
-    from liver_sim.view.server import check_host
+    from liver_sim.view.live_view import check_host
 
     if allowed:
         assert check_host(host, False) == host
@@ -97,7 +97,7 @@ def test_scene_updates_read_back_with_the_advertised_schema():
     """The message the view logs, read as the app reads it: by the field numbers of the schema it advertises."""
     from foxglove.messages import SceneUpdate
 
-    from liver_sim.view.server import scene_update
+    from liver_sim.view.foxglove_scene import scene_update
 
     scene = build_scene(LIVER.points, LIVER.points, LIVER.skin, LIVER.skin, np.array([0.0, 0.0, 0.1]), 0.015, PLANE,
                         np.array([0.0, 0.0, 0.4]))
@@ -131,7 +131,7 @@ def test_the_live_view_refuses_a_bad_mesh_and_goes_on_after_a_failing_tick(ros_d
     from rclpy.executors import SingleThreadedExecutor
     from shape_msgs.msg import Mesh, MeshTriangle
 
-    from liver_sim.view.server import LiveView
+    from liver_sim.view.live_view import LiveView
     from msg_defs.point_cloud import nodes_to_pointcloud2
     from msg_defs.skin import skin_mesh_msg
     from msg_defs.topics import TOPICS
