@@ -13,7 +13,15 @@ from foxglove_client import VIEW_TOPICS, field_numbers, fields, packed_count, sc
 from liver_sim.base.local_model import LocalModel
 from liver_sim.mesh.liver_shape import default_liver
 from liver_sim.view import scene as scene_module
-from liver_sim.view.scene import DISPLACED_COLOUR, REST_COLOUR, build_scene, force_arrow, lips, plane_patch
+from liver_sim.view.scene import (
+    DISPLACED_COLOUR,
+    REST_COLOUR,
+    build_scene,
+    force_arrow,
+    lip_edges,
+    opened_triangles,
+    plane_patch,
+)
 
 LIVER = default_liver()
 PLANE = LocalModel("plane", True, np.array([0.0, 0.0, 0.05]), np.array([0.0, 0.6, 0.8]), np.zeros(3), 0.0, 0.002,
@@ -23,12 +31,13 @@ PLANE = LocalModel("plane", True, np.array([0.0, 0.0, 0.05]), np.array([0.0, 0.6
 def test_the_scene_holds_every_skin_triangle_coloured_by_its_displacement():
     moved = LIVER.points.copy()
     moved[LIVER.skin[0]] += [0.0, 0.0, -0.02]  # beyond the colour's scale
-    scene = build_scene(moved, LIVER.points, LIVER.skin, LIVER.skin, np.array([0.0, 0.0, 0.1]), 0.015, PLANE,
-                        np.array([0.0, 0.0, 0.5]))
+    scene = build_scene(moved, LIVER.points, LIVER.skin, lip_edges(LIVER.points, LIVER.skin),
+                        np.array([0.0, 0.0, 0.1]), 0.015, PLANE, np.array([0.0, 0.0, 0.5]))
     assert scene.triangle_count == len(LIVER.skin) and scene.triangles.shape == (len(LIVER.skin), 3, 3)
-    assert scene.colours[0] == pytest.approx(np.tile(DISPLACED_COLOUR, (3, 1)))
+    assert scene.colours.shape == (len(LIVER.points), 4)          # one colour per node
+    assert scene.colours[LIVER.skin[0]] == pytest.approx(np.tile(DISPLACED_COLOUR, (3, 1)))
     untouched = ~np.isin(LIVER.skin, LIVER.skin[0]).any(axis=1)
-    assert np.allclose(scene.colours[untouched], REST_COLOUR)
+    assert np.allclose(scene.colours[LIVER.skin[untouched]], REST_COLOUR)
     assert len(scene.lips) == 0                                    # no topology change
     start, end = force_arrow(scene)
     assert end - start == pytest.approx([0.0, 0.0, 0.5 * scene_module.ARROW_M_PER_N])
@@ -41,14 +50,25 @@ def test_a_plane_patch_lies_in_its_plane_around_its_point():
     assert np.linalg.norm(corners - PLANE.point, axis=1) == pytest.approx(np.full(6, half_diagonal))
 
 
-def test_lips_are_the_rim_of_the_triangles_a_cut_added():
-    skin = np.array([[0, 1, 2]])
-    opened = np.array([[0, 1, 2], [1, 3, 2], [3, 4, 2]])   # two new triangles sharing the edge (2, 3)
-    points = np.arange(15, dtype=float).reshape(5, 3)
-    rim = lips(opened, skin, points)
-    edges = {tuple(sorted((int(a[0] // 3), int(b[0] // 3)))) for a, b in rim}
-    assert edges == {(1, 3), (1, 2), (3, 4), (2, 4)}
-    assert len(lips(skin, skin, points)) == 0 and len(lips(opened, None, points)) == 0
+def test_lips_are_the_rim_of_the_triangles_a_cut_opened():
+    """The lips: the edges between the triangles a cut opened (twins at rest: the opening duplicated their nodes in
+    place) and the original skin; none before the cut."""
+    from liver_sim.physics.model import LiverModel
+
+    model = LiverModel(LIVER)
+    assert len(lip_edges(LIVER.points, LIVER.skin)) == 0 and not opened_triangles(LIVER.points, LIVER.skin).any()
+    top = LIVER.points[LIVER.skin_nodes][np.argmax(LIVER.points[LIVER.skin_nodes, 2])]
+    assert model.cut(np.array([top - [0.03, 0.0, 0.0], top + [0.03, 0.0, 0.0]]), 0.01)
+    rest, skin = model.mesh.points, model.mesh.skin
+    opened = opened_triangles(rest, skin)
+    assert 0 < opened.sum() < len(skin)
+
+    def edges(triangles):
+        return {tuple(sorted(e)) for t in triangles.tolist() for e in ((t[0], t[1]), (t[1], t[2]), (t[2], t[0]))}
+    rim = {tuple(e) for e in lip_edges(rest, skin).tolist()}
+    assert rim and rim == edges(skin[opened]) & edges(skin[~opened])
+    scene = build_scene(model.positions, rest, skin, lip_edges(rest, skin))
+    assert scene.lips.shape == (len(rim), 2, 3)
 
 
 @pytest.mark.parametrize("host, allowed", [("127.0.0.1", True), ("localhost", True), ("::1", True),
@@ -99,17 +119,15 @@ def test_scene_updates_read_back_with_the_advertised_schema():
 
     from liver_sim.view.foxglove_scene import scene_update
 
-    scene = build_scene(LIVER.points, LIVER.points, LIVER.skin, LIVER.skin, np.array([0.0, 0.0, 0.1]), 0.015, PLANE,
+    scene = build_scene(LIVER.points, LIVER.points, LIVER.skin, None, np.array([0.0, 0.0, 0.1]), 0.015, PLANE,
                         np.array([0.0, 0.0, 0.4]))
     schema = SceneUpdate.get_schema()
     assert schema.name == "foxglove.SceneUpdate" and schema.encoding == "protobuf"
-    colours = np.tile(REST_COLOUR, (len(LIVER.points), 1))
-    for kwargs in ({}, {"points": (LIVER.points, colours), "indices": LIVER.skin}):
-        entities = decode_scene(scene_update(scene, 1_500_000_000, **kwargs).encode(), bytes(schema.data))
-        assert set(entities) == {"skin", "tool", "local_model", "force", "lips"}
-        assert skin_triangles(entities, bytes(schema.data)) == len(LIVER.skin)
-        assert len(entities["tool"]["spheres"]) == 1 and len(entities["force"]["arrows"]) == 1
-        assert len(entities["local_model"]["triangles"]) == 1 and "lines" not in entities["lips"]
+    entities = decode_scene(scene_update(scene, 1_500_000_000).encode(), bytes(schema.data))
+    assert set(entities) == {"skin", "tool", "local_model", "force", "lips"}
+    assert skin_triangles(entities, bytes(schema.data)) == len(LIVER.skin)
+    assert len(entities["tool"]["spheres"]) == 1 and len(entities["force"]["arrows"]) == 1
+    assert len(entities["local_model"]["triangles"]) == 1 and "lines" not in entities["lips"]
 
 
 def wait_for(condition, timeout_s: float, what: str, every=None) -> None:

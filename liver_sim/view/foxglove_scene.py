@@ -50,23 +50,17 @@ def arrow_orientation(direction: np.ndarray) -> tuple[float, float, float, float
     return tuple(float(c) for c in q)
 
 
-def scene_update(scene: Scene, stamp_ns: int, frame_id: str = "liver", points=None, indices=None):
-    """The foxglove.SceneUpdate of `scene`: entities `skin`, `tool`, `local_model`, `force`, `lips` (an absent
-    one is sent empty, so that the app removes what it showed). `points` and `indices`: the skin as node positions
-    and triangle indices, when the caller has them (fewer points than three corners per triangle)."""
+def scene_update(scene: Scene, stamp_ns: int, frame_id: str = "liver") -> SceneUpdate:
+    """The foxglove.SceneUpdate of `scene`: entities `skin` (the node points with their colours, indexed by the
+    skin triangles), `tool`, `local_model`, `force`, `lips` (an absent one is sent empty, so that the app removes
+    what it showed)."""
     stamp = Timestamp(stamp_ns // 1_000_000_000, stamp_ns % 1_000_000_000)
 
     def entity(name, **primitives):
         return SceneEntity(timestamp=stamp, frame_id=frame_id, id=name, **primitives)
 
-    if points is None:
-        corners, colours = scene.triangles.reshape(-1, 3), scene.colours.reshape(-1, 4)
-        skin = TriangleListPrimitive(pose=_pose(), points=[_point(p) for p in corners],
-                                     colors=[_colour(c) for c in colours])
-    else:
-        node_points, node_colours = points
-        skin = TriangleListPrimitive(pose=_pose(), points=[_point(p) for p in node_points],
-                                     colors=[_colour(c) for c in node_colours], indices=indices.ravel().tolist())
+    skin = TriangleListPrimitive(pose=_pose(), points=[_point(p) for p in scene.points],
+                                 colors=[_colour(c) for c in scene.colours], indices=scene.skin.ravel().tolist())
     entities = [entity("skin", triangles=[skin])]
     tool = []
     if scene.tool_tip_m is not None:

@@ -31,7 +31,7 @@ from liver_sim.nodes.inputs import LoopInputs
 from liver_sim.nodes.rate_loop import RateLoop
 from liver_sim.view.defaults import DEFAULT_HOST, DEFAULT_PORT, VIEW_RATE_HZ
 from liver_sim.view.foxglove_scene import scene_update
-from liver_sim.view.scene import build_scene
+from liver_sim.view.scene import build_scene, lip_edges
 from msg_defs.forces import force_from_bytes, force_message_type
 from msg_defs.local_model import local_model_from_bytes
 from msg_defs.point_cloud import pointcloud2_to_nodes
@@ -70,7 +70,7 @@ class LiveView(Node):
                  allow_remote: bool = False, on_scene=None, name: str = "liver_view", context=None):
         super().__init__(name, context=context)
         self._lock = threading.Lock()
-        self._skin = self._rest = self._initial_skin = None
+        self._skin = self._rest = self._lips = None
         self._nodes = self._tip = self._model = None
         self._stamp_ns = 0
         self._command = np.zeros(3)
@@ -124,10 +124,9 @@ class LiveView(Node):
     def _on_surface(self, message) -> None:
         with self._refused():
             skin, rest = mesh_msg_to_arrays(message)
+            lips = lip_edges(rest, skin)
             with self._lock:
-                if self._initial_skin is None:
-                    self._initial_skin = skin
-                self._skin, self._rest = skin, rest
+                self._skin, self._rest, self._lips = skin, rest, lips
 
     def _on_nodes(self, message) -> None:
         with self._refused():
@@ -176,17 +175,13 @@ class LiveView(Node):
     def _step(self, now: float) -> None:
         self._inputs.poll()
         with self._lock:
-            skin, rest, initial = self._skin, self._rest, self._initial_skin
+            skin, rest, lips = self._skin, self._rest, self._lips
         nodes, stamp_ns = self._nodes, self._stamp_ns
         if skin is None or nodes is None or (len(skin) and skin.max() >= len(nodes)):
             return  # no surface yet, or nodes from before a topology change
         model: LocalModel | None = self._model
-        scene = build_scene(nodes, rest, skin, initial, self._tip, local_model=model, force_n=self._physics_force)
-        colours = scene.colours.reshape(-1, 4)
-        node_colours = np.zeros((len(nodes), 4))
-        node_colours[skin.ravel()] = colours
-        self._scene_channel.log(scene_update(scene, stamp_ns, points=(nodes, node_colours), indices=skin),
-                                log_time=stamp_ns)
+        scene = build_scene(nodes, rest, skin, lips, self._tip, local_model=model, force_n=self._physics_force)
+        self._scene_channel.log(scene_update(scene, stamp_ns), log_time=stamp_ns)
         command, physics = self._command, self._physics_force
         self._forces_channel.log(json.dumps({
             "device_command_n": command.tolist(), "device_command_norm_n": float(np.linalg.norm(command)),
@@ -195,3 +190,5 @@ class LiveView(Node):
         self.scenes += 1
         if self._on_scene is not None:
             self._on_scene(scene, stamp_ns)
+
+
