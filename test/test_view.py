@@ -268,10 +268,12 @@ def test_a_recorded_session_carries_schemas_foxglove_decodes(recorded_demo):
 
 
 def test_the_loop_bench_reads_the_views_share_and_scene_rate(tmp_path):
+    """The bench reads the scene rate from the summary `liver-sim view --summary` writes, not from its output."""
     from liver_sim.bench.loop import VIEW, view_figures
 
-    log = tmp_path / "view.log"
-    log.write_text("serving the live view on ws://127.0.0.1:40000 (…)\nserved 900 scenes in 30.1 s (29.9 per second)\n")
-    figures = view_figures({VIEW: {"cpu_share_of_one_core": 0.04}}, log)
+    summary = tmp_path / "view_summary.json"
+    summary.write_text('{"scenes": 900, "seconds": 30.1, "scenes_per_s": 29.9, "refused_messages": 0, '
+                       '"tick_errors": 0}\n')
+    figures = view_figures({VIEW: {"cpu_share_of_one_core": 0.04}}, summary)
     assert figures == {"cpu_share_of_one_core": 0.04, "scenes_per_s": 29.9}
-    assert view_figures({}, tmp_path / "absent.log") == {"cpu_share_of_one_core": None, "scenes_per_s": None}
+    assert view_figures({}, tmp_path / "absent.json") == {"cpu_share_of_one_core": None, "scenes_per_s": None}

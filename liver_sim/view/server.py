@@ -1,8 +1,10 @@
 """`liver-sim view`: the running network served to the Foxglove app over the Foxglove SDK's WebSocket server, by a
-LiveView (liver_sim.view.live_view) in its own rclpy context, until an ending signal or a duration; at exit, the
-picture of the scene with the largest contact force when asked."""
+LiveView (liver_sim.view.live_view) in its own rclpy context, until an ending signal or a duration; at exit, what it
+served as a summary (scenes, seconds, scenes per second, refused messages, failed ticks), and the picture of the
+scene with the largest contact force when asked."""
 from __future__ import annotations
 
+import json
 import sys
 import threading
 import time
@@ -15,7 +17,7 @@ from rclpy.signals import SignalHandlerOptions
 
 from liver_sim.base.stop_request import stop_on_signals
 from liver_sim.nodes.run import spin
-from liver_sim.view.defaults import DEFAULT_HOST, DEFAULT_PORT, VIEW_RATE_HZ, VIEW_SERVED
+from liver_sim.view.defaults import DEFAULT_HOST, DEFAULT_PORT, VIEW_RATE_HZ
 from liver_sim.view.live_view import LiveView, check_host
 from liver_sim.view.picture import draw_scene
 from liver_sim.view.scene import Scene
@@ -23,9 +25,10 @@ from liver_sim.view.scene import Scene
 
 def serve(host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, rate_hz: float = VIEW_RATE_HZ,
           allow_remote: bool = False, picture: Path | None = None, duration_s: float | None = None,
-          progress=print) -> int:
+          progress=print, summary: Path | None = None) -> dict:
     """`liver-sim view`: a LiveView until an ending signal (or `duration_s`); with `picture`, the scene with the
-    largest contact force (the last one if none) drawn into that PNG at exit. Returns the scenes served."""
+    largest contact force (the last one if none) drawn into that PNG at exit. Returns what it served, {scenes,
+    seconds, scenes_per_s, refused_messages, tick_errors}, also written as JSON into `summary` when given."""
     check_host(host, allow_remote)
     kept = {}
 
@@ -55,8 +58,15 @@ def serve(host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, rate_hz: float = V
             view.destroy_node()
         context.try_shutdown()
     elapsed = time.monotonic() - started
-    scenes = view.scenes if view is not None else 0
-    progress(f"{VIEW_SERVED} {scenes} scenes in {elapsed:.1f} s ({scenes / max(elapsed, 1e-9):.1f} per second)")
+    served = {"scenes": view.scenes if view is not None else 0, "seconds": elapsed,
+              "refused_messages": view.refused if view is not None else 0,
+              "tick_errors": view.tick_errors if view is not None else 0}
+    served["scenes_per_s"] = served["scenes"] / max(elapsed, 1e-9)
+    progress(f"served {served['scenes']} scenes in {elapsed:.1f} s ({served['scenes_per_s']:.1f} per second); "
+             f"{served['refused_messages']} message(s) refused, {served['tick_errors']} tick(s) failed")
+    if summary is not None:
+        summary.parent.mkdir(parents=True, exist_ok=True)
+        summary.write_text(json.dumps(served) + "\n")
     if picture is not None and "scene" in kept:
         force = float(np.linalg.norm(kept["scene"].force_n))
         draw_scene(kept["scene"], picture, f"liver-sim view: the scene at the largest contact force ({force:.2f} N)")
@@ -64,4 +74,4 @@ def serve(host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, rate_hz: float = V
     elif picture is not None:
         print("liver-sim view: no scene was received (is the network running on this ROS_DOMAIN_ID?)",
               file=sys.stderr)
-    return scenes
+    return served
