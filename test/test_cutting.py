@@ -328,7 +328,7 @@ COMPILES_AFTER_WARM_UP = """
 import importlib, json, pkgutil
 import numba, numpy as np
 import liver_sim.physics as physics
-from liver_sim.physics.parameters import PARAMETERS, build_model
+from liver_sim.physics.parameters import PhysicsParameters, build_model
 from liver_sim.physics.tearing import tear
 from test_cutting import liver_top_path, mean_edge_m
 
@@ -337,7 +337,7 @@ def versions():
     return {f"{m.__name__}.{name}": len(f.signatures) for m in modules for name, f in vars(m).items()
             if isinstance(f, numba.core.registry.CPUDispatcher)}
 
-model = build_model({**{name: p.default for name, p in PARAMETERS.items()}, "tearing": True})
+model = build_model(PhysicsParameters.defaults().replace(tearing=True))
 before = versions()
 assert model.cut(liver_top_path(model.mesh, 0.08), 2 * mean_edge_m(model.mesh))
 model.step_frame()

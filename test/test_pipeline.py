@@ -10,7 +10,7 @@ from liver_sim.mesh.landmarks import press_anchor
 from liver_sim.mesh.tetmesh import MeshError
 from liver_sim.physics import model as model_module
 from liver_sim.physics.model import LiverModel
-from liver_sim.physics.parameters import PARAMETERS, build_model
+from liver_sim.physics.parameters import PhysicsParameters, build_model
 from liver_sim.physics.pipeline import FramePipeline
 from liver_sim.tool.scripts import ScriptSettings, make_script
 
@@ -18,7 +18,7 @@ from meshes import assert_same_state, model_state
 
 
 def values(**changes):
-    return {**{name: spec.default for name, spec in PARAMETERS.items()}, **changes}
+    return PhysicsParameters.defaults().replace(**changes)
 
 
 @pytest.fixture(scope="module")
@@ -42,8 +42,8 @@ def test_a_pose_older_than_the_timeout_means_no_tool(defaults):
     pipeline = FramePipeline(build_model(defaults), defaults)
     top = press_anchor(pipeline.model.mesh)
     pipeline.receive(top, (0, 0, 0, 1), 0.0)  # the tool sphere's centre on the skin: in contact
-    assert pipeline.step(defaults["tool_pose_timeout_s"]).result.local_model.valid
-    assert not pipeline.step(defaults["tool_pose_timeout_s"] + 0.001).result.local_model.valid
+    assert pipeline.step(defaults.tool_pose_timeout_s).result.local_model.valid
+    assert not pipeline.step(defaults.tool_pose_timeout_s + 0.001).result.local_model.valid
 
 
 def test_the_marker_is_due_at_marker_rate_hz(defaults):
@@ -77,7 +77,7 @@ def test_build_model_loads_mesh_path_scaled_by_mesh_scale(tmp_path):
     unitless = values(mesh_path=str(path), target_tets=300)
     with pytest.raises(MeshError, match=r"sphere_mm.obj: implausible size .*mesh_scale.*--scale 0\.001 "):
         build_model(unitless)
-    model = build_model({**unitless, "mesh_scale": 0.001})
+    model = build_model(unitless.replace(mesh_scale=0.001))
     lower, upper = model.mesh.bounds
     np.testing.assert_allclose((lower + upper) / 2, [0.1, -0.05, 0.02], atol=2e-3)
     np.testing.assert_allclose(upper - lower, [0.08] * 3, rtol=0.08)

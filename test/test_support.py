@@ -70,7 +70,7 @@ def test_the_organ_support_holds_the_default_liver_and_the_paper_scene_stays_sel
 
 def test_support_parameters_are_checked_and_the_config_gives_the_defaults():
     assert model_params(node_parameters()["liver_physics"]) == ModelParams()
-    values = {**node_parameters()["liver_physics"], "support_regions": [0.0, 0.0, 0.0, 0.01]}
+    values = node_parameters()["liver_physics"].replace(support_regions=[0.0, 0.0, 0.0, 0.01])
     with pytest.raises(ValueError, match="support_regions"):
         model_params(values)
     with pytest.raises(ValueError, match="support_regions"):

@@ -185,7 +185,7 @@ def teleop_row(rendering: str, passivity_control: bool, link: LinkSettings, run,
     bridge = run.diagnostics.get("haptic_bridge: loop", {})
     energy = float(bridge.get("energy_to_hand_j", "nan"))
     peak_energy = float(bridge.get("energy_to_hand_peak_j", "nan"))
-    stiffness = node_parameters(())["liver_physics"]["contact_stiffness_n_per_m"]
+    stiffness = node_parameters(())["liver_physics"].contact_stiffness_n_per_m
     wrench = np.linalg.norm(run.wrench_n, axis=1) if len(run.wrench_n) else np.zeros(1)
     oscillation = oscillating_s((times, force), (ref_times, ref_force))
     norm = np.linalg.norm(force, axis=1) if len(force) else np.zeros(1)

@@ -162,12 +162,12 @@ def add_warm_command(commands) -> None:
 
 def warm(args) -> int:
     # this command's own modules, loaded when it runs (module docstring)
-    from liver_sim.physics.parameters import INTEGRATORS, PARAMETERS, build_model
+    from liver_sim.physics.parameters import INTEGRATORS, PhysicsParameters, build_model
 
     started = time.monotonic()
-    defaults = {name: parameter.default for name, parameter in PARAMETERS.items()}
+    defaults = PhysicsParameters.defaults()
     for integrator in INTEGRATORS:  # the implicit frame's kernels and the explicit one's
-        build_model({**defaults, "integrator": integrator})  # builds the default liver and warms it up
+        build_model(defaults.replace(integrator=integrator))  # builds the default liver and warms it up
     print(f"the physics kernels are compiled and cached ({time.monotonic() - started:.1f} s)")
     return 0
 

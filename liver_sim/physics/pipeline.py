@@ -45,20 +45,20 @@ class Frame:
 
 
 class FramePipeline:
-    """The frame sequence of one model, configured by the physics node's parameter `values`.
+    """The frame sequence of one model, configured by the physics node's parameters (PhysicsParameters).
 
     `receive`/`refuse` take each tool pose message (time in the clock `step` is called with), `step`
     runs a frame.  `tool_use.mode` may change between frames.  Counts: `frames`, `refused_poses`,
     `topology_failures` (tears and cuts that failed and left the model as it was).
     """
 
-    def __init__(self, model: LiverModel, values: dict):
+    def __init__(self, model: LiverModel, parameters):
         self.model = model
-        self.tool_use = ToolUse(model, values["tool_mode"], values["grasp_margin_m"], values["cut_depth_m"])
+        self.tool_use = ToolUse(model, parameters.tool_mode, parameters.grasp_margin_m, parameters.cut_depth_m)
         lower, upper = model.mesh.bounds
-        self.workspace = (lower - values["workspace_margin_m"], upper + values["workspace_margin_m"])
-        self.pose_timeout_s = values["tool_pose_timeout_s"]
-        self.marker_every = max(1, round(values["rate_hz"] / values["marker_rate_hz"]))
+        self.workspace = (lower - parameters.workspace_margin_m, upper + parameters.workspace_margin_m)
+        self.pose_timeout_s = parameters.tool_pose_timeout_s
+        self.marker_every = max(1, round(parameters.rate_hz / parameters.marker_rate_hz))
         self.frames = 0
         self.refused_poses = 0
         self.topology_failures = 0
