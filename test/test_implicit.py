@@ -7,7 +7,7 @@ from liver_sim.mesh.landmarks import press_anchor
 from liver_sim.mesh.liver_shape import default_liver
 from liver_sim.physics import explicit_kernels, implicit_kernels, pcg, reference
 from liver_sim.physics.contact import ToolPose, ToolShape, surface_contacts, tool_state
-from liver_sim.physics.implicit import Contacts, ImplicitEuler
+from liver_sim.physics.implicit import Contacts, ImplicitEuler, StepHistory
 from liver_sim.physics.model import LiverModel
 from liver_sim.physics.model_params import ModelParams
 from liver_sim.physics.springs import build_springs
@@ -93,7 +93,8 @@ def test_step_matches_dense_numpy_assembly():
     gravity = np.array([0.0, 0.0, -9.81])
     x_ref, v_ref = dense_reference_step(springs, x, v, inv_mass, contacts, external, FRAME_S, 3.0, gravity)
     solver = ImplicitEuler(springs, len(x), cg_tolerance=1e-13, max_newton=0)
-    solver.step(x, v, inv_mass, external, FRAME_S, 3.0, gravity, contacts)
+    history = StepHistory(solver.n_nodes)
+    solver.step(history, x, v, inv_mass, external, FRAME_S, 3.0, gravity, contacts)
     np.testing.assert_allclose(v, v_ref, atol=1e-10)
     np.testing.assert_allclose(x, x_ref, atol=1e-12)
 
@@ -104,7 +105,8 @@ def test_newton_iterations_solve_the_nonlinear_step():
     mesh, springs, x, v, inv_mass, contacts, external = tiny_scene(offset_m=0.0002, speed_m_s=0.005)
     x0, v0 = x.copy(), v.copy()
     solver = ImplicitEuler(springs, len(x), cg_tolerance=1e-12, newton_tolerance_n=1e-9, max_newton=10)
-    solver.step(x, v, inv_mass, external, FRAME_S, 3.0, np.zeros(3))
+    history = StepHistory(solver.n_nodes)
+    solver.step(history, x, v, inv_mass, external, FRAME_S, 3.0, np.zeros(3))
     assert 1 <= solver.last_newton_iterations < 10 and solver.last_residual_n <= 1e-9
     # backward Euler: M·(v − v0) = h·f(x0 + h·v, v) on every free node
     free = inv_mass > 0.0
@@ -130,8 +132,9 @@ def test_stable_at_one_step_per_frame_where_symplectic_euler_diverges(liver):
     p = liver.params
     x, v = perturbed(liver)
     solver = ImplicitEuler(liver.springs, len(x))
+    history = StepHistory(solver.n_nodes)
     for _ in range(150):
-        solver.step(x, v, liver.inv_mass, np.zeros_like(x), FRAME_S, p.environment_damping_per_s, np.zeros(3))
+        solver.step(history, x, v, liver.inv_mass, np.zeros_like(x), FRAME_S, p.environment_damping_per_s, np.zeros(3))
     assert np.isfinite(x).all() and np.abs(x - liver.mesh.points).max() < 0.002
     assert np.abs(v).max() < 1e-3
     xe, ve = perturbed(liver)
@@ -157,9 +160,10 @@ def test_energy_decreases_without_external_work(liver):
     v[:] = np.random.default_rng(2).normal(scale=0.05, size=v.shape)
     v[liver.fixed_nodes] = 0.0
     solver = ImplicitEuler(liver.springs, len(x))
+    history = StepHistory(solver.n_nodes)
     energies = [energy_j(liver, x, v)]
     for _ in range(60):
-        solver.step(x, v, liver.inv_mass, np.zeros_like(x), FRAME_S, 0.0, np.zeros(3))
+        solver.step(history, x, v, liver.inv_mass, np.zeros_like(x), FRAME_S, 0.0, np.zeros(3))
         energies.append(energy_j(liver, x, v))
     steps = np.diff(energies)
     assert (steps <= 1e-9 * energies[0]).all()
@@ -174,8 +178,9 @@ def test_held_nodes_stay_put(liver):
     v[held] = 0.01  # a kinematic node's velocity is the scene's: kept, and it does not move during the step
     before = x[held].copy()
     solver = ImplicitEuler(liver.springs, len(x))
+    history = StepHistory(solver.n_nodes)
     for _ in range(5):
-        solver.step(x, v, inv_mass, np.zeros_like(x), FRAME_S, 3.0, np.array([0.0, 0.0, -9.81]))
+        solver.step(history, x, v, inv_mass, np.zeros_like(x), FRAME_S, 3.0, np.array([0.0, 0.0, -9.81]))
     np.testing.assert_array_equal(x[held], before)
     np.testing.assert_array_equal(v[held], 0.01)
 
@@ -224,6 +229,7 @@ def test_press_and_release_matches_symplectic_euler_at_72_substeps():
                               clearance_m=0.005, approach_s=0.1, press_s=0.3, hold_s=0.2, withdraw_s=0.1, rest_s=0.3)
     script = make_script("press_release", settings)
     solver = ImplicitEuler(model.springs, len(mesh.points))
+    history = StepHistory(solver.n_nodes)
     x, v = model.positions, model.velocities
     skin = np.asarray(mesh.skin, dtype=np.int64)
     previous = None
@@ -235,8 +241,8 @@ def test_press_and_release_matches_symplectic_euler_at_72_substeps():
         previous = pose
         # the tool at the end of the frame, as the explicit kernel's last substep
         contacts = surface_contacts(x, v, state, state.velocity_m_s * FRAME_S, FRAME_S)
-        force = solver.step(x, v, model.inv_mass, model.external_forces_n, FRAME_S, p.environment_damping_per_s,
-                            np.zeros(3), contacts)
+        force = solver.step(history, x, v, model.inv_mass, model.external_forces_n, FRAME_S,
+                            p.environment_damping_per_s, np.zeros(3), contacts)
         worst_position = max(worst_position, np.abs(x - explicit.positions).max())
         worst_force = max(worst_force, np.abs(force - expected).max())
         peak = max(peak, np.linalg.norm(expected))
@@ -253,18 +259,19 @@ def test_bdf2_is_second_order_and_falls_back_to_backward_euler(liver):
         v[liver.fixed_nodes] = 0.0
         solver = ImplicitEuler(liver.springs, len(x), cg_tolerance=1e-10, newton_tolerance_n=1e-9, max_newton=10,
                                second_order=second_order)
+        history = StepHistory(solver.n_nodes)
         for _ in range(steps):
-            solver.step(x, v, liver.inv_mass, np.zeros_like(x), duration_s / steps, 0.0, np.zeros(3))
-        return x, v, solver
+            solver.step(history, x, v, liver.inv_mass, np.zeros_like(x), duration_s / steps, 0.0, np.zeros(3))
+        return x, v, solver, history
     exact = run(1600, True)[0]
     errors = {order: [np.abs(run(n, order)[0] - exact).max() for n in (15, 30)] for order in (True, False)}
     assert errors[True][0] / errors[True][1] > 3.5
     assert 1.7 < errors[False][0] / errors[False][1] < 2.3
     assert errors[True][0] < errors[False][0] / 5
-    x, v, solver = run(2, True)
+    x, v, solver, history = run(2, True)
     assert solver.last_second_order
     x += 1e-6  # a state set from outside: the next step has no history
-    solver.step(x, v, liver.inv_mass, np.zeros_like(x), 0.1, 0.0, np.zeros(3))
+    solver.step(history, x, v, liver.inv_mass, np.zeros_like(x), 0.1, 0.0, np.zeros(3))
     assert not solver.last_second_order
 
 

@@ -27,7 +27,7 @@ from liver_sim.physics.contact import (
 from liver_sim.physics.contact_kernels import TOOL_NONE, ToolState
 from liver_sim.physics.cutting import cut_along_path
 from liver_sim.physics.explicit_kernels import StepSettings, WorkArrays, max_speed, run_frame
-from liver_sim.physics.implicit import ImplicitEuler
+from liver_sim.physics.implicit import ImplicitEuler, StepHistory
 from liver_sim.physics.local_stiffness import LocalStiffness
 from liver_sim.physics.model_params import ModelParams
 from liver_sim.physics.spring_kernels import SpringArrays, spring_forces_serial, support_forces
@@ -131,6 +131,7 @@ class LiverModel:
         self._work = WorkArrays(np.zeros_like(mesh.points), np.zeros((threads, len(mesh.points), 3)), self.parallel)
         self._skin = np.ascontiguousarray(mesh.skin, dtype=np.int64)
         self._solver = ImplicitEuler(springs, len(mesh.points), support=self.support)
+        self._step_history = StepHistory(len(mesh.points))
         self.local_stiffness = LocalStiffness(self._solver, len(mesh.points))
         self.hold(self.held_nodes)
 
@@ -195,7 +196,7 @@ class LiverModel:
         self.positions = self.mesh.points.copy()
         self.velocities = np.zeros_like(self.positions)
         self._previous_pose: ToolPose | None = None
-        self._solver.reset()
+        self._step_history.reset()
         self.local_stiffness.reset()
         if self.held_nodes.size:
             self.hold(np.zeros(0, dtype=np.int64))
@@ -212,7 +213,7 @@ class LiverModel:
         self._solver.compliance(self.positions, self.inv_mass, np.ones_like(self.positions), 0.0,
                                 np.zeros_like(self.positions))
         self.positions[:], self.velocities[:] = state
-        self._solver.reset()
+        self._step_history.reset()
         self._previous_pose = None
         self._detector().stretches(self.positions)
         estimate_stable_time_step(self.springs, self.masses_kg, self.params.environment_damping_per_s,
@@ -319,7 +320,7 @@ class LiverModel:
         for step in range(substeps):
             contacts = None if tool.kind == TOOL_NONE else surface_contacts(
                 x, v, tool, tool.velocity_m_s * ((step + 1) * dt), dt)
-            liver_force = self._solver.step(x, v, self.inv_mass, self.external_forces_n, dt,
+            liver_force = self._solver.step(self._step_history, x, v, self.inv_mass, self.external_forces_n, dt,
                                             params.environment_damping_per_s, gravity, contacts)
         if tool.kind != TOOL_NONE:  # the contact geometry the local model is fitted to
             probe_contacts(x, v, tool, tool.velocity_m_s * (substeps * dt), dt)
