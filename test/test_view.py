@@ -59,7 +59,7 @@ def test_lips_are_the_rim_of_the_triangles_a_cut_opened():
     assert len(lip_edges(LIVER.points, LIVER.skin)) == 0 and not opened_triangles(LIVER.points, LIVER.skin).any()
     top = LIVER.points[LIVER.skin_nodes][np.argmax(LIVER.points[LIVER.skin_nodes, 2])]
     assert model.cut(np.array([top - [0.03, 0.0, 0.0], top + [0.03, 0.0, 0.0]]), 0.01)
-    rest, skin = model.mesh.points, model.mesh.skin
+    rest, skin = model.structure.mesh.points, model.structure.mesh.skin
     opened = opened_triangles(rest, skin)
     assert 0 < opened.sum() < len(skin)
 
@@ -67,7 +67,7 @@ def test_lips_are_the_rim_of_the_triangles_a_cut_opened():
         return {tuple(sorted(e)) for t in triangles.tolist() for e in ((t[0], t[1]), (t[1], t[2]), (t[2], t[0]))}
     rim = {tuple(e) for e in lip_edges(rest, skin).tolist()}
     assert rim and rim == edges(skin[opened]) & edges(skin[~opened])
-    scene = build_scene(model.positions, rest, skin, lip_edges(rest, skin))
+    scene = build_scene(model.state.positions, rest, skin, lip_edges(rest, skin))
     assert scene.lips.shape == (len(rim), 2, 3)
 
 

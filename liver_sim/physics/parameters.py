@@ -19,7 +19,8 @@ from liver_sim.physics.model_params import (
     SpringLaw,
     TissueProperties,
 )
-from liver_sim.physics.tool_use import TOOL_MODES
+from liver_sim.physics.tool_contact import LOCAL_MODELS, ToolContact
+from liver_sim.physics.tool_use import TOOL_MODES, ToolUse
 
 DEFAULTS = ModelParams()
 TISSUE = DEFAULTS.tissue
@@ -95,7 +96,7 @@ PARAMETERS = {
                             0.0, 0.05),
     "cut_depth_m": Param(0.005, "cut: depth of the cut below the tool path (m); under one element layer cuts "
                          "the capsule (membrane) only", 0.0005, 0.2),
-    "local_model": Param("plane", "local model published for the haptic loop", choices=("plane", "sphere")),
+    "local_model": Param("plane", "local model published for the haptic loop", choices=LOCAL_MODELS),
     "local_model_reach_m": Param(0.02, "publish a local model while the tool is this close to the skin (m)",
                                  0.0, 1.0),
     "local_model_lifetime_s": Param(0.05, "how long the bridge may trust one local model (s)", 0.001, 10.0),
@@ -143,9 +144,10 @@ def model_params(p: PhysicsParameters) -> ModelParams:
 
 
 def build_model(p: PhysicsParameters) -> LiverModel:
-    """The LiverModel (mesh, parameters, tool, local model) named by the node's parameters, warmed up."""
+    """The LiverModel (mesh, parameters, its tool and the tool's use) named by the node's parameters, warmed up."""
     mesh = load_mesh(p.mesh_path, p.target_tets, p.mesh_scale) if p.mesh_path else default_liver()
-    tool = ToolShape(p.tool_shape, p.tool_radius_m, p.tool_length_m, tuple(p.tool_half_extents_m))
-    model = LiverModel(mesh, model_params(p), tool, p.local_model, p.local_model_reach_m)
+    tool = ToolContact(ToolShape(p.tool_shape, p.tool_radius_m, p.tool_length_m, tuple(p.tool_half_extents_m)),
+                       p.local_model, p.local_model_reach_m, ToolUse(p.tool_mode, p.grasp_margin_m, p.cut_depth_m))
+    model = LiverModel(mesh, model_params(p), tool)
     model.warm_up()
     return model

@@ -76,23 +76,23 @@ class _Session:
     def _frame(self, t0: float):
         """Step one frame; return (publish time s, messages, (local model, lifetime), contact force N)."""
 
-        frame = self.pipeline.step(t0 + self.model.time_s)
-        t = t0 + self.model.time_s
+        frame = self.pipeline.step(t0 + self.model.state.time_s)
+        t = t0 + self.model.state.time_s
         stamp, frame_id = stamp_from_seconds(t), self.p.frame_id
         marker = local_model_marker(frame.result.local_model, stamp, frame_id,
                                     self.p.local_model_lifetime_s)
         wrench = wrench_stamped(frame.result.tool_force_n, stamp, frame_id)
         marker_bytes = serialize_message(marker)
         messages = [(self.p.nodes_topic, "nodes",
-                     serialize_message(nodes_to_pointcloud2(self.model.positions, stamp, frame_id))),
+                     serialize_message(nodes_to_pointcloud2(self.model.state.positions, stamp, frame_id))),
                     (self.p.contact_plane_topic, "contact_plane", marker_bytes),
                     (self.p.tool_wrench_topic, "tool_wrench", serialize_message(wrench))]
         if frame.surface_changed:  # the new surface before the node cloud that indexes it
             messages.insert(0, (self.p.surface_topic, "surface", serialize_message(
-                skin_mesh_msg(self.model.mesh.skin, self.model.mesh.points))))
+                skin_mesh_msg(self.model.structure.mesh.skin, self.model.structure.mesh.points))))
         if frame.marker_due:
             messages.append((self.p.marker_topic, "marker", skin_marker_serialized(
-                self.model.positions, self.model.mesh.skin, stamp, frame_id)))
+                self.model.state.positions, self.model.structure.mesh.skin, stamp, frame_id)))
         model, lifetime = local_model_from_bytes(marker_bytes)  # as the live bridge reads it
         return (t, messages, (model, lifetime if lifetime > 0.0 else self.b["lifetime_s"]),
                 force_from_message("wrench_stamped", wrench))
@@ -101,14 +101,14 @@ class _Session:
         """`poses`: [(time s, PoseStamped, recorded bytes)] in time order."""
 
         t0 = poses[0][0]
-        self.emit(self.p.surface_topic, "surface", t0, serialize_message(
-            skin_mesh_msg(self.model.mesh.skin, self.model.mesh.points)))
+        mesh = self.model.structure.mesh
+        self.emit(self.p.surface_topic, "surface", t0, serialize_message(skin_mesh_msg(mesh.skin, mesh.points)))
         tip, tip_time = None, -np.inf
         pending = deque()
         local, held, source_time = None, None, -np.inf
         next_progress = t0 + 1.0
         for t, message, data in poses:
-            while t0 + self.model.time_s < t:  # frames that start before this pose see the poses before it
+            while t0 + self.model.state.time_s < t:  # frames that start before this pose see the poses before it
                 pending.append(self._frame(t0))
             while pending and pending[0][0] <= t:
                 source_time, messages, local, held = pending.popleft()
