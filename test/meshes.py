@@ -23,7 +23,7 @@ def box_mesh(nx: int, ny: int, nz: int, spacing_m: float) -> TetMesh:
 
 def kinetic_energy_j(model) -> float:
     """½·Σ m·|v|² (J) of a LiverModel."""
-    return 0.5 * float((model.masses_kg * (model.velocities ** 2).sum(axis=1)).sum())
+    return 0.5 * float((model.structure.masses_kg * (model.state.velocities ** 2).sum(axis=1)).sum())
 
 
 def write_sphere_surface(path, radius, centre=(0.0, 0.0, 0.0), subdivisions=3):
@@ -63,12 +63,13 @@ def assert_sound(mesh: TetMesh) -> int:
 def model_state(model) -> dict:
     """Copies of all a topology change replaces in a LiverModel: node state, mesh, capsule, springs,
     masses, fixed and held nodes, substeps, stability bound, topology_version."""
-    springs = model.springs
-    arrays = (model.positions, model.velocities, model.external_forces_n, model.masses_kg, model.inv_mass,
-              model.fixed_nodes, model.held_nodes, model.mesh.points, model.mesh.tets, model.capsule_triangles,
-              springs.node_i, springs.node_j, springs.rest_length_m)
-    return {"arrays": [a.copy() for a in arrays], "substeps": model.params.substeps,
-            "stable_dt_s": model.stable_dt_s, "topology_version": model.topology_version}
+    springs = model.structure.springs
+    state, structure = model.state, model.structure
+    arrays = (state.positions, state.velocities, state.external_forces_n, structure.masses_kg, state.inv_mass,
+              structure.fixed_nodes, state.held_nodes, structure.mesh.points, structure.mesh.tets,
+              structure.capsule_triangles, springs.node_i, springs.node_j, springs.rest_length_m)
+    return {"arrays": [a.copy() for a in arrays], "substeps": model.structure.params.substeps,
+            "stable_dt_s": model.structure.stable_dt_s, "topology_version": model.structure.version}
 
 
 def assert_same_state(state: dict, model) -> None:

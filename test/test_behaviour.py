@@ -42,9 +42,9 @@ def test_press_is_felt_and_never_diverges(viscous):
 
 def test_b1_deformation_is_local_under_the_tool(viscous):
     model, trace = viscous
-    target = press_anchor(model.mesh)
-    change = deformation_m(model.mesh.points, trace.peak_positions_m)
-    distance = np.linalg.norm(model.mesh.points - target, axis=1)
+    target = press_anchor(model.structure.mesh)
+    change = deformation_m(model.structure.mesh.points, trace.peak_positions_m)
+    distance = np.linalg.norm(model.structure.mesh.points - target, axis=1)
     near, far = change[distance < 0.04], change[distance > 0.12]
     assert near.mean() > 4 * far.mean()
     assert np.argmax(change) in np.flatnonzero(distance < 0.04)

@@ -8,6 +8,7 @@ from liver_sim.base.local_model import penetration
 from liver_sim.physics.contact import ToolPose, ToolShape, candidate_nodes, candidate_triangles, fit_sphere
 from liver_sim.physics.model import LiverModel
 from liver_sim.physics.model_params import ModelParams
+from liver_sim.physics.tool_contact import ToolContact
 
 from meshes import box_mesh
 
@@ -28,7 +29,7 @@ def one_step_model(mesh, tool):
     params = ModelParams(integrator="symplectic_euler", substeps=1, frame_rate_hz=1e5,
                          contact_stiffness_n_per_m=STIFFNESS,
                          contact_damping_ns_per_m=0.0)
-    return LiverModel(mesh, params, tool=tool)
+    return LiverModel(mesh, params, ToolContact(tool))
 
 
 Y_TO_X = (0.0, math.sin(math.pi / 4), 0.0, math.cos(math.pi / 4))  # tool +z along liver +x
@@ -50,8 +51,8 @@ def test_pressing_a_vertex_gives_the_penalty_force_along_the_normal(slab, tool, 
 def test_liver_nodes_feel_the_opposite_of_the_tool_force(slab):
     model = one_step_model(slab, ToolShape("sphere", radius_m=0.01))
     result = model.step_frame(ToolPose(np.array([0.042, 0.041, 0.04 + 0.01 - DEPTH])))
-    momentum = (model.masses_kg[:, None] * model.velocities).sum(axis=0)
-    impulse_on_liver = -result.tool_force_n * model.params.dt_s
+    momentum = (model.structure.masses_kg[:, None] * model.state.velocities).sum(axis=0)
+    impulse_on_liver = -result.tool_force_n * model.structure.params.dt_s
     # the fixed nodes absorb only spring forces, which are zero at rest
     np.testing.assert_allclose(momentum, impulse_on_liver, atol=1e-12)
     assert result.tool_force_n[2] > 0
@@ -77,7 +78,7 @@ def test_no_force_out_of_contact(slab):
 def test_penalty_damping_resists_approach(slab):
     params = ModelParams(integrator="symplectic_euler", substeps=1, frame_rate_hz=1e5,
                          contact_stiffness_n_per_m=STIFFNESS, contact_damping_ns_per_m=5.0)
-    model = LiverModel(slab, params, tool=ToolShape("sphere", radius_m=0.01))
+    model = LiverModel(slab, params, ToolContact(ToolShape("sphere", radius_m=0.01)))
     z0 = 0.04 + 0.01 - DEPTH
     model.step_frame(ToolPose(np.array([0.04, 0.04, z0 + 1e-6])))
     moving = model.step_frame(ToolPose(np.array([0.04, 0.04, z0]))).tool_force_n[2]
@@ -114,7 +115,7 @@ def test_local_model_in_contact_is_the_touched_plane(slab):
 
 
 def test_local_model_near_but_not_touching_and_out_of_reach(slab):
-    model = LiverModel(slab, tool=ToolShape("sphere", radius_m=0.01), local_model_reach_m=0.02)
+    model = LiverModel(slab, tool=ToolContact(ToolShape("sphere", radius_m=0.01), local_model_reach_m=0.02))
     near = model.step_frame(ToolPose(np.array([0.05, 0.05, 0.04 + 0.01 + 0.005]))).local_model
     assert near.valid and not near.in_contact and near.depth_m == 0.0
     np.testing.assert_allclose(near.normal, [0, 0, 1], atol=1e-6)
@@ -152,15 +153,15 @@ def test_the_local_stiffness_refreshed_every_few_frames_stays_near_a_fresh_solve
     from liver_sim.tool.scripts import ScriptSettings, make_script
 
     mesh = default_liver()
-    cached, fresh = LiverModel(mesh, ModelParams()), LiverModel(mesh, ModelParams())
-    fresh.local_stiffness.refresh_frames = 1
+    cached = LiverModel(mesh, ModelParams())
+    fresh = LiverModel(mesh, ModelParams(), ToolContact(stiffness_refresh_frames=1))
     script = make_script("press_slide_release", ScriptSettings(anchor_m=tuple(press_anchor(mesh)), rest_s=0.1))
-    penalty = cached.params.contact_stiffness_n_per_m
+    penalty = cached.structure.params.contact_stiffness_n_per_m
     compared = 0
     for k in range(int(script.duration_s * 150)):
         pose = ToolPose(script.position_at(k / 150.0))
         reused, solved = cached.step_frame(pose).local_model, fresh.step_frame(pose).local_model
-        np.testing.assert_array_equal(cached.positions, fresh.positions)  # K does not touch the physics
+        np.testing.assert_array_equal(cached.state.positions, fresh.state.positions)  # K does not touch the physics
         if not solved.in_contact:
             continue
         assert reused.stiffness_n_per_m == pytest.approx(solved.stiffness_n_per_m, rel=0.10), k

@@ -17,6 +17,7 @@ from liver_sim.physics.cutting import SNAP_FRACTION, Ribbon, cut_along_path, def
 from liver_sim.physics.model import LiverModel
 from liver_sim.physics.model_params import ModelParams
 from liver_sim.physics.springs import stable_time_step
+from liver_sim.physics.tool_contact import ToolContact
 from liver_sim.physics.tool_use import ToolUse
 
 from meshes import assert_sound, box_mesh, components, kinetic_energy_j
@@ -210,16 +211,16 @@ def test_cut_liver_model_keeps_its_mass_and_simulates_stably(liver):
     # substeps to stay below it
     model = LiverModel(liver, ModelParams(integrator="symplectic_euler"))
     edge = mean_edge_m(liver)
-    mass_kg = model.masses_kg.sum()
-    substeps = model.params.substeps
+    mass_kg = model.structure.masses_kg.sum()
+    substeps = model.structure.params.substeps
     assert model.cut(liver_top_path(liver, 0.08), 2 * edge)
-    assert model.topology_version == 1
-    assert model.masses_kg.sum() == pytest.approx(mass_kg, rel=1e-12)
-    assert np.allclose(model.positions, model.mesh.points)
-    assert model.params.dt_s <= model.stable_dt_s and model.params.substeps >= substeps
-    model.velocities += np.random.default_rng(0).normal(scale=0.05, size=model.velocities.shape)
+    assert model.structure.version == 1
+    assert model.structure.masses_kg.sum() == pytest.approx(mass_kg, rel=1e-12)
+    assert np.allclose(model.state.positions, model.structure.mesh.points)
+    assert model.structure.params.dt_s <= model.structure.stable_dt_s and model.structure.params.substeps >= substeps
+    model.state.velocities += np.random.default_rng(0).normal(scale=0.05, size=model.state.velocities.shape)
     assert all(model.step_frame().divergence is None for _ in range(30))
-    assert kinetic_energy_j(model) < 0.5 * float((model.masses_kg * 0.05 ** 2 * 3).sum())
+    assert kinetic_energy_j(model) < 0.5 * float((model.structure.masses_kg * 0.05 ** 2 * 3).sum())
 
 
 def test_the_stability_estimate_after_each_cut_is_not_above_the_exact_bound(liver):
@@ -227,12 +228,12 @@ def test_the_stability_estimate_after_each_cut_is_not_above_the_exact_bound(live
     edge = mean_edge_m(liver)
     for path in (liver_top_path(liver, 0.08), upper_skin_path(liver, (-0.03, -0.04), (-0.03, 0.04))):
         assert model.cut(path, 2 * edge)
-        p = model.params
-        exact = stable_time_step(model.springs, model.masses_kg, p.environment_damping_per_s, p.integrator,
-                                 model.mesh.points)
-        assert model.stable_dt_s <= 1.02 * exact
+        p = model.structure.params
+        exact = stable_time_step(model.structure.springs, model.structure.masses_kg, p.environment_damping_per_s,
+                                 p.integrator, model.structure.mesh.points)
+        assert model.structure.stable_dt_s <= 1.02 * exact
         assert p.dt_s <= exact
-    model.velocities += np.random.default_rng(1).normal(scale=0.05, size=model.velocities.shape)
+    model.state.velocities += np.random.default_rng(1).normal(scale=0.05, size=model.state.velocities.shape)
     assert all(model.step_frame().divergence is None for _ in range(30))
 
 
@@ -240,17 +241,18 @@ def random_stroke(model, rng, previous):
     """A blade path (P, 3) in the deformed frame: a chord between two skin nodes (through nodes, along the
     mesh), a diagonal on the upper skin, a stroke of 0.3 mm to 3 cm from a skin node, a 10–40 cm stroke
     that leaves the liver, a wiggly polyline, or a stroke across the middle of the `previous` path."""
-    x = model.positions
-    skin = model.mesh.skin_nodes
+    x = model.state.positions
+    skin = model.structure.mesh.skin_nodes
     direction = rng.normal(size=3)
     direction /= np.linalg.norm(direction)
     kind = rng.integers(6)
     if kind == 0:
         return np.linspace(*x[rng.choice(skin, 2, replace=False)], rng.integers(2, 12))
     if kind == 1:
-        low, high = model.mesh.bounds[:, :2] * 0.8
+        low, high = model.structure.mesh.bounds[:, :2] * 0.8
         try:
-            return upper_skin_path(model.mesh, rng.uniform(low, high), rng.uniform(low, high), rng.integers(2, 15))
+            return upper_skin_path(model.structure.mesh, rng.uniform(low, high), rng.uniform(low, high),
+                                   rng.integers(2, 15))
         except ValueError:  # a point not above the mesh: a straight line over it
             kind = 3
     if kind == 2:
@@ -265,45 +267,48 @@ def random_stroke(model, rng, previous):
     return middle + np.outer(np.linspace(-0.03, 0.03, rng.integers(2, 12)), direction)
 
 
-def stroke(use, path):
-    """The tool in cut mode in contact along `path`, then off the surface: True when the mesh changed."""
+def stroke(model, path):
+    """The tool in cut mode in contact along `path`, then off the surface (LiverModel.after_frame): (True when the
+    mesh changed, why the cut failed)."""
     for point in path:
-        use.after_frame(LocalModel("plane", True, point, [0.0, 0.0, 1.0], point, 0.0, 0.001, True))
-    return use.after_frame(LocalModel.invalid())
+        model.after_frame(LocalModel("plane", True, point, [0.0, 0.0, 1.0], point, 0.0, 0.001, True))
+    changes, failures = model.after_frame(LocalModel.invalid())
+    return changes == ["cut"], failures
 
 
 def test_many_random_cuts_never_raise_and_keep_the_mesh_sound(liver):
     # crossing strokes, strokes along mesh edges, very short and very long ones, some on a deformed liver;
     # this seed makes strokes whose ribbon meets the mesh at nodes only (it raised IndexError)
     rng = np.random.default_rng(13)
-    model = LiverModel(liver, ModelParams())
-    use = ToolUse(model, "cut")
-    mass_kg = model.masses_kg.sum()
+    use = ToolUse("cut")
+    model = LiverModel(liver, ModelParams(), ToolContact(use=use))
+    mass_kg = model.structure.masses_kg.sum()
     previous = liver_top_path(liver, 0.08)
     changes = 0
     for k in range(60):
         if k % 4 == 3:  # deform the liver by a small random linear map about its centre
-            centre = model.positions.mean(axis=0)
-            model.positions = centre + (model.positions - centre) @ (np.eye(3) + rng.normal(scale=0.03, size=(3, 3)))
+            centre = model.state.positions.mean(axis=0)
+            linear = np.eye(3) + rng.normal(scale=0.03, size=(3, 3))
+            model.state.positions = centre + (model.state.positions - centre) @ linear
         use.cut_depth_m = 10 ** rng.uniform(-3.3, -1.3)
         path = random_stroke(model, rng, previous)
-        version = model.topology_version
-        changed = stroke(use, path)
-        assert not use.failures, use.failures
-        assert model.topology_version == version + changed
+        version = model.structure.version
+        changed, failures = stroke(model, path)
+        assert not failures, failures
+        assert model.structure.version == version + changed
         if changed:
             changes += 1
             previous = path
-            assert_sound(model.mesh)
-            assert len(model.positions) == len(model.mesh.points) == len(model.masses_kg)
-        assert np.isfinite(model.positions).all() and np.isfinite(model.velocities).all()
-        assert model.masses_kg.sum() == pytest.approx(mass_kg, rel=1e-9)
+            assert_sound(model.structure.mesh)
+            assert len(model.state.positions) == len(model.structure.mesh.points) == len(model.structure.masses_kg)
+        assert np.isfinite(model.state.positions).all() and np.isfinite(model.state.velocities).all()
+        assert model.structure.masses_kg.sum() == pytest.approx(mass_kg, rel=1e-9)
     assert changes >= 30
-    assert model.params.dt_s <= model.stable_dt_s
-    model.positions = model.mesh.points.copy()
-    model.velocities += rng.normal(scale=0.01, size=model.velocities.shape)
+    assert model.structure.params.dt_s <= model.structure.stable_dt_s
+    model.state.positions = model.structure.mesh.points.copy()
+    model.state.velocities += rng.normal(scale=0.01, size=model.state.velocities.shape)
     assert all(model.step_frame().divergence is None for _ in range(3))
-    assert np.isfinite(model.positions).all()
+    assert np.isfinite(model.state.positions).all()
 
 
 def test_repeated_cuts_keep_one_implicit_step_per_frame(liver):
@@ -315,11 +320,11 @@ def test_repeated_cuts_keep_one_implicit_step_per_frame(liver):
     rng = np.random.default_rng(2)
     for version, path in enumerate(paths, start=1):
         assert model.cut(path, 2 * edge)
-        assert model.topology_version == version and model.params.substeps == 1
-        model.velocities += rng.normal(scale=0.05, size=model.velocities.shape)
+        assert model.structure.version == version and model.structure.params.substeps == 1
+        model.state.velocities += rng.normal(scale=0.05, size=model.state.velocities.shape)
         assert all(model.step_frame().divergence is None for _ in range(30))
-    assert model.divergences == 0 and np.isfinite(model.positions).all()
-    assert kinetic_energy_j(model) < 0.5 * float((model.masses_kg * 0.05 ** 2 * 3).sum())
+    assert model.divergences == 0 and np.isfinite(model.state.positions).all()
+    assert kinetic_energy_j(model) < 0.5 * float((model.structure.masses_kg * 0.05 ** 2 * 3).sum())
 
 
 #: A fresh interpreter builds the physics node's model (tearing on), then cuts, tears and steps it; it prints the
@@ -328,7 +333,7 @@ COMPILES_AFTER_WARM_UP = """
 import importlib, json, pkgutil
 import numba, numpy as np
 import liver_sim.physics as physics
-from liver_sim.physics.parameters import PARAMETERS, build_model
+from liver_sim.physics.parameters import PhysicsParameters, build_model
 from liver_sim.physics.tearing import tear
 from test_cutting import liver_top_path, mean_edge_m
 
@@ -337,12 +342,14 @@ def versions():
     return {f"{m.__name__}.{name}": len(f.signatures) for m in modules for name, f in vars(m).items()
             if isinstance(f, numba.core.registry.CPUDispatcher)}
 
-model = build_model({**{name: p.default for name, p in PARAMETERS.items()}, "tearing": True})
+model = build_model(PhysicsParameters.defaults().replace(tearing=True))
 before = versions()
-assert model.cut(liver_top_path(model.mesh, 0.08), 2 * mean_edge_m(model.mesh))
+assert model.cut(liver_top_path(model.structure.mesh, 0.08), 2 * mean_edge_m(model.structure.mesh))
 model.step_frame()
-change = tear(model.mesh.points, model.mesh.tets, model.positions * [1.5, 1.0, 1.0], model.capsule_triangles, 0.15, 0.2)
-model.apply_topology_change(change)
+mesh = model.structure.mesh
+change = tear(mesh.points, mesh.tets, model.state.positions * [1.5, 1.0, 1.0], model.structure.capsule_triangles, 0.15,
+              0.2)
+model.apply(change)
 model.step_frame()
 print(json.dumps({name: n for name, n in versions().items() if n != before.get(name)}))
 """

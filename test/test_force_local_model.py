@@ -41,7 +41,7 @@ def demo_run():
     tick = BridgeTick(bridge)
     script = make_script("press_slide_release", ScriptSettings(anchor_m=tuple(press_anchor(mesh)), rest_s=0.5))
     frames, ticks = [], []
-    period, tick_s = model.frame_period_s, 1.0 / bridge["rate_hz"]
+    period, tick_s = model.structure.frame_period_s, 1.0 / bridge["rate_hz"]
     t = 0.0
     for k in range(int(script.duration_s / period)):
         pose = ToolPose(script.position_at(k * period))

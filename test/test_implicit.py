@@ -7,10 +7,11 @@ from liver_sim.mesh.landmarks import press_anchor
 from liver_sim.mesh.liver_shape import default_liver
 from liver_sim.physics import explicit_kernels, implicit_kernels, pcg, reference
 from liver_sim.physics.contact import ToolPose, ToolShape, surface_contacts, tool_state
-from liver_sim.physics.implicit import Contacts, ImplicitEuler
+from liver_sim.physics.implicit import Contacts, ImplicitEuler, StepHistory
 from liver_sim.physics.model import LiverModel
 from liver_sim.physics.model_params import ModelParams
 from liver_sim.physics.springs import build_springs
+from liver_sim.physics.tool_contact import ToolContact
 from liver_sim.tool.scripts import ScriptSettings, make_script
 
 from meshes import box_mesh
@@ -93,7 +94,8 @@ def test_step_matches_dense_numpy_assembly():
     gravity = np.array([0.0, 0.0, -9.81])
     x_ref, v_ref = dense_reference_step(springs, x, v, inv_mass, contacts, external, FRAME_S, 3.0, gravity)
     solver = ImplicitEuler(springs, len(x), cg_tolerance=1e-13, max_newton=0)
-    solver.step(x, v, inv_mass, external, FRAME_S, 3.0, gravity, contacts)
+    history = StepHistory(solver.n_nodes)
+    solver.step(history, x, v, inv_mass, external, FRAME_S, 3.0, gravity, contacts)
     np.testing.assert_allclose(v, v_ref, atol=1e-10)
     np.testing.assert_allclose(x, x_ref, atol=1e-12)
 
@@ -104,7 +106,8 @@ def test_newton_iterations_solve_the_nonlinear_step():
     mesh, springs, x, v, inv_mass, contacts, external = tiny_scene(offset_m=0.0002, speed_m_s=0.005)
     x0, v0 = x.copy(), v.copy()
     solver = ImplicitEuler(springs, len(x), cg_tolerance=1e-12, newton_tolerance_n=1e-9, max_newton=10)
-    solver.step(x, v, inv_mass, external, FRAME_S, 3.0, np.zeros(3))
+    history = StepHistory(solver.n_nodes)
+    solver.step(history, x, v, inv_mass, external, FRAME_S, 3.0, np.zeros(3))
     assert 1 <= solver.last_newton_iterations < 10 and solver.last_residual_n <= 1e-9
     # backward Euler: M·(v − v0) = h·f(x0 + h·v, v) on every free node
     free = inv_mass > 0.0
@@ -121,45 +124,48 @@ def liver():
 
 def perturbed(model, seed=0, scale=0.002):
     rng = np.random.default_rng(seed)
-    x = model.mesh.points + rng.normal(scale=scale, size=model.mesh.points.shape)
-    x[model.fixed_nodes] = model.mesh.points[model.fixed_nodes]
+    x = model.structure.mesh.points + rng.normal(scale=scale, size=model.structure.mesh.points.shape)
+    x[model.structure.fixed_nodes] = model.structure.mesh.points[model.structure.fixed_nodes]
     return x, np.zeros_like(x)
 
 
 def test_stable_at_one_step_per_frame_where_symplectic_euler_diverges(liver):
-    p = liver.params
+    p = liver.structure.params
     x, v = perturbed(liver)
-    solver = ImplicitEuler(liver.springs, len(x))
+    solver = ImplicitEuler(liver.structure.springs, len(x))
+    history = StepHistory(solver.n_nodes)
     for _ in range(150):
-        solver.step(x, v, liver.inv_mass, np.zeros_like(x), FRAME_S, p.environment_damping_per_s, np.zeros(3))
-    assert np.isfinite(x).all() and np.abs(x - liver.mesh.points).max() < 0.002
+        solver.step(history, x, v, liver.state.inv_mass, np.zeros_like(x), FRAME_S, p.environment_damping_per_s,
+                    np.zeros(3))
+    assert np.isfinite(x).all() and np.abs(x - liver.structure.mesh.points).max() < 0.002
     assert np.abs(v).max() < 1e-3
     xe, ve = perturbed(liver)
     settings = explicit_kernels.StepSettings(FRAME_S, 30, p.environment_damping_per_s, np.zeros(3), True)
-    no_tool = tool_state(liver.tool, None, None, p, 0.0, xe, liver.mesh.skin)
+    no_tool = tool_state(liver.tool.shape, None, None, p, 0.0, xe, liver.structure.mesh.skin)
     work = explicit_kernels.WorkArrays(np.zeros_like(xe), np.zeros((1, len(xe), 3)), False)
     with np.errstate(all="ignore"):
-        explicit_kernels.run_frame(xe, ve, liver.inv_mass, np.zeros_like(xe), liver._spring_arrays, liver.support,
-                                   settings, no_tool, work)
-    assert not (np.isfinite(xe).all() and np.abs(xe - liver.mesh.points).max() < 0.1)
+        explicit_kernels.run_frame(xe, ve, liver.state.inv_mass, np.zeros_like(xe), liver.structure.spring_arrays,
+                                   liver.structure.support, settings, no_tool, work)
+    assert not (np.isfinite(xe).all() and np.abs(xe - liver.structure.mesh.points).max() < 0.1)
 
 
 def energy_j(model, x, v):
     """Kinetic energy plus the springs' elastic energy, ∫T dl = l0·(λ1·d⁴/4 + λ2·d²/2)."""
-    s = model.springs
+    s = model.structure.springs
     d = np.linalg.norm(x[s.node_j] - x[s.node_i], axis=1) / s.rest_length_m - 1.0
     elastic = (s.rest_length_m * (s.lambda1_n * d ** 4 / 4 + s.lambda2_n * d ** 2 / 2)).sum()
-    return elastic + 0.5 * (model.masses_kg * (v ** 2).sum(axis=1)).sum()
+    return elastic + 0.5 * (model.structure.masses_kg * (v ** 2).sum(axis=1)).sum()
 
 
 def test_energy_decreases_without_external_work(liver):
     x, v = perturbed(liver, seed=1, scale=0.003)
     v[:] = np.random.default_rng(2).normal(scale=0.05, size=v.shape)
-    v[liver.fixed_nodes] = 0.0
-    solver = ImplicitEuler(liver.springs, len(x))
+    v[liver.structure.fixed_nodes] = 0.0
+    solver = ImplicitEuler(liver.structure.springs, len(x))
+    history = StepHistory(solver.n_nodes)
     energies = [energy_j(liver, x, v)]
     for _ in range(60):
-        solver.step(x, v, liver.inv_mass, np.zeros_like(x), FRAME_S, 0.0, np.zeros(3))
+        solver.step(history, x, v, liver.state.inv_mass, np.zeros_like(x), FRAME_S, 0.0, np.zeros(3))
         energies.append(energy_j(liver, x, v))
     steps = np.diff(energies)
     assert (steps <= 1e-9 * energies[0]).all()
@@ -168,14 +174,15 @@ def test_energy_decreases_without_external_work(liver):
 
 def test_held_nodes_stay_put(liver):
     x, v = perturbed(liver, seed=4)
-    held = np.concatenate([liver.fixed_nodes, default_liver().skin_nodes[:5]])
-    inv_mass = liver.inv_mass.copy()
+    held = np.concatenate([liver.structure.fixed_nodes, default_liver().skin_nodes[:5]])
+    inv_mass = liver.state.inv_mass.copy()
     inv_mass[held] = 0.0
     v[held] = 0.01  # a kinematic node's velocity is the scene's: kept, and it does not move during the step
     before = x[held].copy()
-    solver = ImplicitEuler(liver.springs, len(x))
+    solver = ImplicitEuler(liver.structure.springs, len(x))
+    history = StepHistory(solver.n_nodes)
     for _ in range(5):
-        solver.step(x, v, inv_mass, np.zeros_like(x), FRAME_S, 3.0, np.array([0.0, 0.0, -9.81]))
+        solver.step(history, x, v, inv_mass, np.zeros_like(x), FRAME_S, 3.0, np.array([0.0, 0.0, -9.81]))
     np.testing.assert_array_equal(x[held], before)
     np.testing.assert_array_equal(v[held], 0.01)
 
@@ -218,13 +225,14 @@ def test_press_and_release_matches_symplectic_euler_at_72_substeps():
     # the conditions this solver-level check was written for
     paper = ModelParams(spring_constants="paper", support="paper")
     explicit, model = LiverModel(mesh, paper.with_changes(integrator="symplectic_euler")), LiverModel(mesh, paper)
-    assert explicit.params.substeps == 72
-    p, tool = model.params, model.tool
+    assert explicit.structure.params.substeps == 72
+    p, tool = model.structure.params, model.tool.shape
     settings = ScriptSettings(anchor_m=tuple(press_anchor(mesh)), tool_radius_m=tool.radius_m, depth_m=0.01,
                               clearance_m=0.005, approach_s=0.1, press_s=0.3, hold_s=0.2, withdraw_s=0.1, rest_s=0.3)
     script = make_script("press_release", settings)
-    solver = ImplicitEuler(model.springs, len(mesh.points))
-    x, v = model.positions, model.velocities
+    solver = ImplicitEuler(model.structure.springs, len(mesh.points))
+    history = StepHistory(solver.n_nodes)
+    x, v = model.state.positions, model.state.velocities
     skin = np.asarray(mesh.skin, dtype=np.int64)
     previous = None
     worst_position = worst_force = peak = 0.0
@@ -235,9 +243,9 @@ def test_press_and_release_matches_symplectic_euler_at_72_substeps():
         previous = pose
         # the tool at the end of the frame, as the explicit kernel's last substep
         contacts = surface_contacts(x, v, state, state.velocity_m_s * FRAME_S, FRAME_S)
-        force = solver.step(x, v, model.inv_mass, model.external_forces_n, FRAME_S, p.environment_damping_per_s,
-                            np.zeros(3), contacts)
-        worst_position = max(worst_position, np.abs(x - explicit.positions).max())
+        force = solver.step(history, x, v, model.state.inv_mass, model.state.external_forces_n, FRAME_S,
+                            p.environment_damping_per_s, np.zeros(3), contacts)
+        worst_position = max(worst_position, np.abs(x - explicit.state.positions).max())
         worst_force = max(worst_force, np.abs(force - expected).max())
         peak = max(peak, np.linalg.norm(expected))
     assert peak > 0.3  # a real press
@@ -248,23 +256,24 @@ def test_press_and_release_matches_symplectic_euler_at_72_substeps():
 def test_bdf2_is_second_order_and_falls_back_to_backward_euler(liver):
     # the liver set turning about its fixed nodes: halving h divides BDF2's error by ~4, backward Euler's by ~2
     def run(steps, second_order, duration_s=0.2):
-        x = liver.mesh.points.copy()
+        x = liver.structure.mesh.points.copy()
         v = 0.5 * np.cross([0.0, 0.0, 1.0], x - x.mean(axis=0))
-        v[liver.fixed_nodes] = 0.0
-        solver = ImplicitEuler(liver.springs, len(x), cg_tolerance=1e-10, newton_tolerance_n=1e-9, max_newton=10,
-                               second_order=second_order)
+        v[liver.structure.fixed_nodes] = 0.0
+        solver = ImplicitEuler(liver.structure.springs, len(x), cg_tolerance=1e-10, newton_tolerance_n=1e-9,
+                               max_newton=10, second_order=second_order)
+        history = StepHistory(solver.n_nodes)
         for _ in range(steps):
-            solver.step(x, v, liver.inv_mass, np.zeros_like(x), duration_s / steps, 0.0, np.zeros(3))
-        return x, v, solver
+            solver.step(history, x, v, liver.state.inv_mass, np.zeros_like(x), duration_s / steps, 0.0, np.zeros(3))
+        return x, v, solver, history
     exact = run(1600, True)[0]
     errors = {order: [np.abs(run(n, order)[0] - exact).max() for n in (15, 30)] for order in (True, False)}
     assert errors[True][0] / errors[True][1] > 3.5
     assert 1.7 < errors[False][0] / errors[False][1] < 2.3
     assert errors[True][0] < errors[False][0] / 5
-    x, v, solver = run(2, True)
+    x, v, solver, history = run(2, True)
     assert solver.last_second_order
     x += 1e-6  # a state set from outside: the next step has no history
-    solver.step(x, v, liver.inv_mass, np.zeros_like(x), 0.1, 0.0, np.zeros(3))
+    solver.step(history, x, v, liver.state.inv_mass, np.zeros_like(x), 0.1, 0.0, np.zeros(3))
     assert not solver.last_second_order
 
 
@@ -274,7 +283,7 @@ def test_the_default_is_one_implicit_step_per_frame_and_the_explicit_ones_keep_t
     assert params.with_changes(integrator="symplectic_euler").substeps == 72
     assert params.with_changes(integrator="explicit_euler", substeps=90).substeps == 90
     model = LiverModel(default_liver())
-    assert model.stable_dt_s == np.inf and model.implicit
+    assert model.structure.stable_dt_s == np.inf and model.structure.implicit
 
 
 def demo_script(mesh, tool):
@@ -286,17 +295,18 @@ def demo_script(mesh, tool):
 def test_demo_press_slide_and_release_matches_symplectic_euler_at_72_substeps():
     mesh = default_liver()
     model, reference_model = LiverModel(mesh), LiverModel(mesh, ModelParams(integrator="symplectic_euler"))
-    assert model.params.substeps == 1 and reference_model.params.substeps == 72
-    script = demo_script(mesh, model.tool)
+    assert model.structure.params.substeps == 1 and reference_model.structure.params.substeps == 72
+    script = demo_script(mesh, model.tool.shape)
     worst_position = worst_force = peak = 0.0
     for frame in range(int(round(script.duration_s / FRAME_S))):
         pose = ToolPose(script.position_at((frame + 1) * FRAME_S))
         result, expected = model.step_frame(pose), reference_model.step_frame(pose)
         assert result.divergence is None and expected.divergence is None
-        worst_position = max(worst_position, np.abs(model.positions - reference_model.positions).max())
+        worst_position = max(worst_position, np.abs(model.state.positions - reference_model.state.positions).max())
         worst_force = max(worst_force, np.abs(result.tool_force_n - expected.tool_force_n).max())
         peak = max(peak, np.linalg.norm(expected.tool_force_n))
-    assert peak > 0.2 and reference_model.displacement_m().max() < 1e-3  # a real press, then back at rest
+    rested = reference_model.state.displacement_m(reference_model.structure).max()
+    assert peak > 0.2 and rested < 1e-3  # a real press, then back at rest
     assert worst_position < 0.2e-3
     assert worst_force < 0.01
 
@@ -305,7 +315,7 @@ def test_demo_press_slide_and_release_matches_symplectic_euler_at_72_substeps():
 def test_capsule_and_box_tools_press_with_the_implicit_step(kind):
     mesh = default_liver()
     shape = ToolShape(kind, radius_m=0.01, length_m=0.04, half_extents_m=(0.015, 0.015, 0.01))
-    model, reference_model = (LiverModel(mesh, params, shape) for params in
+    model, reference_model = (LiverModel(mesh, params, ToolContact(shape)) for params in
                               (ModelParams(), ModelParams(integrator="symplectic_euler")))
     top = press_anchor(mesh)
     reach = shape.half_extents_m[2] if kind == "box" else shape.radius_m

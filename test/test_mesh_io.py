@@ -8,7 +8,8 @@ import pytest
 import trimesh
 
 from liver_sim.mesh import io as mesh_io
-from liver_sim.mesh.io import SurfaceSignedDistance, load_mesh, write_mesh
+from liver_sim.mesh.io import load_mesh, write_mesh
+from liver_sim.mesh.signed_distance import SurfaceSignedDistance
 from liver_sim.mesh.tetmesh import MeshError, TetMesh, signed_volumes
 
 from meshes import write_sphere_surface

@@ -6,9 +6,10 @@ import pytest
 
 from liver_sim.physics import explicit_kernels, reference, spring_kernels
 from liver_sim.physics.contact import ToolPose
-from liver_sim.physics.model import LiverModel, default_fixed_nodes
+from liver_sim.physics.model import LiverModel
 from liver_sim.physics.model_params import FIG2_LAW, ModelParams, SpringLaw
 from liver_sim.physics.springs import build_springs
+from liver_sim.physics.structure import default_fixed_nodes
 
 from meshes import box_mesh, kinetic_energy_j
 
@@ -107,23 +108,23 @@ def test_spring_kernels_equal_numpy_oracle(box, parallel):
 def test_model_frame_equals_numpy_oracle_steps(box, integrator, parallel):
     params = ModelParams(integrator=integrator, substeps=1, environment_damping_per_s=1.5,
                          gravity_m_s2=(0.0, 0.0, -9.81), spring_constants="paper")
-    stable = LiverModel(box, params).stable_dt_s
+    stable = LiverModel(box, params).structure.stable_dt_s
     params = params.with_changes(substeps=math.ceil(1.0 / (150.0 * 0.9 * stable)))
     model = LiverModel(box, params, parallel=parallel)
     x, v = perturbed_state(box)
-    model.positions[:], model.velocities[:] = x, v
+    model.state.positions[:], model.state.velocities[:] = x, v
     model.step_frame(None)
     for _ in range(params.substeps):
-        x, v = reference.step(x, v, model.springs, model.inv_mass, params.dt_s, 1.5, params.gravity_m_s2,
-                              integrator, model.support)
-    np.testing.assert_allclose(model.positions, x, rtol=1e-9, atol=1e-12)
-    np.testing.assert_allclose(model.velocities, v, rtol=1e-9, atol=1e-12)
+        x, v = reference.step(x, v, model.structure.springs, model.state.inv_mass, params.dt_s, 1.5,
+                              params.gravity_m_s2, integrator, model.structure.support)
+    np.testing.assert_allclose(model.state.positions, x, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(model.state.velocities, v, rtol=1e-9, atol=1e-12)
 
 
 def total_energy(model):
     """Kinetic plus the elastic energy of the springs' λ2 and λ1 terms: ∫(λ1 d³ + λ2 d) l0 dd."""
-    s = model.springs
-    length = np.linalg.norm(model.positions[s.node_j] - model.positions[s.node_i], axis=1)
+    s = model.structure.springs
+    length = np.linalg.norm(model.state.positions[s.node_j] - model.state.positions[s.node_i], axis=1)
     d = (length - s.rest_length_m) / s.rest_length_m
     elastic = (s.rest_length_m * (s.lambda1_n * d ** 4 / 4 + s.lambda2_n * d ** 2 / 2)).sum()
     return kinetic_energy_j(model) + elastic
@@ -131,7 +132,7 @@ def total_energy(model):
 
 def test_energy_decays_with_damping(box):
     model = LiverModel(box, PAPER_SCENE)
-    model.positions[:] = perturbed_state(box)[0]
+    model.state.positions[:] = perturbed_state(box)[0]
     energies = [total_energy(model)]
     for _ in range(60):
         model.step_frame(None)
@@ -146,11 +147,11 @@ def test_fixed_nodes_default_to_the_middle_tet_and_stay_put(box):
     centroid = box.points[fixed].mean(axis=0)
     assert np.linalg.norm(centroid - box.points.mean(axis=0)) < 0.02
     model = LiverModel(box, PAPER_SCENE)
-    model.positions[:] = perturbed_state(box)[0]
-    before = model.positions[fixed].copy()
+    model.state.positions[:] = perturbed_state(box)[0]
+    before = model.state.positions[fixed].copy()
     for _ in range(10):
         model.step_frame(None)
-    np.testing.assert_array_equal(model.positions[fixed], before)
+    np.testing.assert_array_equal(model.state.positions[fixed], before)
 
 
 def test_fixed_nodes_out_of_range_are_refused(box):
@@ -171,13 +172,13 @@ def test_out_of_range_parameters_are_refused_by_name(change, name):
 
 
 def test_stable_time_step_predicts_divergence(box):
-    stable = LiverModel(box, ModelParams(support="paper", integrator="symplectic_euler")).stable_dt_s
+    stable = LiverModel(box, ModelParams(support="paper", integrator="symplectic_euler")).structure.stable_dt_s
     assert 0 < stable < math.inf
-    assert LiverModel(box, PAPER_SCENE).stable_dt_s == math.inf  # the implicit integrator has no bound
+    assert LiverModel(box, PAPER_SCENE).structure.stable_dt_s == math.inf  # the implicit integrator has no bound
     # Just below the bound the model stays finite.
     steps_ok = math.ceil(1.0 / (150.0 * stable * 0.9))
     ok = LiverModel(box, ModelParams(support="paper", integrator="symplectic_euler", substeps=steps_ok))
-    ok.positions[:] = perturbed_state(box)[0]
+    ok.state.positions[:] = perturbed_state(box)[0]
     assert all(ok.step_frame(None).divergence is None for _ in range(30))
 
 
@@ -185,24 +186,24 @@ def test_undamped_explicit_euler_has_no_stable_step(box):
     law = SpringLaw(43.0, 0.3, 0.0)
     params = ModelParams(support="paper", integrator="explicit_euler", spring_constants="paper", capsule=law,
                          parenchyma=law, environment_damping_per_s=0.0)
-    assert LiverModel(box, params).stable_dt_s == 0.0
+    assert LiverModel(box, params).structure.stable_dt_s == 0.0
 
 
 def test_divergence_is_reported_with_its_cause_and_the_model_resets(box):
     params = ModelParams(support="paper", integrator="symplectic_euler", substeps=1, contact_stiffness_n_per_m=300.0)
     model = LiverModel(box, params)
-    model.positions[:] = perturbed_state(box)[0] * 1.3
+    model.state.positions[:] = perturbed_state(box)[0] * 1.3
     reports = [model.step_frame(None).divergence for _ in range(40)]
     report = next(r for r in reports if r is not None)
     assert "stability bound" in report and "substeps" in report
     assert model.divergences >= 1
-    assert np.isfinite(model.positions).all()
+    assert np.isfinite(model.state.positions).all()
 
 
 def test_non_finite_state_is_caught_within_one_frame(box):
     model = LiverModel(box, PAPER_SCENE)
-    model.velocities[5, 0] = math.nan
+    model.state.velocities[5, 0] = math.nan
     result = model.step_frame(ToolPose(np.array([0.04, 0.03, 0.1])))
     assert result.divergence is not None and "non-finite" in result.divergence
-    np.testing.assert_array_equal(model.positions, box.points)
+    np.testing.assert_array_equal(model.state.positions, box.points)
     assert np.isfinite(result.tool_force_n).all() and not result.local_model.valid

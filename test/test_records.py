@@ -10,7 +10,7 @@ import time
 import pytest
 
 from liver_sim.base.process_settings import cli_command_line
-from liver_sim.running.launcher import RunFile, _command_line, _process_start, run_dir, stop_leftovers
+from liver_sim.running.launcher import RunEntry, RunFile, _command_line, _process_start, run_dir, stop_leftovers
 from liver_sim.sessions.bag import BagError, BagWriter, _salvaged_mcap, bag_info, check_bag
 from liver_sim.sessions.gaps import SequenceGaps
 
@@ -93,7 +93,8 @@ def test_leftovers_of_a_dead_run_are_stopped_and_a_live_run_is_refused(tmp_path)
     try:
         with run_file.edit() as runs:
             runs.append({"owner": [dead_pid(), 1], "log_dir": "old", "processes": [
-                ["liver_physics", leftover.pid, _process_start(leftover.pid), False, _command_line(leftover.pid)]]})
+                RunEntry("liver_physics", leftover.pid, _process_start(leftover.pid), False,
+                         _command_line(leftover.pid))]})
         said = []
         assert stop_leftovers(run_file, said.append) == [f"liver_physics (pid {leftover.pid})"]
         assert leftover.wait(timeout=10) == -signal.SIGTERM and "liver_physics" in said[0]
@@ -101,7 +102,7 @@ def test_leftovers_of_a_dead_run_are_stopped_and_a_live_run_is_refused(tmp_path)
         live = sleeping_process()
         with run_file.edit() as runs:
             runs.append({"owner": [live.pid, _process_start(live.pid)], "log_dir": "busy", "processes": [
-                ["haptic_bridge", live.pid, _process_start(live.pid), False, _command_line(live.pid)]]})
+                RunEntry("haptic_bridge", live.pid, _process_start(live.pid), False, _command_line(live.pid))]})
         with pytest.raises(RuntimeError, match="choose another ROS_DOMAIN_ID"):
             stop_leftovers(run_file)
         assert live.poll() is None  # another live run's process is never touched
@@ -118,8 +119,8 @@ def test_a_process_is_signalled_only_when_pid_start_and_command_line_match(tmp_p
     try:
         with run_file.edit() as runs:  # the pid and start time of `other`, but the command line of a node
             runs.append({"owner": [dead_pid(), 1], "log_dir": "old", "processes": [
-                ["liver_physics", other.pid, _process_start(other.pid), False, "liver_physics\0--ros-args\0"],
-                ["haptic_bridge", other.pid, _process_start(other.pid), False]]})  # no command line noted
+                RunEntry("liver_physics", other.pid, _process_start(other.pid), False, "liver_physics\0--ros-args\0"),
+                ["haptic_bridge", other.pid, _process_start(other.pid), False]]})  # an older entry: no command line
         assert stop_leftovers(run_file, lambda line: None) == []
         time.sleep(0.2)
         assert other.poll() is None, "a process that is not the one noted is never signalled"

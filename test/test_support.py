@@ -8,9 +8,10 @@ import pytest
 from liver_sim.cli.main import main
 from liver_sim.mesh.liver_shape import default_liver
 from liver_sim.physics import implicit_kernels, reference, spring_kernels
-from liver_sim.physics.model import LiverModel, default_fixed_nodes
+from liver_sim.physics.model import LiverModel
 from liver_sim.physics.model_params import ModelParams
 from liver_sim.physics.parameters import model_params
+from liver_sim.physics.structure import default_fixed_nodes
 from liver_sim.physics.support import SupportArrays, build_support
 from liver_sim.sessions.parameters import node_parameters
 from liver_sim.studies.validate import figures_json
@@ -56,21 +57,23 @@ def test_support_force_and_jacobian_in_both_integrators():
 def test_the_organ_support_holds_the_default_liver_and_the_paper_scene_stays_selectable():
     liver = default_liver()
     organ, paper = LiverModel(liver), LiverModel(liver, ModelParams(support="paper"))
-    assert organ.fixed_nodes.size == 0 and len(organ.support.nodes) >= 20
-    assert np.isin(organ.support.nodes, liver.skin_nodes).all() and (organ.support.stiffness_n_per_m > 0).all()
+    support = organ.structure.support
+    assert organ.structure.fixed_nodes.size == 0 and len(support.nodes) >= 20
+    assert np.isin(support.nodes, liver.skin_nodes).all() and (support.stiffness_n_per_m > 0).all()
     # the bare area and the vena cava are posterior: most of the tie stiffness holds the posterior face
-    posterior = liver.points[organ.support.nodes, 1] > 0.02
-    assert organ.support.stiffness_n_per_m[posterior].sum() > 0.8 * organ.support.stiffness_n_per_m.sum()
-    assert np.array_equal(paper.fixed_nodes, default_fixed_nodes(liver)) and len(paper.support.nodes) == 0
+    posterior = liver.points[support.nodes, 1] > 0.02
+    assert support.stiffness_n_per_m[posterior].sum() > 0.8 * support.stiffness_n_per_m.sum()
+    assert np.array_equal(paper.structure.fixed_nodes, default_fixed_nodes(liver))
+    assert len(paper.structure.support.nodes) == 0
     # regions that hold no skin node of a mesh: the paper's scene
     far = ModelParams(support_regions=((1.0, 1.0, 1.0, 0.01, 1e6),))
     assert len(build_support(liver, liver.skin, far).nodes) == 0
-    assert np.array_equal(LiverModel(liver, far).fixed_nodes, default_fixed_nodes(liver))
+    assert np.array_equal(LiverModel(liver, far).structure.fixed_nodes, default_fixed_nodes(liver))
 
 
 def test_support_parameters_are_checked_and_the_config_gives_the_defaults():
     assert model_params(node_parameters()["liver_physics"]) == ModelParams()
-    values = {**node_parameters()["liver_physics"], "support_regions": [0.0, 0.0, 0.0, 0.01]}
+    values = node_parameters()["liver_physics"].replace(support_regions=[0.0, 0.0, 0.0, 0.01])
     with pytest.raises(ValueError, match="support_regions"):
         model_params(values)
     with pytest.raises(ValueError, match="support_regions"):

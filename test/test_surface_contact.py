@@ -6,8 +6,10 @@ import pytest
 from liver_sim.mesh.landmarks import press_anchor
 from liver_sim.mesh.liver_shape import build_liver, default_liver
 from liver_sim.physics.contact import ToolPose, ToolShape, probe_contacts, tool_state
-from liver_sim.physics.model import LiverModel, default_fixed_nodes
+from liver_sim.physics.model import LiverModel
 from liver_sim.physics.model_params import ModelParams
+from liver_sim.physics.structure import default_fixed_nodes
+from liver_sim.physics.tool_contact import ToolContact
 
 FRAME_RATE_HZ = 150.0
 UP = np.array([0.0, 0.0, 1.0])
@@ -37,8 +39,8 @@ def tool_bottom_m(shape):
 def press_forces(model, xy, depths_m, frames_per_mm=15):
     """|force on the tool| (N) at each depth (m) below the rest surface at xy, pressing slowly (1 mm per
     `frames_per_mm` frames) and settling 30 frames at each depth."""
-    top = surface_height(model.mesh, xy)
-    bottom = tool_bottom_m(model.tool)
+    top = surface_height(model.structure.mesh, xy)
+    bottom = tool_bottom_m(model.tool.shape)
     forces, depth = [], 0.0
     model.reset()
     for target in depths_m:
@@ -109,7 +111,7 @@ def test_pressing_deeper_never_lowers_the_force_even_between_nodes(liver, integr
 
 @pytest.mark.parametrize("kind", ["capsule", "box"])
 def test_capsule_and_box_pressed_deeper_push_harder(liver, kind):
-    model = LiverModel(liver, ModelParams(), TOOLS[kind])
+    model = LiverModel(liver, ModelParams(), ToolContact(TOOLS[kind]))
     for name, xy in places(liver).items():
         forces = press_forces(model, xy, [0.002, 0.005, 0.008])
         assert forces[0] > 0.0 and (np.diff(forces) > 0.0).all(), (name, forces)
@@ -118,7 +120,7 @@ def test_capsule_and_box_pressed_deeper_push_harder(liver, kind):
 @pytest.mark.parametrize("kind", ["sphere", "capsule", "box"])
 def test_sliding_in_contact_never_drops_the_force_to_zero(liver, kind):
     shape = TOOLS[kind]
-    model = LiverModel(liver, ModelParams(), shape)
+    model = LiverModel(liver, ModelParams(), ToolContact(shape))
     anchor = press_anchor(liver)
     top = surface_height(liver, anchor[:2])
     start = np.array([anchor[0] - 0.015, anchor[1], top + tool_bottom_m(shape) - 0.008])

@@ -10,11 +10,12 @@ from liver_sim.base.local_model import penetration
 from liver_sim.mesh.landmarks import press_anchor
 from liver_sim.mesh.liver_shape import default_liver
 from liver_sim.mesh.tetmesh import TET_FACES, TetMesh
-from liver_sim.physics import model as model_module
+from liver_sim.physics import structure as structure_module
 from liver_sim.physics.contact import ToolPose
 from liver_sim.physics.model import LiverModel
 from liver_sim.physics.model_params import ModelParams
 from liver_sim.physics.tearing import TearDetector, duplication_change
+from liver_sim.physics.tool_contact import ToolContact
 from liver_sim.physics.tool_use import ToolUse
 from liver_sim.physics.topology import separate_faces
 
@@ -45,7 +46,7 @@ def bar_params(**changes):
     fixed = tuple(np.flatnonzero(bar.points[:, 0] < 1e-9).tolist())
     # the pulls below were set for the paper's per-spring constants and an explicit step
     params = ModelParams(fixed_nodes=fixed, spring_constants="paper", integrator="symplectic_euler", **changes)
-    stable = LiverModel(bar, params).stable_dt_s
+    stable = LiverModel(bar, params).structure.stable_dt_s
     return bar, params.with_changes(substeps=math.ceil(1.0 / (params.frame_rate_hz * 0.6 * stable)))
 
 
@@ -53,21 +54,22 @@ def pulled_bar(force_n, **changes):
     """The bar, left end fixed, its last layer of cubes pulled along +x (force ∝ node mass)."""
     bar, params = bar_params(**changes)
     model = LiverModel(bar, params)
-    pulled = model.masses_kg * (bar.points[:, 0] > (NX - 1) * SPACING_M - 1e-9)
-    model.external_forces_n[:, 0] = force_n * pulled / pulled.sum()
+    pulled = model.structure.masses_kg * (bar.points[:, 0] > (NX - 1) * SPACING_M - 1e-9)
+    model.state.external_forces_n[:, 0] = force_n * pulled / pulled.sum()
     return model
 
 
 def record_changes(model):
-    """Wrap model.apply_topology to keep (old mesh, positions, capsule, change) of every change."""
+    """Wrap model.apply to keep (old mesh, positions, capsule, change) of every change."""
     records = []
-    apply = model.apply_topology
+    apply = model.apply
 
     def spy(change):
-        records.append((model.mesh, model.positions.copy(), model.capsule_triangles.copy(), change))
+        records.append((model.structure.mesh, model.state.positions.copy(), model.structure.capsule_triangles.copy(),
+                        change))
         apply(change)
 
-    model.apply_topology = spy
+    model.apply = spy
     return records
 
 
@@ -171,14 +173,14 @@ def test_tearing_parameters_are_validated():
 def torn_bar():
     model = pulled_bar(16.0, tearing=True, tear_strain_parenchyma=0.15, tear_strain_capsule=0.2)
     records = record_changes(model)
-    initial_mass = model.masses_kg.sum()
+    initial_mass = model.structure.masses_kg.sum()
     results = [model.step_frame() for _ in range(300)]
     return model, records, initial_mass, results
 
 
 def test_a_pulled_bar_tears_where_and_only_where_the_threshold_is_exceeded(torn_bar):
     model, records, _, results = torn_bar
-    assert records and model.topology_version == len(records) == sum(r.topology_changed for r in results)
+    assert records and model.structure.version == len(records) == sum(r.topology_changed for r in results)
     for old_mesh, positions, capsule, change in records:
         detector = TearDetector(old_mesh.points, old_mesh.tets, capsule, 0.15, 0.2)
         stretch = dict(zip(map(tuple, np.sort(detector.faces, axis=1).tolist()),
@@ -190,38 +192,39 @@ def test_a_pulled_bar_tears_where_and_only_where_the_threshold_is_exceeded(torn_
 
 def test_an_unstressed_bar_never_tears():
     model = pulled_bar(16.0, tearing=True, tear_strain_parenchyma=0.15, tear_strain_capsule=0.2)
-    model.external_forces_n[:] = 0.0
+    model.state.external_forces_n[:] = 0.0
     assert not any(model.step_frame().topology_changed for _ in range(30))
-    assert model.topology_version == 0
+    assert model.structure.version == 0
 
 
 def test_torn_bar_is_sound_and_conserves_mass(torn_bar):
     model, records, initial_mass, results = torn_bar
-    assert model.masses_kg.sum() == pytest.approx(initial_mass, rel=1e-12)
-    assert_sound(model.mesh)
+    assert model.structure.masses_kg.sum() == pytest.approx(initial_mass, rel=1e-12)
+    assert_sound(model.structure.mesh)
     assert not any(r.divergence for r in results)
-    assert np.isfinite(model.positions).all()
-    assert len(model.positions) == len(model.mesh.points) == len(model.inv_mass) == len(model.external_forces_n)
+    assert np.isfinite(model.state.positions).all()
+    assert (len(model.state.positions) == len(model.structure.mesh.points) == len(model.state.inv_mass)
+            == len(model.state.external_forces_n))
 
 
 def test_opened_faces_carry_no_capsule_springs(torn_bar):
     model, records, _, _ = torn_bar
     original_skin = face_keys(records[0][0].skin)
-    parent = np.arange(len(model.positions))
+    parent = np.arange(len(model.state.positions))
     for _, _, _, change in reversed(records):  # compose new → original node maps
         parent = change.node_sources[parent, 0]
-    capsule = face_keys(model.capsule_triangles)
-    wounds = [f for f in model.mesh.skin.tolist() if tuple(sorted(f)) not in capsule]
+    capsule = face_keys(model.structure.capsule_triangles)
+    wounds = [f for f in model.structure.mesh.skin.tolist() if tuple(sorted(f)) not in capsule]
     assert wounds
-    assert face_keys(parent[model.capsule_triangles]) <= original_skin
+    assert face_keys(parent[model.structure.capsule_triangles]) <= original_skin
     assert not face_keys(parent[np.array(wounds)]) & original_skin
-    cap_edges = {tuple(sorted(e)) for t in model.capsule_triangles.tolist()
+    cap_edges = {tuple(sorted(e)) for t in model.structure.capsule_triangles.tolist()
                  for e in ((t[0], t[1]), (t[1], t[2]), (t[2], t[0]))}
-    springs = model.springs
+    springs = model.structure.springs
     on_capsule = np.array([(i, j) in cap_edges for i, j in zip(springs.node_i.tolist(), springs.node_j.tolist())])
-    par = model.params.parenchyma.lambda2_n
+    par = model.structure.params.parenchyma.lambda2_n
     assert np.allclose(springs.lambda2_n[~on_capsule], par)
-    assert np.allclose(springs.lambda2_n[on_capsule], par + model.params.capsule.lambda2_n)
+    assert np.allclose(springs.lambda2_n[on_capsule], par + model.structure.params.capsule.lambda2_n)
     wound_only = {tuple(sorted(e)) for t in wounds for e in ((t[0], t[1]), (t[1], t[2]), (t[2], t[0]))} - cap_edges
     assert wound_only
 
@@ -230,30 +233,32 @@ def test_momentum_and_mass_carry_over_a_duplication():
     model = pulled_bar(16.0)
     for _ in range(5):
         model.step_frame()
-    model.velocities += np.random.default_rng(1).normal(0.0, 0.01, model.velocities.shape)
-    model.velocities[model.fixed_nodes] = 0.0
-    mesh = model.mesh
+    model.state.velocities += np.random.default_rng(1).normal(0.0, 0.01, model.state.velocities.shape)
+    model.state.velocities[model.structure.fixed_nodes] = 0.0
+    mesh = model.structure.mesh
     faces = mesh.tets[:, TET_FACES].reshape(-1, 3)
     plane = np.isclose(mesh.points[faces][:, :, 0], 5 * SPACING_M).all(axis=1)
-    change = duplication_change(mesh.points, mesh.tets, model.capsule_triangles, faces[plane])
-    momentum = (model.masses_kg[:, None] * model.velocities).sum(axis=0)
-    old_masses = model.masses_kg.copy()
-    mass, force = old_masses.sum(), model.external_forces_n.sum(axis=0)
-    positions = model.positions.copy()
-    model.apply_topology(change)
-    assert components(model.mesh.tets, len(model.positions))[0] == 2
-    assert model.masses_kg.sum() == pytest.approx(mass, rel=1e-12)
-    assert np.allclose((model.masses_kg[:, None] * model.velocities).sum(axis=0), momentum, rtol=1e-12, atol=1e-15)
-    assert np.allclose(model.external_forces_n.sum(axis=0), force, rtol=1e-12)
-    assert np.array_equal(model.positions, positions[change.node_sources[:, 0]])
+    change = duplication_change(mesh.points, mesh.tets, model.structure.capsule_triangles, faces[plane])
+    momentum = (model.structure.masses_kg[:, None] * model.state.velocities).sum(axis=0)
+    old_masses = model.structure.masses_kg.copy()
+    mass, force = old_masses.sum(), model.state.external_forces_n.sum(axis=0)
+    positions = model.state.positions.copy()
+    model.apply(change)
+    assert components(model.structure.mesh.tets, len(model.state.positions))[0] == 2
+    assert model.structure.masses_kg.sum() == pytest.approx(mass, rel=1e-12)
+    assert np.allclose((model.structure.masses_kg[:, None] * model.state.velocities).sum(axis=0), momentum,
+                       rtol=1e-12, atol=1e-15)
+    assert np.allclose(model.state.external_forces_n.sum(axis=0), force, rtol=1e-12)
+    assert np.array_equal(model.state.positions, positions[change.node_sources[:, 0]])
     source = change.node_sources[:, 0]
     copies = np.bincount(source)[source]
-    floor = 0.5 * np.minimum(model.params.min_node_mass_fraction * old_masses.mean(), old_masses[source] / copies)
-    assert (model.masses_kg >= floor * (1 - 1e-12)).all()
-    assert model.topology_version == 1
-    assert_sound(model.mesh)
+    floor = 0.5 * np.minimum(model.structure.params.min_node_mass_fraction * old_masses.mean(),
+                             old_masses[source] / copies)
+    assert (model.structure.masses_kg >= floor * (1 - 1e-12)).all()
+    assert model.structure.version == 1
+    assert_sound(model.structure.mesh)
     model.reset()
-    assert np.array_equal(model.positions, model.mesh.points)
+    assert np.array_equal(model.state.positions, model.structure.mesh.points)
     for _ in range(100):
         assert model.step_frame().divergence is None
 
@@ -264,36 +269,36 @@ def test_copies_of_fixed_nodes_stay_fixed():
     model = LiverModel(mesh, ModelParams(fixed_nodes=(centre,)))
     faces = mesh.tets[:, TET_FACES].reshape(-1, 3)
     plane = np.isclose(mesh.points[faces][:, :, 0], 0.02).all(axis=1)
-    change = duplication_change(mesh.points, mesh.tets, model.capsule_triangles, faces[plane])
-    model.apply_topology(change)
+    change = duplication_change(mesh.points, mesh.tets, model.structure.capsule_triangles, faces[plane])
+    model.apply(change)
     copies = np.flatnonzero(change.node_sources[:, 0] == centre)
     assert len(copies) == 2
-    assert np.array_equal(model.fixed_nodes, copies) and (model.inv_mass[copies] == 0.0).all()
+    assert np.array_equal(model.structure.fixed_nodes, copies) and (model.state.inv_mass[copies] == 0.0).all()
 
 
 def test_apply_topology_change_is_all_or_nothing(monkeypatch):
     model = pulled_bar(16.0)
     for _ in range(3):
         model.step_frame()
-    mesh = model.mesh
+    mesh = model.structure.mesh
     faces = mesh.tets[:, TET_FACES].reshape(-1, 3)
     plane = np.isclose(mesh.points[faces][:, :, 0], 5 * SPACING_M).all(axis=1)
-    change = duplication_change(mesh.points, mesh.tets, model.capsule_triangles, faces[plane])
+    change = duplication_change(mesh.points, mesh.tets, model.structure.capsule_triangles, faces[plane])
     before = model_state(model)
 
-    def broken(*args, **kwargs):  # LiverModel._set_mesh calls it after taking the new mesh and node state
+    def broken(*args, **kwargs):  # build_structure calls it after carrying the node state over
         raise RuntimeError("injected")
 
-    monkeypatch.setattr(model_module, "build_springs", broken)
+    monkeypatch.setattr(structure_module, "build_springs", broken)
     with pytest.raises(RuntimeError, match="injected"):
-        model.apply_topology_change(change)
+        model.apply(change)
     assert_same_state(dict(before, arrays=list(before["arrays"])), model)
     with pytest.raises(ValueError, match="node_sources"):  # checked before the model is touched
-        model.apply_topology_change(dataclasses.replace(change, node_sources=change.node_sources[:-1]))
+        model.apply(dataclasses.replace(change, node_sources=change.node_sources[:-1]))
     assert_same_state(before, model)
     monkeypatch.undo()
-    model.apply_topology_change(change)
-    assert model.topology_version == 1 and len(model.positions) == len(change.rest_points)
+    model.apply(change)
+    assert model.structure.version == 1 and len(model.state.positions) == len(change.rest_points)
 
 
 @pytest.mark.parametrize("integrator", ["implicit_euler", "symplectic_euler"])
@@ -303,111 +308,109 @@ def test_default_liver_tears_under_a_strong_pull_and_keeps_a_manifold_skin(integ
     # soft tip stretches without tearing) and its scene (the organ's support ties the tip by its ligament)
     model = LiverModel(liver, ModelParams(tearing=True, integrator=integrator, spring_constants="paper",
                                           support="paper"))
-    mass = model.masses_kg.sum()
+    mass = model.structure.masses_kg.sum()
     group = np.argsort(-liver.points[:, 0])[:15]
-    model.external_forces_n[group, 0] = 60.0 / len(group)
+    model.state.external_forces_n[group, 0] = 60.0 / len(group)
     results = [model.step_frame() for _ in range(60)]
-    assert any(r.topology_changed for r in results) and model.topology_version > 0
+    assert any(r.topology_changed for r in results) and model.structure.version > 0
     assert not any(r.divergence for r in results)
-    assert len(model.positions) > len(liver.points)
-    assert model.masses_kg.sum() == pytest.approx(mass, rel=1e-12)
-    assert_sound(model.mesh)
+    assert len(model.state.positions) > len(liver.points)
+    assert model.structure.masses_kg.sum() == pytest.approx(mass, rel=1e-12)
+    assert_sound(model.structure.mesh)
     if integrator == "implicit_euler":  # a large tear: still one step per frame
-        assert model.params.substeps == 1
+        assert model.structure.params.substeps == 1
 
 
 def pull_the_dome(tearing):
     """The default liver grasped at its dome and pulled 8 cm up over 400 frames; (model, tool use, results,
     tool tips)."""
     liver = default_liver()
-    model = LiverModel(liver, ModelParams(tearing=tearing))
-    use = ToolUse(model, "grasp", grasp_margin_m=0.005)
+    model = LiverModel(liver, ModelParams(tearing=tearing), ToolContact(use=ToolUse("grasp", grasp_margin_m=0.005)))
     dome = press_anchor(liver)
-    start = dome + [0.0, 0.0, model.tool.radius_m - 0.004]
-    assert use.grasp(ToolPose(start)) > 0
+    start = dome + [0.0, 0.0, model.tool.shape.radius_m - 0.004]
+    assert model.grasp(ToolPose(start)) > 0
     tips = [start + [0.0, 0.0, 0.08 * min(1.0, k / 400)] for k in range(450)]
-    return model, use, [use.step_frame(ToolPose(tip))[0] for tip in tips], tips
+    return model, model.tool.use, [model.step_frame(ToolPose(tip)) for tip in tips], tips
 
 
 def test_grasped_nodes_follow_the_tool_and_pull_it_back_towards_the_liver():
     model, use, results, tips = pull_the_dome(tearing=False)
-    held = model.held_nodes
-    offsets = model.positions[held] - tips[-1]
-    np.testing.assert_allclose(offsets, model.mesh.points[held] - tips[0], atol=1e-12)  # carried rigidly
+    held = model.state.held_nodes
+    offsets = model.state.positions[held] - tips[-1]
+    np.testing.assert_allclose(offsets, model.structure.mesh.points[held] - tips[0], atol=1e-12)  # carried rigidly
     assert not any(r.divergence or r.topology_changed for r in results)
     assert results[-1].tool_force_n[2] < -1.0       # the tissue pulls the tool back down
     # the local model renders the pull: the bridge's λ·depth·n for the tool sphere is the tissue's force
     last = results[-1].local_model
-    depth, direction = penetration(last, tips[-1], model.tool.radius_m)
-    np.testing.assert_allclose(model.params.contact_stiffness_n_per_m * depth * direction,
+    depth, direction = penetration(last, tips[-1], model.tool.shape.radius_m)
+    np.testing.assert_allclose(model.structure.params.contact_stiffness_n_per_m * depth * direction,
                                results[-1].tool_force_n, rtol=1e-9)
-    use.release()
-    assert model.held_nodes.size == 0 and (model.inv_mass[held] > 0).all()
+    model.release()
+    assert model.state.held_nodes.size == 0 and (model.state.inv_mass[held] > 0).all()
     for _ in range(150):
         model.step_frame()
-    assert model.positions[held, 2].max() < tips[-1][2] - 0.03  # let go, the dome falls back
+    assert model.state.positions[held, 2].max() < tips[-1][2] - 0.03  # let go, the dome falls back
 
 
 def test_a_grasped_and_pulled_liver_tears_and_stays_sound():
     model, _, results, _ = pull_the_dome(tearing=True)
     mass = default_liver().lumped_masses(ModelParams().density_kg_m3).sum()
-    assert model.topology_version > 0 and len(model.positions) > len(default_liver().points)
+    assert model.structure.version > 0 and len(model.state.positions) > len(default_liver().points)
     assert not any(r.divergence for r in results)
-    assert model.params.dt_s <= model.stable_dt_s
-    assert model.params.substeps == 1  # implicit: one step per frame whatever the tears made
-    assert model.masses_kg.sum() == pytest.approx(mass, rel=1e-9)
-    assert_sound(model.mesh)
+    assert model.structure.params.dt_s <= model.structure.stable_dt_s
+    assert model.structure.params.substeps == 1  # implicit: one step per frame whatever the tears made
+    assert model.structure.masses_kg.sum() == pytest.approx(mass, rel=1e-9)
+    assert_sound(model.structure.mesh)
 
 
 def test_a_tear_failing_midway_leaves_the_model_as_it_was_and_the_bar_tears_once_it_can(monkeypatch):
     model = pulled_bar(16.0, tearing=True, tear_strain_parenchyma=0.15, tear_strain_capsule=0.2)
     before = []
-    apply = model.apply_topology
+    apply = model.apply
 
     def record_then_apply(change):
         before.append(model_state(model))
         apply(change)
 
-    def broken(*args, **kwargs):  # LiverModel._set_mesh calls it after taking the new mesh and node state
+    def broken(*args, **kwargs):  # build_structure calls it after carrying the node state over
         raise RuntimeError("injected")
 
-    model.apply_topology = record_then_apply
-    monkeypatch.setattr(model_module, "build_springs", broken)
+    model.apply = record_then_apply
+    monkeypatch.setattr(structure_module, "build_springs", broken)
     for _ in range(300):
         result = model.step_frame()
         if before:
             break
-    assert "RuntimeError: injected" in result.topology_failure and not result.topology_changed
+    assert "RuntimeError: injected" in result.topology_failures[0] and not result.topology_changed
     assert_same_state(before[0], model)
     monkeypatch.undo()
     results = [model.step_frame() for _ in range(100)]
-    assert any(r.topology_changed for r in results) and not any(r.topology_failure for r in results)
-    assert_sound(model.mesh)
+    assert any(r.topology_changed for r in results) and not any(r.topology_failures for r in results)
+    assert_sound(model.structure.mesh)
 
 
 def test_repeated_grasp_and_pull_tears_big_chunks_and_never_fails():
     rng = np.random.default_rng(1)
     liver = default_liver()
     model = LiverModel(liver, ModelParams(tearing=True, tear_strain_parenchyma=0.15, tear_strain_capsule=0.15))
-    use = ToolUse(model, "grasp", grasp_margin_m=0.01)
-    mass_kg = model.masses_kg.sum()
+    use = model.tool.use = ToolUse("grasp", grasp_margin_m=0.01)
+    mass_kg = model.structure.masses_kg.sum()
     for _ in range(3):
-        version = model.topology_version
-        node = rng.choice(model.mesh.skin_nodes)
-        outward = model.positions[node] - model.positions.mean(axis=0)
+        version = model.structure.version
+        node = rng.choice(model.structure.mesh.skin_nodes)
+        outward = model.state.positions[node] - model.state.positions.mean(axis=0)
         outward /= np.linalg.norm(outward)
-        start = model.positions[node] + outward * (model.tool.radius_m - 0.004)
+        start = model.state.positions[node] + outward * (model.tool.shape.radius_m - 0.004)
         use.mode = "grasp"
-        assert use.grasp(ToolPose(start)) > 0
+        assert model.grasp(ToolPose(start)) > 0
         pull_m = rng.uniform(0.08, 0.2)
-        for k in range(120):
-            use.step_frame(ToolPose(start + outward * pull_m * min(1.0, k / 80)))
+        results = [model.step_frame(ToolPose(start + outward * pull_m * min(1.0, k / 80))) for k in range(120)]
         use.mode = "press"
-        for _ in range(10):
-            use.step_frame(None)
-        assert not use.failures, use.failures
-        assert model.topology_version > version
-        assert_sound(model.mesh)
-        assert np.isfinite(model.positions).all() and np.isfinite(model.velocities).all()
-        assert model.masses_kg.sum() == pytest.approx(mass_kg, rel=1e-9)
-    assert len(model.positions) > len(liver.points) + 60
+        results += [model.step_frame(None) for _ in range(10)]
+        failures = [text for result in results for text in result.topology_failures]
+        assert not failures, failures
+        assert model.structure.version > version
+        assert_sound(model.structure.mesh)
+        assert np.isfinite(model.state.positions).all() and np.isfinite(model.state.velocities).all()
+        assert model.structure.masses_kg.sum() == pytest.approx(mass_kg, rel=1e-9)
+    assert len(model.state.positions) > len(liver.points) + 60

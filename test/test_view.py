@@ -3,6 +3,8 @@ view of a running network through a real Foxglove WebSocket client, and recorded
 import struct
 import subprocess
 import sys
+import threading
+import time
 
 import numpy as np
 import pytest
@@ -11,7 +13,15 @@ from foxglove_client import VIEW_TOPICS, field_numbers, fields, packed_count, sc
 from liver_sim.base.local_model import LocalModel
 from liver_sim.mesh.liver_shape import default_liver
 from liver_sim.view import scene as scene_module
-from liver_sim.view.scene import DISPLACED_COLOUR, REST_COLOUR, build_scene, force_arrow, lips, plane_patch
+from liver_sim.view.scene import (
+    DISPLACED_COLOUR,
+    REST_COLOUR,
+    build_scene,
+    force_arrow,
+    lip_edges,
+    opened_triangles,
+    plane_patch,
+)
 
 LIVER = default_liver()
 PLANE = LocalModel("plane", True, np.array([0.0, 0.0, 0.05]), np.array([0.0, 0.6, 0.8]), np.zeros(3), 0.0, 0.002,
@@ -21,12 +31,13 @@ PLANE = LocalModel("plane", True, np.array([0.0, 0.0, 0.05]), np.array([0.0, 0.6
 def test_the_scene_holds_every_skin_triangle_coloured_by_its_displacement():
     moved = LIVER.points.copy()
     moved[LIVER.skin[0]] += [0.0, 0.0, -0.02]  # beyond the colour's scale
-    scene = build_scene(moved, LIVER.points, LIVER.skin, LIVER.skin, np.array([0.0, 0.0, 0.1]), 0.015, PLANE,
-                        np.array([0.0, 0.0, 0.5]))
+    scene = build_scene(moved, LIVER.points, LIVER.skin, lip_edges(LIVER.points, LIVER.skin),
+                        np.array([0.0, 0.0, 0.1]), 0.015, PLANE, np.array([0.0, 0.0, 0.5]))
     assert scene.triangle_count == len(LIVER.skin) and scene.triangles.shape == (len(LIVER.skin), 3, 3)
-    assert scene.colours[0] == pytest.approx(np.tile(DISPLACED_COLOUR, (3, 1)))
+    assert scene.colours.shape == (len(LIVER.points), 4)          # one colour per node
+    assert scene.colours[LIVER.skin[0]] == pytest.approx(np.tile(DISPLACED_COLOUR, (3, 1)))
     untouched = ~np.isin(LIVER.skin, LIVER.skin[0]).any(axis=1)
-    assert np.allclose(scene.colours[untouched], REST_COLOUR)
+    assert np.allclose(scene.colours[LIVER.skin[untouched]], REST_COLOUR)
     assert len(scene.lips) == 0                                    # no topology change
     start, end = force_arrow(scene)
     assert end - start == pytest.approx([0.0, 0.0, 0.5 * scene_module.ARROW_M_PER_N])
@@ -39,20 +50,31 @@ def test_a_plane_patch_lies_in_its_plane_around_its_point():
     assert np.linalg.norm(corners - PLANE.point, axis=1) == pytest.approx(np.full(6, half_diagonal))
 
 
-def test_lips_are_the_rim_of_the_triangles_a_cut_added():
-    skin = np.array([[0, 1, 2]])
-    opened = np.array([[0, 1, 2], [1, 3, 2], [3, 4, 2]])   # two new triangles sharing the edge (2, 3)
-    points = np.arange(15, dtype=float).reshape(5, 3)
-    rim = lips(opened, skin, points)
-    edges = {tuple(sorted((int(a[0] // 3), int(b[0] // 3)))) for a, b in rim}
-    assert edges == {(1, 3), (1, 2), (3, 4), (2, 4)}
-    assert len(lips(skin, skin, points)) == 0 and len(lips(opened, None, points)) == 0
+def test_lips_are_the_rim_of_the_triangles_a_cut_opened():
+    """The lips: the edges between the triangles a cut opened (twins at rest: the opening duplicated their nodes in
+    place) and the original skin; none before the cut."""
+    from liver_sim.physics.model import LiverModel
+
+    model = LiverModel(LIVER)
+    assert len(lip_edges(LIVER.points, LIVER.skin)) == 0 and not opened_triangles(LIVER.points, LIVER.skin).any()
+    top = LIVER.points[LIVER.skin_nodes][np.argmax(LIVER.points[LIVER.skin_nodes, 2])]
+    assert model.cut(np.array([top - [0.03, 0.0, 0.0], top + [0.03, 0.0, 0.0]]), 0.01)
+    rest, skin = model.structure.mesh.points, model.structure.mesh.skin
+    opened = opened_triangles(rest, skin)
+    assert 0 < opened.sum() < len(skin)
+
+    def edges(triangles):
+        return {tuple(sorted(e)) for t in triangles.tolist() for e in ((t[0], t[1]), (t[1], t[2]), (t[2], t[0]))}
+    rim = {tuple(e) for e in lip_edges(rest, skin).tolist()}
+    assert rim and rim == edges(skin[opened]) & edges(skin[~opened])
+    scene = build_scene(model.state.positions, rest, skin, lip_edges(rest, skin))
+    assert scene.lips.shape == (len(rim), 2, 3)
 
 
 @pytest.mark.parametrize("host, allowed", [("127.0.0.1", True), ("localhost", True), ("::1", True),
                                            ("0.0.0.0", False), ("192.168.1.20", False), ("liver.example", False)])
 def test_a_non_loopback_address_is_refused_unless_asked_for(host, allowed):
-    from liver_sim.view.server import check_host
+    from liver_sim.view.live_view import check_host
 
     if allowed:
         assert check_host(host, False) == host
@@ -95,19 +117,82 @@ def test_scene_updates_read_back_with_the_advertised_schema():
     """The message the view logs, read as the app reads it: by the field numbers of the schema it advertises."""
     from foxglove.messages import SceneUpdate
 
-    from liver_sim.view.server import scene_update
+    from liver_sim.view.foxglove_scene import scene_update
 
-    scene = build_scene(LIVER.points, LIVER.points, LIVER.skin, LIVER.skin, np.array([0.0, 0.0, 0.1]), 0.015, PLANE,
+    scene = build_scene(LIVER.points, LIVER.points, LIVER.skin, None, np.array([0.0, 0.0, 0.1]), 0.015, PLANE,
                         np.array([0.0, 0.0, 0.4]))
     schema = SceneUpdate.get_schema()
     assert schema.name == "foxglove.SceneUpdate" and schema.encoding == "protobuf"
-    colours = np.tile(REST_COLOUR, (len(LIVER.points), 1))
-    for kwargs in ({}, {"points": (LIVER.points, colours), "indices": LIVER.skin}):
-        entities = decode_scene(scene_update(scene, 1_500_000_000, **kwargs).encode(), bytes(schema.data))
-        assert set(entities) == {"skin", "tool", "local_model", "force", "lips"}
-        assert skin_triangles(entities, bytes(schema.data)) == len(LIVER.skin)
-        assert len(entities["tool"]["spheres"]) == 1 and len(entities["force"]["arrows"]) == 1
-        assert len(entities["local_model"]["triangles"]) == 1 and "lines" not in entities["lips"]
+    entities = decode_scene(scene_update(scene, 1_500_000_000).encode(), bytes(schema.data))
+    assert set(entities) == {"skin", "tool", "local_model", "force", "lips"}
+    assert skin_triangles(entities, bytes(schema.data)) == len(LIVER.skin)
+    assert len(entities["tool"]["spheres"]) == 1 and len(entities["force"]["arrows"]) == 1
+    assert len(entities["local_model"]["triangles"]) == 1 and "lines" not in entities["lips"]
+
+
+def wait_for(condition, timeout_s: float, what: str, every=None) -> None:
+    """Wait until `condition()` holds (calling `every()` between polls), or fail naming `what`."""
+    deadline = time.monotonic() + timeout_s
+    while not condition():
+        assert time.monotonic() < deadline, f"timed out waiting for {what}"
+        if every is not None:
+            every()
+        time.sleep(0.02)
+
+
+@pytest.mark.no_rate_loops
+def test_the_live_view_refuses_a_bad_mesh_and_goes_on_after_a_failing_tick(ros_domain_id):
+    """A running view fed a shape_msgs/Mesh whose triangles index missing vertices refuses and counts it and keeps
+    serving scenes of the last good surface; a tick that raises is counted and the next ticks serve as before."""
+    import rclpy
+    from geometry_msgs.msg import Point
+    from rclpy.executors import SingleThreadedExecutor
+    from shape_msgs.msg import Mesh, MeshTriangle
+
+    from liver_sim.view.live_view import LiveView
+    from msg_defs.point_cloud import nodes_to_pointcloud2
+    from msg_defs.skin import skin_mesh_msg
+    from msg_defs.topics import TOPICS
+
+    failed = []
+
+    def fail_once(scene, stamp_ns):
+        if not failed:
+            failed.append(stamp_ns)
+            raise RuntimeError("a tick that fails")
+
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    executor = SingleThreadedExecutor(context=context)
+    view = LiveView(port=0, rate_hz=50.0, on_scene=fail_once, context=context)
+    source = rclpy.create_node("view_test_source", context=context)
+    try:
+        surface = source.create_publisher(TOPICS["surface"].type, TOPICS["surface"].name, TOPICS["surface"].qos)
+        nodes = source.create_publisher(TOPICS["nodes"].type, TOPICS["nodes"].name, TOPICS["nodes"].qos)
+        executor.add_node(view)
+        executor.add_node(source)
+        spinner = threading.Thread(target=executor.spin, daemon=True)
+        spinner.start()
+
+        def publish_nodes():
+            nodes.publish(nodes_to_pointcloud2(LIVER.points, (1, 0), "liver"))
+
+        surface.publish(skin_mesh_msg(LIVER.skin, LIVER.points))
+        wait_for(lambda: view.scenes >= 5 and view.tick_errors == 1, 30.0, "scenes and the failing tick",
+                 publish_nodes)
+        bad = Mesh(triangles=[MeshTriangle(vertex_indices=[0, 1, 4000])],
+                   vertices=[Point(x=0.0, y=0.0, z=0.0), Point(x=0.01, y=0.0, z=0.0)])
+        surface.publish(bad)
+        wait_for(lambda: view.refused == 1, 30.0, "the bad Mesh refused", publish_nodes)
+        served = view.scenes
+        wait_for(lambda: view.scenes >= served + 10, 30.0, "scenes after the bad Mesh", publish_nodes)
+        assert view.tick_errors == 1 and view.refused == 1 and view._loop.is_alive()
+    finally:
+        view.close()
+        executor.shutdown()
+        view.destroy_node()
+        source.destroy_node()
+        context.try_shutdown()
 
 
 def test_the_view_command_refuses_a_public_address_by_name():
@@ -183,10 +268,12 @@ def test_a_recorded_session_carries_schemas_foxglove_decodes(recorded_demo):
 
 
 def test_the_loop_bench_reads_the_views_share_and_scene_rate(tmp_path):
+    """The bench reads the scene rate from the summary `liver-sim view --summary` writes, not from its output."""
     from liver_sim.bench.loop import VIEW, view_figures
 
-    log = tmp_path / "view.log"
-    log.write_text("serving the live view on ws://127.0.0.1:40000 (…)\nserved 900 scenes in 30.1 s (29.9 per second)\n")
-    figures = view_figures({VIEW: {"cpu_share_of_one_core": 0.04}}, log)
+    summary = tmp_path / "view_summary.json"
+    summary.write_text('{"scenes": 900, "seconds": 30.1, "scenes_per_s": 29.9, "refused_messages": 0, '
+                       '"tick_errors": 0}\n')
+    figures = view_figures({VIEW: {"cpu_share_of_one_core": 0.04}}, summary)
     assert figures == {"cpu_share_of_one_core": 0.04, "scenes_per_s": 29.9}
-    assert view_figures({}, tmp_path / "absent.log") == {"cpu_share_of_one_core": None, "scenes_per_s": None}
+    assert view_figures({}, tmp_path / "absent.json") == {"cpu_share_of_one_core": None, "scenes_per_s": None}

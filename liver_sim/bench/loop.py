@@ -3,6 +3,7 @@ would: rates and period errors on the wire, pose-to-force latency, the Fig. 8 sm
 process cost, each against its target, beside the machine's own stalls."""
 from __future__ import annotations
 
+import json
 import os
 import time
 from pathlib import Path
@@ -12,11 +13,9 @@ import numpy as np
 from liver_sim.analysis import contact_fraction, fig8_figures, held_wrench_baseline
 from liver_sim.base.process_settings import cli_command_line
 from liver_sim.bench.machine import machine
-from liver_sim.running.launcher import log_tail
 from liver_sim.running.machine_stalls import stall_summary
 from liver_sim.running.network import closed_loop_plan, run_network, wire_gaps, wire_rates
 from liver_sim.sessions.parameters import node_parameters
-from liver_sim.view.defaults import VIEW_SERVED
 
 LOOP_TARGETS = {"physics_rate_hz": (147.0, 153.0), "haptic_rate_hz_min": 995.0, "haptic_period_error_p99_s_max": 0.0005,
                 "haptic_max_gap_s_max": 0.005, "haptic_max_gap_outside_machine_stalls_s_max": 0.005,
@@ -46,7 +45,7 @@ def run_loop_bench(duration_s: float = 30.0, log_dir=None, progress=None, observ
     log_dir = Path(log_dir or "out/bench_loop/logs")
     report = loop_run(duration_s, log_dir, progress, observers, view=view, check_domain=check_domain)
     if view:
-        report["results"]["view"] = view_figures(report["processes"], log_dir / f"{VIEW}.log")
+        report["results"]["view"] = view_figures(report["processes"], log_dir / VIEW_SUMMARY)
     if extra_load:
         (progress or (lambda line: None))("the same run with one core-bound process at normal priority beside it:")
         loaded = loop_run(duration_s, log_dir.with_name(log_dir.name + "_extra_load"), progress, observers, 1,
@@ -81,7 +80,7 @@ def loop_run(duration_s: float, log_dir, progress=None, observers: dict | None =
     plan = closed_loop_plan(extra={"phantom_sim": {"loop_script": True, "script": "explore"}})
     plan.observers.update(observers or {})
     if view:  # the live view joins as a viewer would, beside the four nodes
-        plan.commands[VIEW] = cli_command_line("view", "--port", "0")
+        plan.commands[VIEW] = cli_command_line("view", "--port", "0", "--summary", str(log_dir / VIEW_SUMMARY))
     load_before = os.getloadavg()
     run = run_network(plan, duration_s, log_dir, progress or (lambda line: None), extra_load=extra_load,
                       check_domain=check_domain)
@@ -155,14 +154,18 @@ def loop_run(duration_s: float, log_dir, progress=None, observers: dict | None =
               "targets": {**LOOP_TARGETS, "neighbour": NEIGHBOUR_TARGETS}, "met": met}
 
 
-#: The live view's label among the processes of a run.
+#: The live view's label among the processes of a run, and the file (in the run's log folder) of its summary.
 VIEW = "view"
+VIEW_SUMMARY = "view_summary.json"
 
 
-def view_figures(costs: dict, log: Path) -> dict:
-    """The live view beside the loop: its share of a core and the scenes per second it said it served at exit."""
-    said = [line for line in log_tail(log, 50) if line.startswith(VIEW_SERVED)]
-    rate = float(said[-1].split("(")[1].split()[0]) if said else None
+def view_figures(costs: dict, summary: Path) -> dict:
+    """The live view beside the loop: its share of a core and the scenes per second of the summary it wrote at
+    exit (`liver-sim view --summary`; None when it wrote none)."""
+    try:
+        rate = json.loads(summary.read_text())["scenes_per_s"]
+    except (OSError, ValueError, KeyError):
+        rate = None
     return {"cpu_share_of_one_core": costs.get(VIEW, {}).get("cpu_share_of_one_core"), "scenes_per_s": rate}
 
 

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 import time
+from dataclasses import replace
 
 import numpy as np
 
@@ -20,8 +21,9 @@ from liver_sim.mesh.landmarks import press_anchor
 from liver_sim.mesh.liver_shape import build_liver, default_liver
 from liver_sim.physics import reference
 from liver_sim.physics.contact import ToolPose
-from liver_sim.physics.model import LiverModel, default_fixed_nodes
+from liver_sim.physics.model import LiverModel
 from liver_sim.physics.model_params import ModelParams
+from liver_sim.physics.structure import default_fixed_nodes
 from liver_sim.studies.peers import NETWORK_POISSON_RATIO, liver_sim_press_force_n, time_mujoco_flex
 from liver_sim.tool.scripts import ScriptSettings, make_script
 
@@ -38,49 +40,51 @@ TARGETS = {"default_us_per_step_1thread_max": 50.0, "default_speedup_vs_numpy_mi
 
 def _perturb(model: LiverModel) -> None:
     rng = np.random.default_rng(0)
-    spacing = float(model.springs.rest_length_m.mean())
-    model.positions += rng.normal(scale=0.02 * spacing, size=model.positions.shape)
-    model.velocities += rng.normal(scale=0.001, size=model.velocities.shape)
+    spacing = float(model.structure.springs.rest_length_m.mean())
+    model.state.positions += rng.normal(scale=0.02 * spacing, size=model.state.positions.shape)
+    model.state.velocities += rng.normal(scale=0.001, size=model.state.velocities.shape)
 
 
 def _time_kernel(model: LiverModel, min_seconds: float) -> float:
     """Microseconds per step of the model's kernel, over frames of many substeps."""
-    model.params = model.params.with_changes(substeps=max(1, int(2e6 // model.springs.edges)))
+    structure = model.structure
+    model.structure = replace(structure, params=structure.params.with_changes(
+        substeps=max(1, int(2e6 // structure.springs.edges))))
     model.step_frame(None)
     steps, start = 0, time.perf_counter()
     while time.perf_counter() - start < min_seconds:
         model.step_frame(None)
-        steps += model.params.substeps
+        steps += model.structure.params.substeps
     return (time.perf_counter() - start) / steps * 1e6
 
 
 def _time_numpy(model: LiverModel, min_seconds: float) -> float:
-    x, v = model.positions.copy(), model.velocities.copy()
-    p = model.params
+    x, v = model.state.positions.copy(), model.state.velocities.copy()
+    p = model.structure.params
     steps, start = 0, time.perf_counter()
     while time.perf_counter() - start < min_seconds or steps < 3:
-        x, v = reference.step(x, v, model.springs, model.inv_mass, p.dt_s, p.environment_damping_per_s,
-                              p.gravity_m_s2, p.integrator, model.support)
+        x, v = reference.step(x, v, model.structure.springs, model.state.inv_mass, p.dt_s, p.environment_damping_per_s,
+                              p.gravity_m_s2, p.integrator, model.structure.support)
         steps += 1
     return (time.perf_counter() - start) / steps * 1e6
 
 
 def _oracle_difference(model: LiverModel) -> float:
     """Largest |x_kernel − x_numpy| (m) after one frame from the same perturbed state."""
-    x, v = model.positions.copy(), model.velocities.copy()
-    p = model.params
+    x, v = model.state.positions.copy(), model.state.velocities.copy()
+    p = model.structure.params
     model.step_frame(None)
     for _ in range(p.substeps):
-        x, v = reference.step(x, v, model.springs, model.inv_mass, p.dt_s, p.environment_damping_per_s,
-                              p.gravity_m_s2, p.integrator, model.support)
-    return float(np.abs(model.positions - x).max())
+        x, v = reference.step(x, v, model.structure.springs, model.state.inv_mass, p.dt_s, p.environment_damping_per_s,
+                              p.gravity_m_s2, p.integrator, model.structure.support)
+    return float(np.abs(model.state.positions - x).max())
 
 
 def stable_params(mesh, integrator: str = "symplectic_euler") -> ModelParams:
     """The default parameters with `integrator`; an explicit one with at least enough substeps per frame for
     this mesh's stability bound."""
     params = ModelParams(integrator=integrator)
-    stable = LiverModel(mesh, params).stable_dt_s
+    stable = LiverModel(mesh, params).structure.stable_dt_s
     needed = math.ceil(1.0 / (params.frame_rate_hz * STABILITY_MARGIN * stable))
     return params.with_changes(substeps=max(params.substeps, needed))
 
@@ -106,9 +110,9 @@ def _run_frames(model: LiverModel, poses, reference_positions=None) -> tuple[flo
         model.step_frame(pose)
         elapsed += time.perf_counter() - start
         if reference_positions is None:
-            trajectory.append(model.positions.copy())
+            trajectory.append(model.state.positions.copy())
         else:
-            error = max(error, float(np.abs(model.positions - reference_positions[frame]).max()))
+            error = max(error, float(np.abs(model.state.positions - reference_positions[frame]).max()))
     return elapsed / len(poses) * 1e3, error, trajectory
 
 
@@ -117,7 +121,7 @@ def frame_figures(name: str, mesh, integrators=FRAME_INTEGRATORS) -> list[dict]:
     Python) over `scripted_press`, on one thread and on all (the parallel spring kernel where it has one),
     and its largest position error against symplectic Euler at its stable step over the same frames."""
     reference_params = stable_params(mesh, "symplectic_euler")
-    poses = scripted_press(mesh, LiverModel(mesh, reference_params).tool.radius_m)
+    poses = scripted_press(mesh, LiverModel(mesh, reference_params).tool.shape.radius_m)
     _, _, reference_positions = _run_frames(LiverModel(mesh, reference_params), poses)
     rows = []
     for integrator in integrators:
@@ -138,7 +142,7 @@ def bench_mesh(name: str, mesh, min_seconds: float = 1.0) -> dict:
     params = stable_params(mesh)
     serial = LiverModel(mesh, params, parallel=False)
     parallel = LiverModel(mesh, params, parallel=True)
-    configured = serial.params
+    configured = serial.structure.params
     for model in (serial, parallel):
         model.warm_up()
         _perturb(model)
@@ -152,15 +156,15 @@ def bench_mesh(name: str, mesh, min_seconds: float = 1.0) -> dict:
         "mesh": name,
         "nodes": int(len(mesh.points)),
         "tetrahedra": int(len(mesh.tets)),
-        "springs": serial.springs.springs,
-        "edges_evaluated": serial.springs.edges,
+        "springs": serial.structure.springs.springs,
+        "edges_evaluated": serial.structure.springs.edges,
         "us_per_step_1thread": round(us_serial, 3),
         "us_per_step_all_threads": round(us_parallel, 3),
         "numpy_us_per_step": round(us_numpy, 3),
         "speedup_vs_numpy": round(us_numpy / us_serial, 2),
-        "spring_updates_per_s": round(serial.springs.edges / (best * 1e-6)),
+        "spring_updates_per_s": round(serial.structure.springs.edges / (best * 1e-6)),
         "max_abs_diff_vs_numpy_m": difference,
-        "stable_dt_s": serial.stable_dt_s,
+        "stable_dt_s": serial.structure.stable_dt_s,
         "configured_dt_s": configured.dt_s,
         "substeps_per_frame": configured.substeps,
         "realtime_factor_150hz": round(frame_us / (configured.substeps * best), 3),

@@ -219,7 +219,7 @@ def teleop_row(variant: str, link: LinkSettings, run, reference, default_referen
     device = run.diagnostics.get("phantom_sim: loop", {})
     truth, generated = float(device.get("energy_to_hand_j", "nan")), float(device.get("energy_generated_max_j", "nan"))
     estimate = float(bridge.get("energy_to_hand_j", "nan"))
-    stiffness = node_parameters(())["liver_physics"]["contact_stiffness_n_per_m"]
+    stiffness = node_parameters(())["liver_physics"].contact_stiffness_n_per_m
     wrench = np.linalg.norm(run.wrench_n, axis=1) if len(run.wrench_n) else np.zeros(1)
     oscillation = oscillating_s((times, force), script_times(reference))
     norm = np.linalg.norm(force, axis=1) if len(force) else np.zeros(1)

@@ -42,22 +42,22 @@ def bench_topology_mesh(name: str, mesh, repeats: int = 9) -> dict:
     stretched = mesh.points + (mesh.points[:, 0] > middle[0])[:, None] * [0.3 * (upper - lower)[0], 0.0, 0.0]
     template = LiverModel(mesh, params)
     template.warm_up()
-    detector = TearDetector(mesh.points, mesh.tets, template.capsule_triangles, params.tear_strain_parenchyma,
+    detector = TearDetector(mesh.points, mesh.tets, template.structure.capsule_triangles, params.tear_strain_parenchyma,
                             params.tear_strain_capsule)
     detect_s = _median_s(lambda: detector.torn_faces(stretched), max(repeats, 20))
 
     def fresh(positions):
         model = LiverModel(mesh, params)
-        model.positions = positions.copy()
+        model.state.positions = positions.copy()
         return model
 
     faces = []
 
     def tear_once():
-        change = tear(mesh.points, mesh.tets, stretched, template.capsule_triangles, params.tear_strain_parenchyma,
-                      params.tear_strain_capsule, detector=detector)
+        change = tear(mesh.points, mesh.tets, stretched, template.structure.capsule_triangles,
+                      params.tear_strain_parenchyma, params.tear_strain_capsule, detector=detector)
         faces.append(change.separated_faces)
-        models.pop().apply_topology(change)
+        models.pop().apply(change)
 
     models = [fresh(stretched) for _ in range(repeats)]
     tear_s = _median_s(tear_once, repeats)
@@ -71,7 +71,7 @@ def bench_topology_mesh(name: str, mesh, repeats: int = 9) -> dict:
     def cut_once():
         model = models.pop()
         model.cut(path, depth)
-        cut_nodes.append(len(model.positions) - len(mesh.points))
+        cut_nodes.append(len(model.state.positions) - len(mesh.points))
 
     cut_s = _median_s(cut_once, repeats)
     return {"mesh": name, "tetrahedra": int(len(mesh.tets)), "nodes": int(len(mesh.points)),

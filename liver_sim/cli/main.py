@@ -162,12 +162,12 @@ def add_warm_command(commands) -> None:
 
 def warm(args) -> int:
     # this command's own modules, loaded when it runs (module docstring)
-    from liver_sim.physics.parameters import INTEGRATORS, PARAMETERS, build_model
+    from liver_sim.physics.parameters import INTEGRATORS, PhysicsParameters, build_model
 
     started = time.monotonic()
-    defaults = {name: parameter.default for name, parameter in PARAMETERS.items()}
+    defaults = PhysicsParameters.defaults()
     for integrator in INTEGRATORS:  # the implicit frame's kernels and the explicit one's
-        build_model({**defaults, "integrator": integrator})  # builds the default liver and warms it up
+        build_model(defaults.replace(integrator=integrator))  # builds the default liver and warms it up
     print(f"the physics kernels are compiled and cached ({time.monotonic() - started:.1f} s)")
     return 0
 
@@ -267,7 +267,8 @@ def demo(args) -> int:
 
 
 def add_view_command(commands) -> None:
-    """``liver-sim view [--host H] [--port P] [--rate HZ] [--allow-remote] [--picture PNG] [--duration S]``."""
+    """``liver-sim view [--host H] [--port P] [--rate HZ] [--allow-remote] [--picture PNG] [--duration S]
+    [--summary JSON]``."""
     parser = commands.add_parser("view", help="serve the running network to the Foxglove app (a WebSocket on "
                                               f"{DEFAULT_HOST}:{DEFAULT_PORT}): the deforming liver, tool, local "
                                               "model, forces and diagnostics")
@@ -279,6 +280,9 @@ def add_view_command(commands) -> None:
     parser.add_argument("--picture", type=Path, default=None, metavar="PNG",
                         help="at exit, draw the scene with the largest contact force into this PNG")
     parser.add_argument("--duration", type=float, default=None, help="seconds to serve (default: until Ctrl-C)")
+    parser.add_argument("--summary", type=Path, default=None, metavar="JSON",
+                        help="at exit, write what was served into this JSON file (scenes, seconds, scenes_per_s, "
+                             "refused_messages, tick_errors)")
     parser.set_defaults(handler=view)
 
 
@@ -291,7 +295,7 @@ def view(args) -> int:
     if not 0 <= args.port <= 65535:
         raise ValueError(f"--port must lie in [0, 65535], got {args.port}")
     serve(args.host, args.port, args.rate, args.allow_remote, args.picture, args.duration,
-          lambda line: print(line, flush=True))
+          lambda line: print(line, flush=True), args.summary)
     return 0
 
 

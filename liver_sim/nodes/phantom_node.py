@@ -26,7 +26,7 @@ from liver_sim.nodes.rate_loop import RateLoop, warn
 from liver_sim.nodes.run import run_node
 from liver_sim.phantom.device import PhantomSim, StylusParams
 from liver_sim.phantom.parameters import PARAMETERS
-from liver_sim.tool.scripts import IDENTITY_XYZW, script_from
+from liver_sim.tool.scripts import IDENTITY_XYZW, ScriptParameters, script_from
 from msg_defs.forces import force_from_bytes, force_message_type
 from msg_defs.poses import pose_stamped_bytes
 from msg_defs.topics import TOPICS, device_command_qos
@@ -42,7 +42,7 @@ class PhantomNode(Node):
         p = self.p = declare_parameters(self, PARAMETERS)
         stylus = StylusParams(p["stylus_mass_kg"], p["hand_stiffness_n_per_m"], p["hand_damping_ns_per_m"],
                               p["max_force_n"], p["workspace_half_m"])
-        self.sim = PhantomSim(script_from(p), DeviceMap.from_parameters(p), stylus)
+        self.sim = PhantomSim(script_from(ScriptParameters.take(p)), DeviceMap.from_parameters(p), stylus)
         self._command = Latest()
         self.bad_commands = 0
         self._publisher = self.create_publisher(TOPICS["measured_cp"].type, p["measured_cp_topic"],

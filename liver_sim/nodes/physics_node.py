@@ -22,7 +22,7 @@ from liver_sim.nodes.inputs import Latest, LoopInputs, emulated_link, link_repor
 from liver_sim.nodes.parameters import declare_parameters
 from liver_sim.nodes.rate_loop import RateLoop, warn
 from liver_sim.nodes.run import run_node
-from liver_sim.physics.parameters import PARAMETERS, build_model
+from liver_sim.physics.parameters import PARAMETERS, PhysicsParameters, build_model
 from liver_sim.physics.pipeline import Frame, FramePipeline
 from msg_defs.forces import wrench_stamped_bytes
 from msg_defs.local_model import local_model_marker
@@ -37,39 +37,40 @@ class PhysicsNode(Node):
 
     def __init__(self):
         super().__init__("liver_physics")
-        p = declare_parameters(self, PARAMETERS)
+        p = PhysicsParameters.from_values(declare_parameters(self, PARAMETERS))
         self.p = p
         self.model = build_model(p)
         self._pipeline = FramePipeline(self.model, p)
-        mesh = self.model.mesh
+        structure = self.model.structure
+        mesh = structure.mesh
         self._pose = Latest()
         self._frame_seconds = []  # compute time of each frame since the last diagnostics (s)
         self._frame_seconds_lock = threading.Lock()
         self._outputs = {
-            key: self.create_publisher(TOPICS[key].type, p[f"{key}_topic"], TOPICS[key].qos)
+            key: self.create_publisher(TOPICS[key].type, getattr(p, f"{key}_topic"), TOPICS[key].qos)
             for key in ("nodes", "surface", "marker", "contact_plane", "tool_wrench")}
         self._diagnostics = self.create_publisher(TOPICS["diagnostics"].type, TOPICS["diagnostics"].name,
                                                   TOPICS["diagnostics"].qos)
         # 1 kHz of poses for a 150 Hz consumer: the loop takes the newest bytes each frame
         self._inputs = LoopInputs(self)
-        self._link = emulated_link(p)  # the teleoperation link from the operator's side, if emulated
-        self._inputs.subscribe(TOPICS["tool_pose"].type, p["tool_pose_topic"], loop_input_qos(TOPICS["tool_pose"]),
+        self._link = emulated_link(p.as_dict())  # the teleoperation link from the operator's side, if emulated
+        self._inputs.subscribe(TOPICS["tool_pose"].type, p.tool_pose_topic, loop_input_qos(TOPICS["tool_pose"]),
                                self._pose.set, raw=True, received=self._link is not None, link=self._link)
         self._last_pose_bytes = None
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.publish_surface()
         self.create_timer(1.0, self._publish_diagnostics)
-        self._loop = RateLoop(p["rate_hz"], self._step, "liver_physics", realtime_priority=p["realtime_priority"],
+        self._loop = RateLoop(p.rate_hz, self._step, "liver_physics", realtime_priority=p.realtime_priority,
                               on_refused=warn(self))
         self.get_logger().info(
             f"liver_physics: mesh '{mesh.source}' ({len(mesh.points)} nodes, {len(mesh.tets)} tets, "
-            f"{len(mesh.skin)} skin triangles), {p['rate_hz']:g} Hz × {self.model.params.substeps} "
-            f"{self.model.params.integrator} steps (dt {self.model.params.dt_s * 1e6:.0f} us"
-            f"{'' if self.model.implicit else f', stable below {self.model.stable_dt_s * 1e6:.0f} us'}); "
-            f"in: {p['tool_pose_topic']}{link_text(self._link)}; "
-            f"out: {p['nodes_topic']}, {p['surface_topic']}, {p['marker_topic']} "
-            f"({p['marker_rate_hz']:g} Hz), {p['contact_plane_topic']} ({p['local_model']}), {p['tool_wrench_topic']}; "
-            f"tool {p['tool_shape']} in mode {p['tool_mode']}, tearing {'on' if p['tearing'] else 'off'}")
+            f"{len(mesh.skin)} skin triangles), {p.rate_hz:g} Hz × {structure.params.substeps} "
+            f"{structure.params.integrator} steps (dt {structure.params.dt_s * 1e6:.0f} us"
+            f"{'' if structure.implicit else f', stable below {structure.stable_dt_s * 1e6:.0f} us'}); "
+            f"in: {p.tool_pose_topic}{link_text(self._link)}; "
+            f"out: {p.nodes_topic}, {p.surface_topic}, {p.marker_topic} "
+            f"({p.marker_rate_hz:g} Hz), {p.contact_plane_topic} ({p.local_model}), {p.tool_wrench_topic}; "
+            f"tool {p.tool_shape} in mode {p.tool_mode}, tearing {'on' if p.tearing else 'off'}")
         self._loop.start()
 
     def close(self) -> None:
@@ -78,7 +79,8 @@ class PhysicsNode(Node):
 
     def publish_surface(self) -> None:
         """Skin triangles and rest positions: on start and on every topology change."""
-        self._outputs["surface"].publish(skin_mesh_msg(self.model.mesh.skin, self.model.mesh.points))
+        mesh = self.model.structure.mesh
+        self._outputs["surface"].publish(skin_mesh_msg(mesh.skin, mesh.points))
 
     def _on_set_parameters(self, parameters) -> SetParametersResult:
         """Accept a new tool_mode (press, grasp, cut) at run time; every other parameter is read at start."""
@@ -91,7 +93,7 @@ class PhysicsNode(Node):
             except ValueError as exc:
                 return SetParametersResult(successful=False, reason=str(exc))
         for parameter in parameters:
-            self._pipeline.tool_use.mode = parameter.value  # read by the loop at its next frame
+            self.model.tool.use.mode = parameter.value  # read by the loop at its next frame
             self.get_logger().info(f"tool_mode: {parameter.value}")
         return SetParametersResult(successful=True)
 
@@ -132,14 +134,15 @@ class PhysicsNode(Node):
         if frame.surface_changed:
             self.publish_surface()
         result = frame.result
-        frame_id = self.p["frame_id"]
-        self._outputs["nodes"].publish(nodes_to_pointcloud2(self.model.positions, stamp, frame_id))
+        frame_id = self.p.frame_id
+        positions = self.model.state.positions
+        self._outputs["nodes"].publish(nodes_to_pointcloud2(positions, stamp, frame_id))
         self._outputs["contact_plane"].publish(local_model_marker(
-            result.local_model, stamp, frame_id, self.p["local_model_lifetime_s"]))
+            result.local_model, stamp, frame_id, self.p.local_model_lifetime_s))
         self._outputs["tool_wrench"].publish(wrench_stamped_bytes(result.tool_force_n, stamp, frame_id))
         if frame.marker_due:
             self._outputs["marker"].publish(skin_marker_serialized(
-                self.model.positions, self.model.mesh.skin, stamp, frame_id))
+                positions, self.model.structure.mesh.skin, stamp, frame_id))
         with self._frame_seconds_lock:
             self._frame_seconds.append(time.perf_counter() - started)
 
@@ -150,13 +153,13 @@ class PhysicsNode(Node):
         _, received = self._pose.get()
         extra = {"frame_compute_p99_s": float(np.percentile(compute, 99)) if compute.size else 0.0,
                  "divergences": self.model.divergences, "bad_tool_poses": self._pipeline.refused_poses,
-                 "tool_mode": self._pipeline.tool_use.mode, "topology_changes": self.model.topology_version,
+                 "tool_mode": self.model.tool.use.mode, "topology_changes": self.model.structure.version,
                  "topology_failures": self._pipeline.topology_failures,
-                 "nodes": len(self.model.positions), "substeps": self.model.params.substeps,
-                 "tool_pose_age_s": float(time.monotonic() - received), "simulated_s": self.model.time_s,
+                 "nodes": len(self.model.state.positions), "substeps": self.model.structure.params.substeps,
+                 "tool_pose_age_s": float(time.monotonic() - received), "simulated_s": self.model.state.time_s,
                  **link_report(self._link, self._inputs)}
         publish_diagnostics(self, self._diagnostics,
-                            [loop_status(f"{self.get_name()}: loop", stats, self.p["rate_hz"], extra)])
+                            [loop_status(f"{self.get_name()}: loop", stats, self.p.rate_hz, extra)])
 
 
 def main(args=None) -> int:

@@ -78,12 +78,13 @@ class RateLoop(threading.Thread):
     what the node built before is never scanned again. A loop at most CATCH_UP_PERIODS behind runs its
     missed ticks at once, so that a short stall costs no ticks; further behind, it skips to the newest
     deadline rather than run a burst. An exception in a step is counted (`errors`) and handed to
-    `on_error(now, exc)` (default: printed); the loop goes on. `clock` and `sleep` are time.monotonic and
+    `on_error(now, exc)` (default: printed); the loop goes on, unless the rclpy `context` it runs in (default:
+    rclpy's default context) has shut down: then the loop ends. `clock` and `sleep` are time.monotonic and
     time.sleep unless a test gives its own.
     """
 
     def __init__(self, rate_hz: float, step, name: str, clock=time.monotonic, sleep=time.sleep, on_error=None,
-                 freeze: bool = True, realtime_priority: int = 0, on_refused=print):
+                 freeze: bool = True, realtime_priority: int = 0, on_refused=print, context=None):
         super().__init__(name=name, daemon=True)
         self.period_s = 1.0 / rate_hz
         self.step = step
@@ -96,6 +97,7 @@ class RateLoop(threading.Thread):
         self._freeze = freeze
         self.realtime_priority = realtime_priority
         self._on_refused = on_refused
+        self._context_ok = rclpy.ok if context is None else context.ok
         self._stopping = threading.Event()
 
     def report(self) -> dict:
@@ -146,7 +148,7 @@ class RateLoop(threading.Thread):
             try:
                 self.step(now)
             except Exception as exc:  # a node keeps running; at shutdown the context goes first
-                if not rclpy.ok():
+                if not self._context_ok():
                     return
                 self.errors += 1
                 if self._on_error is None:

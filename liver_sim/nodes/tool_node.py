@@ -28,7 +28,7 @@ from liver_sim.nodes.parameters import declare_parameters, on_parameter_changes,
 from liver_sim.nodes.rate_loop import LoopStats, RateLoop, warn
 from liver_sim.nodes.run import run_node
 from liver_sim.tool.parameters import PARAMETERS
-from liver_sim.tool.scripts import IDENTITY_XYZW, ScriptedTrajectory, script_from
+from liver_sim.tool.scripts import IDENTITY_XYZW, ScriptedTrajectory, ScriptParameters, script_from
 from msg_defs.device_map import device_map_message
 from msg_defs.poses import pose_from_bytes, pose_stamped_bytes
 from msg_defs.topics import TOPICS, loop_input_qos
@@ -41,7 +41,8 @@ class ToolNode(Node):
         super().__init__("liver_tool")
         p = self.p = declare_parameters(self, PARAMETERS)
         # every parameter is checked, whichever source uses it
-        script, device_map = script_from(p), DeviceMap.from_parameters(p, p["workspace_radius_m"])
+        script = script_from(ScriptParameters.take(p))
+        device_map = DeviceMap.from_parameters(p, p["workspace_radius_m"])
         static_position = vector_parameter(p, "static_position_m", 3)
         static_orientation = quaternion_parameter(p, "static_orientation_xyzw")
         self._publisher = self.create_publisher(TOPICS["tool_pose"].type, p["tool_pose_topic"],

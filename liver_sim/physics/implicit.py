@@ -10,12 +10,12 @@ r = M·Δv − h·f(x + h·v_new, v_new) exceeds `newton_tolerance_n`·h on some
 iterations J·δ = −r with J re-assembled at the iterate.
 
 Second order (BDF2, default from the second step on).  Backward Euler damps the liver's slow
-oscillations (about its fixed nodes) by ~(ω·h)²/2 per step, which at h = 1/150 s puts a press, slide
-and release 0.4 mm away from symplectic Euler at 72 substeps.  BDF2,
+oscillations (about its fixed nodes) by ~(ω·h)²/2 per step, which at h = 1/150 s shows beside symplectic
+Euler at 72 substeps (README, "A physics frame").  BDF2,
 x₊ = (4·x − x₋)/3 + (2h/3)·v₊ and M·(v₊ − (4·v − v₋)/3) = (2h/3)·f(x₊, v₊), is exactly the step
 above of length 2h/3 from the extrapolated state ((4·x − x₋)/3, (4·v − v₋)/3) (held nodes are not
-extrapolated), so the same solver makes it; it is A-stable, L-stable and its error is second order
-(0.1 mm on that press).  The previous state is used only when the step starts from the state the
+extrapolated), so the same solver makes it; it is A-stable, L-stable and its error is second order.
+The previous state (StepHistory) is used only when the step starts from the state the
 last step left (same free nodes' x and v, same h); otherwise (first step, reset, topology change,
 state set from outside) the step is backward Euler.
 
@@ -75,8 +75,8 @@ def node_contacts(nodes, normal, offset_m, normal_speed_m_s, stiffness_n_per_m, 
                     np.broadcast_to(np.asarray(damping_ns_per_m, dtype=np.float64), (count,)).copy())
 
 
-#: The step length (s) of the quasi-static solve in ImplicitEuler.compliance, and its CG tolerance (3e-2
-#: leaves the compliance within ~3 % of a 1e-3 solve at a tenth of the iterations, measured on the press).
+#: The step length (s) of the quasi-static solve in ImplicitEuler.compliance, and its CG tolerance (README, "A
+#: physics frame": what it costs in accuracy and iterations against a tighter one).
 COMPLIANCE_HORIZON_S = 30.0
 COMPLIANCE_TOLERANCE = 3e-2
 #: The step length (s) of ImplicitEuler.equilibrium's backward-Euler iterations and their CG tolerance.
@@ -84,10 +84,27 @@ STATIC_HORIZON_S = 1e3
 STATIC_CG_TOLERANCE = 1e-6
 
 
+class StepHistory:
+    """What a step leaves the next one on the same nodes: `warm`, the Δv (N, 3) that starts its CG solve, and
+    BDF2's `states`, (x, v) of the last step and (x₋, v₋) of the one before, with its length `dt_s` (0: none,
+    the next step is backward Euler).  Part of the model's state; a new one after a topology change."""
+
+    def __init__(self, n_nodes: int):
+        self.warm = np.zeros((n_nodes, 3))
+        self.states = np.zeros((4, n_nodes, 3))
+        self.dt_s = 0.0
+
+    def reset(self) -> None:
+        """Forget the previous Δv and the previous state: the next step is backward Euler from zero."""
+        self.warm[:] = 0.0
+        self.dt_s = 0.0
+
+
 class ImplicitEuler:
     """Linearised backward Euler on one spring network and its support (none by default): its per-spring
-    matrix blocks and work arrays; with `second_order`, BDF2 from the second step on (see the module
-    docstring).  Build a new one after a topology change."""
+    matrix blocks and work arrays, which depend on the topology only; with `second_order`, BDF2 from the
+    second step on (see the module docstring), from the StepHistory each step is given.  Build a new one
+    after a topology change."""
 
     def __init__(self, springs: SpringNetwork, n_nodes: int, cg_tolerance: float = 1e-3,
                  max_cg_iterations: int = 500, newton_tolerance_n: float = 1e-2, max_newton: int = 2,
@@ -111,13 +128,9 @@ class ImplicitEuler:
         self._shift = np.ones(self.n_nodes)
         self._diagonal = np.zeros((self.n_nodes, 3, 3))
         self._preconditioner = np.zeros((self.n_nodes, 3, 3))
-        self._warm = np.zeros((self.n_nodes, 3))
         self._work = np.zeros((10, self.n_nodes, 3))
         self._coefficient = np.zeros(0)
         self._inv_mass = np.zeros(self.n_nodes)
-        # BDF2's history: the state the last step left (x, v) and the one before it (x₋, v₋), and its h
-        self._history = np.zeros((4, self.n_nodes, 3))
-        self._history_dt = 0.0
         #: CG iterations, Newton iterations and final residual (N) of the last step.
         self.last_cg_iterations = 0
         self.last_newton_iterations = 0
@@ -125,17 +138,18 @@ class ImplicitEuler:
         #: Whether the last step was BDF2 (else backward Euler).
         self.last_second_order = False
 
-    def step(self, x: np.ndarray, v: np.ndarray, inv_mass: np.ndarray, external_force: np.ndarray, dt: float,
-             environment_damping: float, gravity: np.ndarray, contacts: Contacts | None = None) -> np.ndarray:
-        """Advance x, v (N, 3, in place) by one step of `dt` s; returns the contact force on the liver (N)
-        at the new state (the tool feels its opposite)."""
+    def step(self, history: StepHistory, x: np.ndarray, v: np.ndarray, inv_mass: np.ndarray,
+             external_force: np.ndarray, dt: float, environment_damping: float, gravity: np.ndarray,
+             contacts: Contacts | None = None) -> np.ndarray:
+        """Advance x, v (N, 3, in place) by one step of `dt` s from `history` (updated for the next step);
+        returns the contact force on the liver (N) at the new state (the tool feels its opposite)."""
         contacts = contacts or Contacts.none()
         if len(self._coefficient) != len(contacts):
             self._coefficient = np.zeros(len(contacts))
         self._inv_mass = inv_mass
-        x_last, v_last, x_prev, v_prev = self._history
+        x_last, v_last, x_prev, v_prev = history.states
         second = bdf2_start(x, v, x_last, v_last, x_prev, v_prev, inv_mass,
-                            self.second_order and self._history_dt == dt)
+                            self.second_order and history.dt_s == dt)
         h = 2.0 * dt / 3.0 if second else float(dt)
         s = self.springs
         contact, self.last_cg_iterations, self.last_newton_iterations, self.last_residual_n = implicit_step(
@@ -144,18 +158,12 @@ class ImplicitEuler:
             self._unit, self._iso, self._axial, self._shift, self._diagonal, *self.support, contacts.nodes,
             contacts.weights,
             contacts.normal, contacts.offset_m, contacts.normal_speed_m_s, contacts.stiffness_n_per_m,
-            contacts.damping_ns_per_m, self._coefficient, self._preconditioner, self._warm, self.cg_tolerance,
+            contacts.damping_ns_per_m, self._coefficient, self._preconditioner, history.warm, self.cg_tolerance,
             self.max_cg_iterations, self.newton_tolerance_n, self.max_newton, self._work)
         x_last[:], v_last[:] = x, v
-        self._history_dt = float(dt)
+        history.dt_s = float(dt)
         self.last_second_order = second
         return contact
-
-    def reset(self) -> None:
-        """Forget the previous Δv (the solver's starting guess) and the previous state (the next step is
-        backward Euler), e.g. after the state was reset."""
-        self._warm[:] = 0.0
-        self._history_dt = 0.0
 
     def matrix(self) -> scipy.sparse.csr_matrix:
         """The spring, support, mass and damping part of the last assembled system matrix, (3N, 3N) sparse
@@ -246,4 +254,5 @@ class ImplicitEuler:
         contacts = node_contacts(np.array([0]), np.array([[0.0, 0.0, 1.0]]), np.array([0.0]), np.array([0.0]),
                                  1.0, 0.0)
         probe = ImplicitEuler(springs, self.n_nodes, max_cg_iterations=1, max_newton=0, support=self.support)
-        probe.step(x, v, np.ones(self.n_nodes), np.zeros_like(x), 1e-3, 0.0, np.zeros(3), contacts)
+        probe.step(StepHistory(self.n_nodes), x, v, np.ones(self.n_nodes), np.zeros_like(x), 1e-3, 0.0, np.zeros(3),
+                   contacts)

@@ -1,10 +1,10 @@
-"""The physics node's parameter table (liver_sim.base.parameters.Param: default, unit, range), the
-ModelParams its values name (`model_params`) and the model they build (`build_model`): declared by
-`liver_physics`, read by the offline sessions, so both refuse the same values."""
+"""The physics node's parameter table (liver_sim.base.parameters.Param: default, unit, range) and its typed record
+(`PhysicsParameters`), the ModelParams a record names (`model_params`) and the model it builds (`build_model`):
+declared by `liver_physics`, read by the offline sessions, so both refuse the same values."""
 from __future__ import annotations
 
 from liver_sim.base.link import LINK_PARAMETERS
-from liver_sim.base.parameters import Param, realtime_priority_parameter
+from liver_sim.base.parameters import Param, parameter_record, realtime_priority_parameter
 from liver_sim.base.topic_names import TOPIC_NAMES
 from liver_sim.mesh.io import load_mesh
 from liver_sim.mesh.liver_shape import default_liver
@@ -19,7 +19,8 @@ from liver_sim.physics.model_params import (
     SpringLaw,
     TissueProperties,
 )
-from liver_sim.physics.tool_use import TOOL_MODES
+from liver_sim.physics.tool_contact import LOCAL_MODELS, ToolContact
+from liver_sim.physics.tool_use import TOOL_MODES, ToolUse
 
 DEFAULTS = ModelParams()
 TISSUE = DEFAULTS.tissue
@@ -95,7 +96,7 @@ PARAMETERS = {
                             0.0, 0.05),
     "cut_depth_m": Param(0.005, "cut: depth of the cut below the tool path (m); under one element layer cuts "
                          "the capsule (membrane) only", 0.0005, 0.2),
-    "local_model": Param("plane", "local model published for the haptic loop", choices=("plane", "sphere")),
+    "local_model": Param("plane", "local model published for the haptic loop", choices=LOCAL_MODELS),
     "local_model_reach_m": Param(0.02, "publish a local model while the tool is this close to the skin (m)",
                                  0.0, 1.0),
     "local_model_lifetime_s": Param(0.05, "how long the bridge may trust one local model (s)", 0.001, 10.0),
@@ -114,38 +115,39 @@ PARAMETERS = {
 }
 
 
-def model_params(values: dict) -> ModelParams:
-    """The ModelParams named by the node's parameter values (validated)."""
-    fixed = tuple(values["fixed_nodes"]) if list(values["fixed_nodes"]) != [-1] else None
-    regions = list(values["support_regions"])
+#: The physics node's parameters as one typed record (liver_sim.base.parameters.parameter_record).
+PhysicsParameters = parameter_record("PhysicsParameters", PARAMETERS, "The parameters of liver_physics (PARAMETERS).")
+
+
+def model_params(p: PhysicsParameters) -> ModelParams:
+    """The ModelParams named by the node's parameters (validated)."""
+    fixed = tuple(p.fixed_nodes) if list(p.fixed_nodes) != [-1] else None
+    regions = list(p.support_regions)
     if len(regions) % 5:
         raise ValueError(f"parameter support_regions must hold five numbers per region (x, y, z, radius m, "
                          f"stiffness N/m³), got {len(regions)} numbers")
     return ModelParams(
-        spring_constants=values["spring_constants"],
-        tissue=TissueProperties(values["parenchyma_young_modulus_kpa"], values["parenchyma_poisson_ratio"],
-                                values["parenchyma_viscosity_pa_s"], values["capsule_stiffness_n_per_m"],
-                                values["capsule_viscosity_ns_per_m"]),
-        capsule=SpringLaw(values["capsule_lambda1_n"], values["capsule_lambda2_n"], values["capsule_mu_ns_per_m"]),
-        parenchyma=SpringLaw(values["parenchyma_lambda1_n"], values["parenchyma_lambda2_n"],
-                             values["parenchyma_mu_ns_per_m"]),
-        density_kg_m3=values["density_kg_m3"], environment_damping_per_s=values["environment_damping_per_s"],
-        gravity_m_s2=tuple(values["gravity_m_s2"]), integrator=values["integrator"],
-        frame_rate_hz=values["rate_hz"], substeps=values["substeps"] or None, fixed_nodes=fixed,
-        support=values["support"], support_regions=tuple(tuple(regions[i:i + 5]) for i in range(0, len(regions), 5)),
-        support_damping_s=values["support_damping_s"],
-        contact_stiffness_n_per_m=values["contact_stiffness_n_per_m"],
-        contact_damping_ns_per_m=values["contact_damping_ns_per_m"], tearing=values["tearing"],
-        tear_strain_parenchyma=values["tear_strain_parenchyma"],
-        tear_strain_capsule=values["tear_strain_capsule"]).validate()
+        spring_constants=p.spring_constants,
+        tissue=TissueProperties(p.parenchyma_young_modulus_kpa, p.parenchyma_poisson_ratio,
+                                p.parenchyma_viscosity_pa_s, p.capsule_stiffness_n_per_m, p.capsule_viscosity_ns_per_m),
+        capsule=SpringLaw(p.capsule_lambda1_n, p.capsule_lambda2_n, p.capsule_mu_ns_per_m),
+        parenchyma=SpringLaw(p.parenchyma_lambda1_n, p.parenchyma_lambda2_n, p.parenchyma_mu_ns_per_m),
+        density_kg_m3=p.density_kg_m3, environment_damping_per_s=p.environment_damping_per_s,
+        gravity_m_s2=tuple(p.gravity_m_s2), integrator=p.integrator,
+        frame_rate_hz=p.rate_hz, substeps=p.substeps or None, fixed_nodes=fixed,
+        support=p.support, support_regions=tuple(tuple(regions[i:i + 5]) for i in range(0, len(regions), 5)),
+        support_damping_s=p.support_damping_s,
+        contact_stiffness_n_per_m=p.contact_stiffness_n_per_m,
+        contact_damping_ns_per_m=p.contact_damping_ns_per_m, tearing=p.tearing,
+        tear_strain_parenchyma=p.tear_strain_parenchyma,
+        tear_strain_capsule=p.tear_strain_capsule).validate()
 
 
-def build_model(values: dict) -> LiverModel:
-    """The LiverModel (mesh, parameters, tool, local model) named by the node's parameter values, warmed up."""
-    mesh = (load_mesh(values["mesh_path"], values["target_tets"], values["mesh_scale"]) if values["mesh_path"]
-            else default_liver())
-    tool = ToolShape(values["tool_shape"], values["tool_radius_m"], values["tool_length_m"],
-                     tuple(values["tool_half_extents_m"]))
-    model = LiverModel(mesh, model_params(values), tool, values["local_model"], values["local_model_reach_m"])
+def build_model(p: PhysicsParameters) -> LiverModel:
+    """The LiverModel (mesh, parameters, its tool and the tool's use) named by the node's parameters, warmed up."""
+    mesh = load_mesh(p.mesh_path, p.target_tets, p.mesh_scale) if p.mesh_path else default_liver()
+    tool = ToolContact(ToolShape(p.tool_shape, p.tool_radius_m, p.tool_length_m, tuple(p.tool_half_extents_m)),
+                       p.local_model, p.local_model_reach_m, ToolUse(p.tool_mode, p.grasp_margin_m, p.cut_depth_m))
+    model = LiverModel(mesh, model_params(p), tool)
     model.warm_up()
     return model

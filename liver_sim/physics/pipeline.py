@@ -3,7 +3,7 @@
 `FramePipeline` is what the physics node and offline re-simulation both run.  A received pose is
 gated (outside the liver's bounds + `workspace_margin_m` it is refused and counted); a frame takes
 the newest pose unless it is older than `tool_pose_timeout_s` (then: no tool), steps the model
-through the tool's use (ToolUse: grasp, hold, cut), and says whether the surface must be
+(LiverModel.step_frame, the tool's use included: grasp, hold, cut), and says whether the surface must be
 republished (a tear or a cut) and whether the skin marker is due (`marker_rate_hz`), with the
 events worth a log line.  The adapters add only their I/O and clock: ROS messages, parameters and
 publishers (liver_sim.nodes.physics_node), bag I/O and deterministic offline timing
@@ -19,7 +19,7 @@ import numpy as np
 
 from liver_sim.physics.contact import ToolPose
 from liver_sim.physics.model import FrameResult, LiverModel
-from liver_sim.physics.tool_use import ToolUse
+from liver_sim.physics.parameters import PhysicsParameters
 
 
 @dataclass(frozen=True)
@@ -45,20 +45,19 @@ class Frame:
 
 
 class FramePipeline:
-    """The frame sequence of one model, configured by the physics node's parameter `values`.
+    """The frame sequence of one model, configured by the physics node's parameters (PhysicsParameters).
 
     `receive`/`refuse` take each tool pose message (time in the clock `step` is called with), `step`
-    runs a frame.  `tool_use.mode` may change between frames.  Counts: `frames`, `refused_poses`,
+    runs a frame.  `model.tool.use.mode` may change between frames.  Counts: `frames`, `refused_poses`,
     `topology_failures` (tears and cuts that failed and left the model as it was).
     """
 
-    def __init__(self, model: LiverModel, values: dict):
+    def __init__(self, model: LiverModel, parameters: PhysicsParameters):
         self.model = model
-        self.tool_use = ToolUse(model, values["tool_mode"], values["grasp_margin_m"], values["cut_depth_m"])
-        lower, upper = model.mesh.bounds
-        self.workspace = (lower - values["workspace_margin_m"], upper + values["workspace_margin_m"])
-        self.pose_timeout_s = values["tool_pose_timeout_s"]
-        self.marker_every = max(1, round(values["rate_hz"] / values["marker_rate_hz"]))
+        lower, upper = model.structure.mesh.bounds
+        self.workspace = (lower - parameters.workspace_margin_m, upper + parameters.workspace_margin_m)
+        self.pose_timeout_s = parameters.tool_pose_timeout_s
+        self.marker_every = max(1, round(parameters.rate_hz / parameters.marker_rate_hz))
         self.frames = 0
         self.refused_poses = 0
         self.topology_failures = 0
@@ -84,25 +83,21 @@ class FramePipeline:
     def step(self, now_s: float) -> Frame:
         """One frame at `now_s` with the newest pose unless older than tool_pose_timeout_s (then no tool)."""
         pose = self._pose if now_s - self._pose_time_s <= self.pose_timeout_s else None
-        result, cut = self.tool_use.step_frame(pose)
+        result = self.model.step_frame(pose)
         events, self._events = self._events, []
         if result.divergence:
             events.append(Event("diverged", result.divergence))
-        for cause, changed in (("torn", result.topology_changed), ("cut", cut)):
-            if changed:
-                events.append(Event("topology", self._topology_text(cause)))
-        events += [Event("tool", text) for text in self.tool_use.events]
-        events += [Event("topology_failed", text) for text in self.tool_use.failures]
-        self.topology_failures += len(self.tool_use.failures)
-        self.tool_use.events.clear()
-        self.tool_use.failures.clear()
+        events += [Event("topology", self._topology_text(cause)) for cause in result.topology_changes]
+        events += [Event("tool", text) for text in result.tool_events]
+        events += [Event("topology_failed", text) for text in result.topology_failures]
+        self.topology_failures += len(result.topology_failures)
         marker_due = self.frames % self.marker_every == 0
         self.frames += 1
-        return Frame(result, result.topology_changed or cut, marker_due, tuple(events))
+        return Frame(result, result.topology_changed, marker_due, tuple(events))
 
     def _topology_text(self, cause: str) -> str:
-        model = self.model
-        mesh = model.mesh
-        stability = "implicit" if model.implicit else f"stable below {model.stable_dt_s * 1e6:.0f} us"
+        structure = self.model.structure
+        mesh = structure.mesh
+        stability = "implicit" if structure.implicit else f"stable below {structure.stable_dt_s * 1e6:.0f} us"
         return (f"{cause}: {len(mesh.points)} nodes, {len(mesh.tets)} tets, {len(mesh.skin)} skin triangles; "
-                f"{model.params.substeps} substeps per frame ({stability})")
+                f"{structure.params.substeps} substeps per frame ({stability})")

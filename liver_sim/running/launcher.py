@@ -21,6 +21,7 @@ import threading
 import time
 from contextlib import contextmanager
 from pathlib import Path
+from typing import NamedTuple
 
 from liver_sim.base.stop_request import ENDING_SIGNALS
 
@@ -154,10 +155,26 @@ def ending_signals_deferred():
             signal.raise_signal(caught[0])
 
 
+class RunEntry(NamedTuple):
+    """One process of a run, as its run file notes it (a JSON list in this order): its label, pid, kernel start
+    time (with the pid, its identity), whether it stops `patient`ly (_wait_gone) and its command line."""
+
+    label: str
+    pid: int
+    start: int
+    patient: bool
+    command_line: str | None
+
+    @classmethod
+    def read(cls, entry: list) -> RunEntry | None:
+        """The entry of a run file's list, or None when it is not one (an older or damaged file)."""
+        return cls(*entry) if isinstance(entry, list) and len(entry) == len(cls._fields) else None
+
+
 class RunFile:
     """The run file of a ROS domain in this user's private directory (:func:`run_dir`): {"runs": [{"owner": [pid,
-    start], "log_dir", "processes": [[label, pid, start, patient, command line], …]}]}, read and written under an
-    exclusive lock, never through a symbolic link."""
+    start], "log_dir", "processes": [RunEntry, …]}]}, read and written under an exclusive lock, never through a
+    symbolic link; `edit` hands the processes as RunEntry, or None for an entry that is not one."""
 
     def __init__(self, domain: str, directory: Path | None = None):
         self.run_dir = run_dir() if directory is None else directory
@@ -171,6 +188,8 @@ class RunFile:
             try:
                 with _open_private(self.path, os.O_RDONLY) as file:
                     runs = json.loads(file.read())["runs"]
+                for run in runs:
+                    run["processes"] = [RunEntry.read(entry) for entry in run["processes"]]
             except FileNotFoundError:
                 runs = []
             except (OSError, ValueError, KeyError, TypeError):
@@ -191,10 +210,10 @@ def _alive(identity) -> bool:
     return _process_start(pid) == start
 
 
-def _noted_alive(entry) -> bool:
+def _noted_alive(entry: RunEntry | None) -> bool:
     """Whether a run file's process entry still names the process that was started: pid, start time and
-    command line all match (an entry without a command line never does)."""
-    return len(entry) >= 5 and _is_process(entry[1], entry[2], entry[4])
+    command line all match (an entry that is not a RunEntry never does)."""
+    return entry is not None and _is_process(entry.pid, entry.start, entry.command_line)
 
 
 def stop_leftovers(run_file: RunFile, progress=print) -> list[str]:
@@ -207,15 +226,16 @@ def stop_leftovers(run_file: RunFile, progress=print) -> list[str]:
             alive = [entry for entry in run["processes"] if _noted_alive(entry)]
             if _alive(run["owner"]):
                 if run["owner"] != me and alive:
-                    raise RuntimeError(f"{run_file.path}: pid {run['owner'][0]} runs {', '.join(e[0] for e in alive)} "
+                    labels = ", ".join(entry.label for entry in alive)
+                    raise RuntimeError(f"{run_file.path}: pid {run['owner'][0]} runs {labels} "
                                        f"on this ROS domain (logs in {run['log_dir']}); stop it or choose another "
                                        "ROS_DOMAIN_ID")
                 continue
-            for label, pid, *_ in alive:
-                os.kill(pid, signal.SIGTERM)
-            for label, pid, start, patient, command_line in alive:
-                _wait_gone(pid, start, (signal.SIGKILL,), patient, command_line=command_line)
-                stopped.append(f"{label} (pid {pid})")
+            for entry in alive:
+                os.kill(entry.pid, signal.SIGTERM)
+            for entry in alive:
+                _wait_gone(entry.pid, entry.start, (signal.SIGKILL,), entry.patient, command_line=entry.command_line)
+                stopped.append(f"{entry.label} (pid {entry.pid})")
             run["processes"] = []
     if stopped:
         progress(f"stopped what an earlier run left on this domain: {', '.join(stopped)}")
@@ -272,8 +292,8 @@ class NodeProcesses:
                 if run is None:
                     run = {"owner": self._identity, "log_dir": str(self.log_dir), "processes": []}
                     runs.append(run)
-                run["processes"].append([label, process.pid, _process_start(process.pid), patient,
-                                         _command_line(process.pid)])
+                run["processes"].append(RunEntry(label, process.pid, _process_start(process.pid), patient,
+                                                 _command_line(process.pid)))
         return process
 
     def stop(self, label: str | list[str] | None = None) -> dict[str, int]:
@@ -285,7 +305,8 @@ class NodeProcesses:
                 process.send_signal(signal.SIGINT)
         pids = {self.processes[name].pid for name in labels}
         with self._run_file.edit() as runs:
-            patient = {e[1] for run in runs if run["owner"] == self._identity for e in run["processes"] if e[3]}
+            patient = {e.pid for run in runs if run["owner"] == self._identity for e in run["processes"]
+                       if e is not None and e.patient}
         for name in labels:
             process = self.processes[name]
             start = _process_start(process.pid)  # our unreaped child: the pid cannot have been reused
@@ -296,7 +317,7 @@ class NodeProcesses:
         with self._run_file.edit() as runs:
             for run in runs:
                 if run["owner"] == self._identity:
-                    run["processes"] = [e for e in run["processes"] if e[1] not in pids]
+                    run["processes"] = [e for e in run["processes"] if e is None or e.pid not in pids]
         return {name: self.exit_codes[name] for name in labels}
 
     def failed(self) -> dict[str, int]:

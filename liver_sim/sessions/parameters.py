@@ -1,6 +1,7 @@
 """The physics' and the bridge's parameters for offline runs: the nodes' own declarations
 (PARAMETERS), their config/<node>.yaml values, then `name:=value` overrides, range-checked as the
-nodes check them (liver_sim.base.parameters.check_parameter).
+nodes check them (liver_sim.base.parameters.check_parameter); the physics' as its typed record
+(liver_sim.physics.parameters.PhysicsParameters).
 
 An override `name:=value` applies to every node declaring `name` (tool_radius_m: both);
 `liver_physics.name:=value` or `haptic_bridge.name:=value` to one.  Values are YAML, as after `-p`.
@@ -10,9 +11,10 @@ from __future__ import annotations
 import yaml
 
 from haptic_bridge.parameters import PARAMETERS as BRIDGE
-from liver_sim.base.parameters import check_parameter
+from liver_sim.base.parameters import check_parameter, typed_value
 from liver_sim.base.process_settings import config_dir
 from liver_sim.physics.parameters import PARAMETERS as PHYSICS
+from liver_sim.physics.parameters import PhysicsParameters
 
 NODES = ("liver_physics", "haptic_bridge")
 
@@ -33,27 +35,6 @@ def _config_values(node: str) -> dict:
         raise ValueError(f"{path}: not a parameter file of {node} ({exc})") from None
 
 
-def _typed(name: str, default, value):
-    """`value` in the type of `default` (an integer is taken for a float), or ValueError naming `name`."""
-    if isinstance(default, bool):
-        ok = isinstance(value, bool)
-    elif isinstance(default, int):
-        ok = isinstance(value, int) and not isinstance(value, bool)
-    elif isinstance(default, float):
-        ok = isinstance(value, (int, float)) and not isinstance(value, bool)
-        value = float(value) if ok else value
-    elif isinstance(default, list):
-        ok = isinstance(value, list)
-        if ok and default:
-            value = [_typed(name, default[0], v) for v in value]
-    else:
-        ok = isinstance(value, str)
-    if not ok:
-        raise ValueError(f"parameter {name}={value!r} must be a {type(default).__name__} like its default "
-                         f"{default!r}")
-    return value
-
-
 def parse_override(text: str) -> tuple[str | None, str, object]:
     """(node or None, name, value) of 'name:=value' or 'node.name:=value'."""
     name, sep, raw = text.partition(":=")
@@ -69,8 +50,9 @@ def parse_override(text: str) -> tuple[str | None, str, object]:
     return (node if dot else None), short, value
 
 
-def node_parameters(overrides=()) -> dict[str, dict]:
-    """{node: {name: value}} for liver_physics and haptic_bridge: defaults, config file, overrides; checked."""
+def node_parameters(overrides=()) -> dict:
+    """{node: parameters} for liver_physics (a PhysicsParameters) and haptic_bridge ({name: value}): defaults,
+    config file, overrides; checked."""
 
     declared = declarations()
     values = {node: {name: spec.default for name, spec in declared[node].items()} for node in NODES}
@@ -86,7 +68,8 @@ def node_parameters(overrides=()) -> dict[str, dict]:
                              f": neither {' nor '.join(NODES)} declares it"))
         for target in targets:
             values[target][name] = value
-    for node in NODES:
-        for name, spec in declared[node].items():
-            values[node][name] = check_parameter(name, spec, _typed(name, spec.default, values[node][name]))
+    for name, spec in declared["haptic_bridge"].items():
+        values["haptic_bridge"][name] = check_parameter(name, spec, typed_value(name, spec.default,
+                                                                                values["haptic_bridge"][name]))
+    values["liver_physics"] = PhysicsParameters.from_values(values["liver_physics"])
     return values

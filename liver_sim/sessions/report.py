@@ -49,8 +49,8 @@ def session_arrays(bag: Path, physics: dict, bridge: dict) -> dict:
     """One pass over the bag: log times of every topic, forces, wrench, tool tips, local models, diagnostics."""
 
     force_topics = {"local_model": bridge["force_topic"], "without_local_model": BASELINE_FORCE_TOPIC}
-    decoded = {bridge["force_topic"], BASELINE_FORCE_TOPIC, physics["tool_wrench_topic"], physics["tool_pose_topic"],
-               physics["contact_plane_topic"], TOPICS["diagnostics"].name}
+    decoded = {bridge["force_topic"], BASELINE_FORCE_TOPIC, physics.tool_wrench_topic, physics.tool_pose_topic,
+               physics.contact_plane_topic, TOPICS["diagnostics"].name}
     times: dict[str, list] = {}
     values: dict[str, list] = {}
     diagnostics: list = []
@@ -69,11 +69,11 @@ def session_arrays(bag: Path, physics: dict, bridge: dict) -> dict:
                 if fmt is None:
                     raise ValueError(f"{m.msgtype} is not a force command type")
                 value = force_from_message(fmt, message)
-            elif m.topic == physics["tool_wrench_topic"]:
+            elif m.topic == physics.tool_wrench_topic:
                 value = force_from_message("wrench_stamped", message)
-            elif m.topic == physics["tool_pose_topic"]:
+            elif m.topic == physics.tool_pose_topic:
                 value = pose_to_arrays(message.pose)[0]
-            elif m.topic == physics["contact_plane_topic"]:
+            elif m.topic == physics.contact_plane_topic:
                 value = marker_to_local_model(message)[0]
             else:
                 for status in message.status:
@@ -93,9 +93,9 @@ def session_arrays(bag: Path, physics: dict, bridge: dict) -> dict:
         t, f = series(topic)
         if len(t):
             forces[label] = (t, np.array(f).reshape(-1, 3))
-    wrench_t, wrench = series(physics["tool_wrench_topic"])
-    pose_t, tips = series(physics["tool_pose_topic"])
-    plane_t, models = series(physics["contact_plane_topic"])
+    wrench_t, wrench = series(physics.tool_wrench_topic)
+    pose_t, tips = series(physics.tool_pose_topic)
+    plane_t, models = series(physics.contact_plane_topic)
     return {"origin_s": origin, "times": {k: np.array(v) - origin for k, v in times.items()},
             "forces": forces, "wrench": (wrench_t, np.array(wrench).reshape(-1, 3)),
             "tool": (pose_t, np.array(tips).reshape(-1, 3)), "local_models": (plane_t, models),
@@ -247,9 +247,9 @@ def write_report(bag: Path, out: Path, progress=print) -> dict:
     summary = {"bag": str(bag), "storage": info.storage, "duration_s": info.duration_ns * 1e-9,
                "topics": {t: {"type": kind, "messages": n} for t, (kind, n) in sorted(info.topics.items())},
                "recorder": info.custom_data}
-    nominal = {physics["tool_pose_topic"]: bridge["rate_hz"], bridge["force_topic"]: bridge["rate_hz"],
-               TOPICS["measured_cp"].name: bridge["rate_hz"], physics["nodes_topic"]: physics["rate_hz"],
-               physics["contact_plane_topic"]: physics["rate_hz"], physics["tool_wrench_topic"]: physics["rate_hz"]}
+    nominal = {physics.tool_pose_topic: bridge["rate_hz"], bridge["force_topic"]: bridge["rate_hz"],
+               TOPICS["measured_cp"].name: bridge["rate_hz"], physics.nodes_topic: physics.rate_hz,
+               physics.contact_plane_topic: physics.rate_hz, physics.tool_wrench_topic: physics.rate_hz}
     rate_topics = [t for t in nominal if t in data["times"]]
     summary["rates_received"] = {t: rate_figures(data["times"][t], nominal[t]) for t in rate_topics}
     latest = {}

@@ -22,7 +22,7 @@ from rclpy.serialization import deserialize_message, serialize_message
 
 from haptic_bridge.tick import BridgeTick
 from liver_sim.base.topic_names import BASELINE_FORCE_TOPIC
-from liver_sim.physics.parameters import build_model
+from liver_sim.physics.parameters import PhysicsParameters, build_model
 from liver_sim.physics.pipeline import FramePipeline
 from liver_sim.sessions.bag import BagError, BagWriter, canonical_cdr, read_messages
 from liver_sim.sessions.parameters import node_parameters
@@ -48,7 +48,7 @@ class _Session:
     """The offline loop around a FramePipeline; `emit(topic, msg_class, time_s, data)` receives every output
     message in time order."""
 
-    def __init__(self, physics: dict, bridge: dict, emit, progress, compare: bool = False):
+    def __init__(self, physics: PhysicsParameters, bridge: dict, emit, progress, compare: bool = False):
         self.p, self.b = physics, bridge
         self.model = build_model(physics)
         self.pipeline = FramePipeline(self.model, physics)
@@ -76,23 +76,23 @@ class _Session:
     def _frame(self, t0: float):
         """Step one frame; return (publish time s, messages, (local model, lifetime), contact force N)."""
 
-        frame = self.pipeline.step(t0 + self.model.time_s)
-        t = t0 + self.model.time_s
-        stamp, frame_id = stamp_from_seconds(t), self.p["frame_id"]
+        frame = self.pipeline.step(t0 + self.model.state.time_s)
+        t = t0 + self.model.state.time_s
+        stamp, frame_id = stamp_from_seconds(t), self.p.frame_id
         marker = local_model_marker(frame.result.local_model, stamp, frame_id,
-                                    self.p["local_model_lifetime_s"])
+                                    self.p.local_model_lifetime_s)
         wrench = wrench_stamped(frame.result.tool_force_n, stamp, frame_id)
         marker_bytes = serialize_message(marker)
-        messages = [(self.p["nodes_topic"], "nodes",
-                     serialize_message(nodes_to_pointcloud2(self.model.positions, stamp, frame_id))),
-                    (self.p["contact_plane_topic"], "contact_plane", marker_bytes),
-                    (self.p["tool_wrench_topic"], "tool_wrench", serialize_message(wrench))]
+        messages = [(self.p.nodes_topic, "nodes",
+                     serialize_message(nodes_to_pointcloud2(self.model.state.positions, stamp, frame_id))),
+                    (self.p.contact_plane_topic, "contact_plane", marker_bytes),
+                    (self.p.tool_wrench_topic, "tool_wrench", serialize_message(wrench))]
         if frame.surface_changed:  # the new surface before the node cloud that indexes it
-            messages.insert(0, (self.p["surface_topic"], "surface", serialize_message(
-                skin_mesh_msg(self.model.mesh.skin, self.model.mesh.points))))
+            messages.insert(0, (self.p.surface_topic, "surface", serialize_message(
+                skin_mesh_msg(self.model.structure.mesh.skin, self.model.structure.mesh.points))))
         if frame.marker_due:
-            messages.append((self.p["marker_topic"], "marker", skin_marker_serialized(
-                self.model.positions, self.model.mesh.skin, stamp, frame_id)))
+            messages.append((self.p.marker_topic, "marker", skin_marker_serialized(
+                self.model.state.positions, self.model.structure.mesh.skin, stamp, frame_id)))
         model, lifetime = local_model_from_bytes(marker_bytes)  # as the live bridge reads it
         return (t, messages, (model, lifetime if lifetime > 0.0 else self.b["lifetime_s"]),
                 force_from_message("wrench_stamped", wrench))
@@ -101,14 +101,14 @@ class _Session:
         """`poses`: [(time s, PoseStamped, recorded bytes)] in time order."""
 
         t0 = poses[0][0]
-        self.emit(self.p["surface_topic"], "surface", t0, serialize_message(
-            skin_mesh_msg(self.model.mesh.skin, self.model.mesh.points)))
+        mesh = self.model.structure.mesh
+        self.emit(self.p.surface_topic, "surface", t0, serialize_message(skin_mesh_msg(mesh.skin, mesh.points)))
         tip, tip_time = None, -np.inf
         pending = deque()
         local, held, source_time = None, None, -np.inf
         next_progress = t0 + 1.0
         for t, message, data in poses:
-            while t0 + self.model.time_s < t:  # frames that start before this pose see the poses before it
+            while t0 + self.model.state.time_s < t:  # frames that start before this pose see the poses before it
                 pending.append(self._frame(t0))
             while pending and pending[0][0] <= t:
                 source_time, messages, local, held = pending.popleft()
@@ -121,7 +121,7 @@ class _Session:
             if pose_tip is not None:
                 tip, tip_time = pose_tip, t
                 self.tick.sample(seconds_from_stamp(message.header.stamp), t, tip)
-            self.emit(self.p["tool_pose_topic"], "tool_pose", t, data)
+            self.emit(self.p.tool_pose_topic, "tool_pose", t, data)
             command = self.tick.step(t, tip, t - tip_time, held if self.b["local_model"] == "none" else local,
                                      t - source_time)
             self.peak_force_n = max(self.peak_force_n, float(np.linalg.norm(command)))
@@ -166,7 +166,7 @@ def resimulate(bag: Path, out: Path, overrides=(), storage: str = "mcap", progre
 
     params = node_parameters(overrides)
     physics, bridge = params["liver_physics"], params["haptic_bridge"]
-    poses = recorded_poses(bag, physics["tool_pose_topic"])
+    poses = recorded_poses(bag, physics.tool_pose_topic)
     known = known_topics()
     types = {key: (type_name(topic.type) if topic.type else None, known[topic.name][1])
              for key, topic in TOPICS.items()}
@@ -216,6 +216,6 @@ def play_script(script, duration_s: float, overrides=(), progress=lambda line: N
     poses = []
     for k in range(int(round(duration_s / period_s))):
         t = k * period_s
-        poses.append((t, pose_stamped(script.position_at(t), IDENTITY_XYZW, t, physics["frame_id"]), b""))
+        poses.append((t, pose_stamped(script.position_at(t), IDENTITY_XYZW, t, physics.frame_id), b""))
     session.run(poses)
     return {key: np.asarray(values, dtype=np.float64) for key, values in session.trace.items()}

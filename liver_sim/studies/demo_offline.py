@@ -28,16 +28,17 @@ def run_offline_demo(out_dir: Path, duration_s: float | None = None, progress=pr
     """Run the press-and-release on `liver`, write the summary and pictures into out_dir, return the summary."""
     mesh = liver.load()
     model = LiverModel(mesh, ModelParams())  # implicit: no stability bound, whatever the mesh's elements
-    script = offline_press_release(mesh, model.tool.radius_m)
+    script = offline_press_release(mesh, model.tool.shape.radius_m)
     if duration_s is not None:
         active = script.approach_s + script.press_s + script.hold_s + script.withdraw_s
         if duration_s <= active:
             raise ValueError(f"--duration must exceed {active:.2f} s (approach, press, hold, withdraw)")
         script = replace(script, rest_s=duration_s - active)
+    params = model.structure.params
     progress(f"{liver.name}: {len(mesh.points)} nodes, {len(mesh.tets)} tets, {len(mesh.skin)} skin triangles, "
-             f"{mesh.volume * 1e3:.2f} L; {model.springs.springs} springs; "
-             f"{model.params.integrator}, dt {model.params.dt_s * 1e6:.0f} us ({model.params.substeps} step(s) at "
-             f"{model.params.frame_rate_hz:g} Hz)")
+             f"{mesh.volume * 1e3:.2f} L; {model.structure.springs.springs} springs; "
+             f"{params.integrator}, dt {params.dt_s * 1e6:.0f} us ({params.substeps} step(s) at "
+             f"{params.frame_rate_hz:g} Hz)")
     model.warm_up()
     start = time.perf_counter()
     trace = press_release(model, script, progress=lambda t, total: progress(f"  simulated {t:4.1f} / {total:.1f} s"))
@@ -47,8 +48,8 @@ def run_offline_demo(out_dir: Path, duration_s: float | None = None, progress=pr
     summary = {
         "mesh": {**mesh.summary(), "scale": liver.scale},
         "parameters": {k: (asdict(v) if hasattr(v, "__dataclass_fields__") else v)
-                       for k, v in vars(model.params).items()},
-        "tool": asdict(model.tool),
+                       for k, v in vars(params).items()},
+        "tool": asdict(model.tool.shape),
         "script": asdict(script),
         "simulated_s": float(data["time_s"][-1]),
         "wall_s": wall_s,
@@ -65,8 +66,9 @@ def run_offline_demo(out_dir: Path, duration_s: float | None = None, progress=pr
     (out_dir / "summary.md").write_text(_markdown(summary, liver.name))
     plot_press_release(data, script, liver.name, out_dir / "force.png")
     peak = int(np.argmax(force))
-    plot_liver(mesh.points, mesh.skin, trace.peak_positions_m, data["tool_position_m"][peak], model.tool.radius_m,
-               f"{liver.title} at peak press ({force[peak]:.2f} N)", out_dir / "liver_press.png")
+    plot_liver(mesh.points, mesh.skin, trace.peak_positions_m, data["tool_position_m"][peak],
+               model.tool.shape.radius_m, f"{liver.title} at peak press ({force[peak]:.2f} N)",
+               out_dir / "liver_press.png")
     progress(f"peak force {summary['peak_force_n']:.2f} N, peak displacement "
              f"{summary['peak_displacement_m'] * 1e3:.1f} mm, residual {summary['final_displacement_m'] * 1e3:.2f} mm "
              f"after {script.rest_s:.1f} s; {summary['realtime_factor']:.1f}x real time")

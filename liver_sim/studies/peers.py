@@ -222,9 +222,9 @@ def _press(mujoco, model, mesh: TetMesh, fixed_nodes, frames: int, threads: int,
 
 def liver_sim_press_force_n(model: LiverModel, frames: int = 150) -> np.ndarray:
     """The force (N) on liver_sim's tool after `frames` frames of the same press (press_depth_m) on `model`."""
-    anchor = press_anchor(model.mesh)
+    anchor = press_anchor(model.structure.mesh)
     force = np.zeros(3)
     for frame in range(frames):
-        depth = press_depth_m((frame + 1) / model.params.frame_rate_hz)
-        force = model.step_frame(ToolPose(anchor + [0.0, 0.0, model.tool.radius_m - depth])).tool_force_n
+        depth = press_depth_m((frame + 1) / model.structure.params.frame_rate_hz)
+        force = model.step_frame(ToolPose(anchor + [0.0, 0.0, model.tool.shape.radius_m - depth])).tool_force_n
     return np.asarray(force, dtype=float)

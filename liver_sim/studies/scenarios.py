@@ -49,27 +49,28 @@ def press_release(model: LiverModel, settings: ScriptSettings | None = None, pro
     The tool tip starts `clearance_m` above the top of the liver (tool surface to skin), goes down
     to `depth_m` below the rest surface, holds, withdraws and the model is left to recover.
     """
-    script = make_script("press_release", settings or offline_press_release(model.mesh, model.tool.radius_m))
-    frames = int(round(script.duration_s * model.params.frame_rate_hz))
+    script = make_script("press_release",
+                         settings or offline_press_release(model.structure.mesh, model.tool.shape.radius_m))
+    frames = int(round(script.duration_s * model.structure.params.frame_rate_hz))
     trace = Trace()
     peak_force = -1.0
     for frame in range(frames):
-        t = (frame + 1) * model.frame_period_s
+        t = (frame + 1) * model.structure.frame_period_s
         tip = script.position_at(t)
         result = model.step_frame(ToolPose(tip))
         trace.time_s.append(t)
         trace.tool_position_m.append(tip)
         trace.tool_force_n.append(result.tool_force_n)
-        trace.max_displacement_m.append(float(model.displacement_m().max()))
-        trace.max_deformation_m.append(float(deformation_m(model.mesh.points, model.positions).max()))
+        trace.max_displacement_m.append(float(model.state.displacement_m(model.structure).max()))
+        trace.max_deformation_m.append(float(deformation_m(model.structure.mesh.points, model.state.positions).max()))
         trace.in_contact.append(result.local_model.in_contact)
         if result.divergence:
             trace.divergences.append(result.divergence)
         magnitude = float(np.linalg.norm(result.tool_force_n))
         if magnitude > peak_force:
             peak_force = magnitude
-            trace.peak_positions_m = model.positions.copy()
-        if progress and frame % int(model.params.frame_rate_hz) == 0:
+            trace.peak_positions_m = model.state.positions.copy()
+        if progress and frame % int(model.structure.params.frame_rate_hz) == 0:
             progress(t, script.duration_s)
     return trace
 

@@ -91,7 +91,7 @@ class Figure:
 def b1_local_deformation(mesh: TetMesh, params: ModelParams) -> tuple[list[Figure], dict]:
     """B1 from a 10 mm press at the press anchor (see the module docstring)."""
     model = LiverModel(mesh, params)
-    settings = ScriptSettings(anchor_m=tuple(press_anchor(mesh)), tool_radius_m=model.tool.radius_m,
+    settings = ScriptSettings(anchor_m=tuple(press_anchor(mesh)), tool_radius_m=model.tool.shape.radius_m,
                               depth_m=B1_DEPTH_M, clearance_m=0.005, approach_s=0.1, press_s=0.6, hold_s=0.3,
                               withdraw_s=0.05, rest_s=0.05)
     trace = press_release(model, settings)
@@ -118,7 +118,7 @@ def b2_b3_return(mesh: TetMesh, params: ModelParams) -> tuple[list[Figure], dict
     traces = {}
     for name, run_params in (("viscous", params), ("capsule-like", quick_params)):
         model = LiverModel(mesh, run_params)
-        traces[name] = press_release(model, offline_press_release(mesh, model.tool.radius_m))
+        traces[name] = press_release(model, offline_press_release(mesh, model.tool.shape.radius_m))
     data = traces["viscous"].arrays()
     residual = data["max_displacement_m"][-1] / data["max_displacement_m"].max()
     slow, quick = (recovery_time_s(traces[name], 0.5, "max_displacement_m") for name in ("viscous", "capsule-like"))
@@ -134,13 +134,13 @@ def b4_and_continuity(mesh: TetMesh, params: ModelParams, bridge: dict) -> tuple
     """B4 and the local model's continuity over the demo's script with 1 kHz poses (module docstring)."""
 
     model = LiverModel(mesh, params)
-    settings = ScriptSettings(anchor_m=tuple(press_anchor(mesh)), tool_radius_m=model.tool.radius_m)
+    settings = ScriptSettings(anchor_m=tuple(press_anchor(mesh)), tool_radius_m=model.tool.shape.radius_m)
     script = make_script("press_slide_release", settings)
     slide_start = settings.approach_s + settings.press_s + settings.hold_s
     slide_end = slide_start + settings.slide_s
     tick = BridgeTick({**bridge, "model_glide_s": 0.0})
     period = 1.0 / bridge["rate_hz"]
-    frame_s = model.frame_period_s
+    frame_s = model.structure.frame_period_s
     frames = int(round(script.duration_s / frame_s))
     frame_force, frame_time, rendered = [], [], []
     local = None

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from liver_sim.base.parameters import Param, vector_parameter
+from liver_sim.base.parameters import Param, parameter_record, vector_parameter
 
 #: Every script name, for parameter choices.
 SCRIPT_NAMES = ("press", "press_release", "slide", "withdraw", "press_slide_release", "hold", "pull", "explore")
@@ -209,11 +209,17 @@ SCRIPT_PARAMETERS = {
 }
 
 
-def script_from(values: dict) -> ScriptedTrajectory:
-    """The script named by the SCRIPT_PARAMETERS `values`, or ValueError naming the bad parameter."""
+#: A script's parameters as one typed record (liver_sim.base.parameters.parameter_record); a node takes it from
+#: its own parameters with ScriptParameters.take.
+ScriptParameters = parameter_record("ScriptParameters", SCRIPT_PARAMETERS,
+                                    "The settings of a tool script (SCRIPT_PARAMETERS).")
+
+
+def script_from(p: ScriptParameters) -> ScriptedTrajectory:
+    """The script named by the script parameters `p`, or ValueError naming the bad parameter."""
     settings = ScriptSettings(
-        anchor_m=tuple(vector_parameter(values, "anchor_m", 3)), loop=values["loop_script"],
-        **{name: values[name] for name in ("tool_radius_m", "depth_m", "clearance_m", "slide_m", "pull_m",
-                                           "start_delay_s", "approach_s", "press_s", "hold_s", "slide_s",
-                                           "withdraw_s", "rest_s", "hand_speed_m_s")})
-    return make_script(values["script"], settings)
+        anchor_m=tuple(vector_parameter(p.as_dict(), "anchor_m", 3)), loop=p.loop_script,
+        tool_radius_m=p.tool_radius_m, depth_m=p.depth_m, clearance_m=p.clearance_m, slide_m=p.slide_m,
+        pull_m=p.pull_m, start_delay_s=p.start_delay_s, approach_s=p.approach_s, press_s=p.press_s,
+        hold_s=p.hold_s, slide_s=p.slide_s, withdraw_s=p.withdraw_s, rest_s=p.rest_s, hand_speed_m_s=p.hand_speed_m_s)
+    return make_script(p.script, settings)

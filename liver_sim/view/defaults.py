@@ -5,5 +5,3 @@ VIEW_RATE_HZ = 30.0
 #: The Foxglove app's default connection: ws://127.0.0.1:8765.
 DEFAULT_HOST = "127.0.0.1"
 DEFAULT_PORT = 8765
-#: How the view's last line begins: "served N scenes in S s (R per second)".
-VIEW_SERVED = "served"

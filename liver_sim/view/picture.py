@@ -16,7 +16,7 @@ def _draw(axis, scene: Scene, centre: np.ndarray, half: float, skin_alpha: float
     # matplotlib loads only when a picture is drawn (the live view itself never needs it)
     from mpl_toolkits.mplot3d.art3d import Line3DCollection, Poly3DCollection
 
-    faces = scene.colours.mean(axis=1).copy()
+    faces = scene.colours[scene.skin].mean(axis=1)
     faces[:, 3] = skin_alpha
     axis.add_collection3d(Poly3DCollection(scene.triangles, facecolors=faces, edgecolors=(0.3, 0.15, 0.1, 0.2),
                                            linewidths=0.2))
@@ -63,7 +63,9 @@ def draw_scene(scene: Scene, path: Path, title: str = "") -> Path:
     if close_up:
         near = figure.add_subplot(1, 2, 2, projection="3d")
         _draw(near, scene, scene.tool_tip_m, CLOSE_UP_HALF_M, 0.35)
-        near.set_title("at the tool: local model (blue), contact force (green)", fontsize=9)
+        shown = [what for what, present in (("local model (blue)", scene.local_model is not None),
+                                            ("contact force (green)", force_arrow(scene) is not None)) if present]
+        near.set_title("at the tool" + (": " + ", ".join(shown) if shown else ""), fontsize=9)
     figure.suptitle(title, fontsize=10)
     figure.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)

@@ -29,12 +29,13 @@ LIPS_COLOUR = (0.9, 0.1, 0.1, 1.0)
 
 @dataclass(frozen=True)
 class Scene:
-    """One frame of the view: skin triangles as (T, 3, 3) corner positions with (T, 3, 4) corner colours, the tool
-    tip (m) and radius, the local model (or None), the contact force on the tool (N, liver frame) and the lips
-    of opened skin as (L, 2, 3) segments."""
+    """One frame of the view: the deformed node `points` (N, 3) m with their `colours` (N, 4) RGBA, the `skin`
+    triangles (K, 3) over them, the tool tip (m) and radius, the local model (or None), the contact force on the
+    tool (N, liver frame) and the lips of opened skin as (L, 2, 3) segments."""
 
-    triangles: np.ndarray
+    points: np.ndarray
     colours: np.ndarray
+    skin: np.ndarray
     tool_tip_m: np.ndarray | None = None
     tool_radius_m: float = 0.015
     local_model: LocalModel | None = None
@@ -42,8 +43,13 @@ class Scene:
     lips: np.ndarray = field(default_factory=lambda: np.zeros((0, 2, 3)))
 
     @property
+    def triangles(self) -> np.ndarray:
+        """(K, 3, 3) corner positions of the skin triangles (m)."""
+        return self.points[self.skin]
+
+    @property
     def triangle_count(self) -> int:
-        return len(self.triangles)
+        return len(self.skin)
 
 
 def displacement_colours(displacement_m: np.ndarray) -> np.ndarray:
@@ -52,38 +58,57 @@ def displacement_colours(displacement_m: np.ndarray) -> np.ndarray:
     return (1.0 - share) * REST_COLOUR + share * DISPLACED_COLOUR
 
 
-def lips(skin: np.ndarray, initial_skin: np.ndarray | None, positions: np.ndarray) -> np.ndarray:
-    """(L, 2, 3) segments: the boundary edges of the skin triangles a tear or a cut added (edges used by one
-    new triangle only, so the rim of what opened), at `positions`; none before any topology change."""
-    if initial_skin is None or len(skin) == len(initial_skin) and np.array_equal(skin, initial_skin):
-        return np.zeros((0, 2, 3))
-    known = {tuple(sorted(row)) for row in np.asarray(initial_skin).tolist()}
-    added = np.array([row for row in np.asarray(skin).tolist() if tuple(sorted(row)) not in known], dtype=np.int64)
-    if added.size == 0:
-        return np.zeros((0, 2, 3))
-    edges = np.sort(np.concatenate([added[:, [0, 1]], added[:, [1, 2]], added[:, [2, 0]]]), axis=1)
-    unique, counts = np.unique(edges, axis=0, return_counts=True)
-    rim = unique[counts == 1]
-    return positions[rim]
+#: Rest positions closer than this (m) are one point when lips are looked for (opened_triangles).
+TWIN_TOLERANCE_M = 1e-7
 
 
-def build_scene(positions: np.ndarray, rest_positions: np.ndarray, skin: np.ndarray,
-                initial_skin: np.ndarray | None = None, tool_tip_m: np.ndarray | None = None,
-                tool_radius_m: float = 0.015, local_model: LocalModel | None = None,
-                force_n: np.ndarray | None = None) -> Scene:
+def opened_triangles(rest_m: np.ndarray, skin: np.ndarray) -> np.ndarray:
+    """Mask of the skin triangles a tear or a cut opened: the two lips of an opening lie on each other at rest (a
+    separation duplicates nodes in place, physics.topology), so such a triangle has a twin with the same rest
+    corners (to TWIN_TOLERANCE_M); the skin of the original surface has none."""
+    skin = np.asarray(skin, dtype=np.int64).reshape(-1, 3)
+    if not len(skin):
+        return np.zeros(0, dtype=bool)
+    corners = np.round(np.asarray(rest_m, dtype=np.float64)[skin] / TWIN_TOLERANCE_M).astype(np.int64)
+    point = np.dtype([("x", np.int64), ("y", np.int64), ("z", np.int64)])
+    ordered = np.sort(np.ascontiguousarray(corners).view(point).reshape(len(skin), 3), axis=1)
+    _, inverse, counts = np.unique(ordered.view(np.int64).reshape(len(skin), 9), axis=0, return_inverse=True,
+                                   return_counts=True)
+    return counts[inverse.ravel()] > 1
+
+
+def lip_edges(rest_m: np.ndarray, skin: np.ndarray) -> np.ndarray:
+    """(L, 2) node pairs: the rims of what opened, the skin edges shared by an opened triangle and one of the
+    original surface (opened_triangles); none before any tear or cut."""
+    skin = np.asarray(skin, dtype=np.int64).reshape(-1, 3)
+    opened = opened_triangles(rest_m, skin)
+    if not opened.any():
+        return np.zeros((0, 2), dtype=np.int64)
+
+    def edges(triangles: np.ndarray) -> np.ndarray:
+        return np.unique(np.sort(triangles[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1), axis=0)
+
+    both = np.concatenate([edges(skin[opened]), edges(skin[~opened])])
+    unique, counts = np.unique(both, axis=0, return_counts=True)
+    return unique[counts > 1]
+
+
+def build_scene(positions: np.ndarray, rest_positions: np.ndarray, skin: np.ndarray, lips: np.ndarray | None = None,
+                tool_tip_m: np.ndarray | None = None, tool_radius_m: float = 0.015,
+                local_model: LocalModel | None = None, force_n: np.ndarray | None = None) -> Scene:
     """The Scene of node `positions` (N, 3) m over `rest_positions` (the first ones of this node count), the
-    `skin` (K, 3) and the rest of the state; colours by each node's displacement from rest."""
+    `skin` (K, 3), its `lips` (L, 2) node pairs (lip_edges) and the rest of the state; colours by each node's
+    displacement from rest."""
     positions = np.asarray(positions, dtype=np.float64)
-    skin = np.asarray(skin, dtype=np.int64)
     if len(rest_positions) == len(positions):
         displacement = np.linalg.norm(positions - rest_positions, axis=1)
     else:
         displacement = np.zeros(len(positions))
-    colours = displacement_colours(displacement)
-    return Scene(positions[skin], colours[skin], None if tool_tip_m is None else np.asarray(tool_tip_m, float),
-                 tool_radius_m, local_model if local_model is not None and local_model.valid else None,
-                 np.zeros(3) if force_n is None else np.asarray(force_n, dtype=np.float64),
-                 lips(skin, initial_skin, positions))
+    lips = np.zeros((0, 2), dtype=np.int64) if lips is None else np.asarray(lips, dtype=np.int64).reshape(-1, 2)
+    return Scene(positions, displacement_colours(displacement), np.asarray(skin, dtype=np.int64),
+                 None if tool_tip_m is None else np.asarray(tool_tip_m, float), tool_radius_m,
+                 local_model if local_model is not None and local_model.valid else None,
+                 np.zeros(3) if force_n is None else np.asarray(force_n, dtype=np.float64), positions[lips])
 
 
 def plane_patch(model: LocalModel, side_m: float = PLANE_PATCH_M) -> np.ndarray:
