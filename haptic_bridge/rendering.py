@@ -29,15 +29,17 @@ def blend(start: LocalModel | None, target: LocalModel, fraction: float) -> Loca
     if start.stiffness_n_per_m is not None and target.stiffness_n_per_m is not None:
         fields["stiffness_n_per_m"] = (start.stiffness_n_per_m
                                        + f * (target.stiffness_n_per_m - start.stiffness_n_per_m))
+    g = 1.0 - f  # floats, not numpy: a blend runs at every 1 kHz tick of a glide
     if target.kind == "plane":
-        normal = (1.0 - f) * start.normal + f * target.normal
+        normal = [g * a + f * b for a, b in zip(start.normal.tolist(), target.normal.tolist())]
         length = math.hypot(*normal)
         if not length > 1e-9:
             return target
-        return LocalModel.derived(target, point=start.point + f * (target.point - start.point),
-                                  normal=normal / length, **fields)
-    return LocalModel.derived(target, centre=start.centre + f * (target.centre - start.centre),
-                              radius_m=start.radius_m + f * (target.radius_m - start.radius_m), **fields)
+        point = [g * a + f * b for a, b in zip(start.point.tolist(), target.point.tolist())]
+        return LocalModel.derived(target, point=np.array(point), normal=np.array(normal) / length, **fields)
+    centre = [g * a + f * b for a, b in zip(start.centre.tolist(), target.centre.tolist())]
+    return LocalModel.derived(target, centre=np.array(centre), radius_m=g * start.radius_m + f * target.radius_m,
+                              **fields)
 
 
 class ModelGlide:

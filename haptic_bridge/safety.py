@@ -26,16 +26,21 @@ _GAIN_SNAP = 1e-9
 _CLAMP_MARGIN = 1e-12
 
 
-def clamp_norm(force: np.ndarray, max_force: float) -> np.ndarray:
-    """F·min(1, max_force/|F|) as a new (3,) array in N, its norm never above max_force however it is
-    rounded; any non-finite component → the zero vector."""
-    force = np.array(force, dtype=np.float64)
-    if not np.isfinite(force).all():
-        return np.zeros(3)
-    norm = math.hypot(*force)  # no overflow for components near the float limit
+def clamped(fx: float, fy: float, fz: float, max_force: float) -> tuple[float, float, float]:
+    """(fx, fy, fz)·min(1, max_force/|F|) in N, its norm never above max_force however it is rounded; any
+    non-finite component → zero. Floats: it runs several times per 1 kHz tick."""
+    norm = math.hypot(fx, fy, fz)  # no overflow for components near the float limit; nan or inf if any is
+    if not math.isfinite(norm):
+        return 0.0, 0.0, 0.0
     if norm > max_force:
-        force *= max_force / norm * (1.0 - _CLAMP_MARGIN)
-    return force
+        scale = max_force / norm * (1.0 - _CLAMP_MARGIN)
+        return fx * scale, fy * scale, fz * scale
+    return fx, fy, fz
+
+
+def clamp_norm(force: np.ndarray, max_force: float) -> np.ndarray:
+    """:func:`clamped` of a (3,) force (N), as a new array."""
+    return np.array(clamped(*(float(c) for c in force), max_force))
 
 
 class RateLimiter:
@@ -52,27 +57,42 @@ class RateLimiter:
         self.period_s = positive(period_s, "period_s")
         self.reset()
 
+    @property
+    def last(self) -> np.ndarray:
+        """The force it sent last (N)."""
+        return np.array(self._last)
+
+    @last.setter
+    def last(self, force) -> None:
+        self._last = tuple(float(c) for c in force)
+
     def reset(self) -> None:
         """Restart from zero force."""
-        self.last = np.zeros(3)
+        self._last = (0.0, 0.0, 0.0)
         self.last_s = None
 
     def step(self, target: np.ndarray, now_s: float | None = None) -> np.ndarray:
         """The force (N) closer to `target` at tick time `now_s` (s): F_{k−1} + Δ, |Δ| ≤ max_rate_n_per_s·elapsed."""
+        return np.array(self.step_floats(*(float(c) for c in target), now_s))
+
+    def step_floats(self, tx: float, ty: float, tz: float, now_s: float | None = None) -> tuple[float, float, float]:
+        """:meth:`step` on floats."""
         if now_s is None or self.last_s is None:
             elapsed = self.period_s
         else:
             elapsed = min(max(now_s - self.last_s, 0.0), 1.0)
         self.last_s = now_s
-        delta = target - self.last
-        if not np.isfinite(delta).all():
-            delta = -self.last
-        change = math.hypot(*delta)
+        lx, ly, lz = self._last
+        dx, dy, dz = tx - lx, ty - ly, tz - lz
+        change = math.hypot(dx, dy, dz)
+        if not math.isfinite(change):
+            dx, dy, dz, change = -lx, -ly, -lz, math.hypot(lx, ly, lz)
         max_change = self.max_rate_n_per_s * elapsed
         if change > max_change:
-            delta *= max_change / change
-        self.last = self.last + delta
-        return self.last.copy()
+            scale = max_change / change
+            dx, dy, dz = dx * scale, dy * scale, dz * scale
+        self._last = (lx + dx, ly + dy, lz + dz)
+        return self._last
 
 
 class Watchdog:
@@ -169,12 +189,14 @@ class SafeForceOutput:
         """The watchdog state: 'ok', 'ramping_down', 'stale' or 'ramping_up'."""
         return self.watchdog.state
 
-    def step(self, force: np.ndarray, model_age_s: float, pose_age_s: float,
+    def step(self, force, model_age_s: float, pose_age_s: float,
              model_lifetime_s: float | None = None, now_s: float | None = None) -> np.ndarray:
         """The (3,) force (N) to send at tick time `now_s` (s; None: one nominal period after the last) for the
-        requested `force` (N); see :class:`Watchdog` for the ages and :class:`RateLimiter` for the times."""
+        requested `force` (N, three numbers); see :class:`Watchdog` for the ages and :class:`RateLimiter` for the
+        times."""
         gain = self.watchdog.update(model_age_s, pose_age_s, model_lifetime_s)
         if gain == 0.0:
             self.limiter.reset()
             return np.zeros(3)
-        return clamp_norm(self.limiter.step(clamp_norm(force, self.max_force) * gain, now_s), self.max_force)
+        fx, fy, fz = clamped(*(float(c) for c in force), self.max_force)
+        return np.array(clamped(*self.limiter.step_floats(fx * gain, fy * gain, fz * gain, now_s), self.max_force))

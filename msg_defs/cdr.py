@@ -1,10 +1,11 @@
-"""Serialized (CDR) PoseStamped and WrenchStamped without message objects, for the 1 kHz topics, and the
-fields of a local-model Marker.
+"""Serialized (CDR) PoseStamped and WrenchStamped without message objects, for the 1 kHz topics, and a
+local-model Marker's fields, read and written.
 
 Building a rosidl Python message and converting it costs tens of microseconds per message; the
 1 kHz loops instead publish and take these two fixed-layout messages as bytes (`Publisher.publish(bytes)`,
 raw subscriptions). The bridge's loop reads the 150 Hz /liver/contact_plane Marker from its bytes too
-(:func:`marker_fields`): taking it as a message object cost about 0.2 ms, a fifth of a 1 kHz tick.
+(:func:`marker_fields`), and the physics writes it as bytes (:func:`marker_bytes`): a message object costs
+more than the rest of the tick.
 Layout (XCDR1, as rmw_fastrtps writes it): a 4-byte encapsulation header
 (0x00 0x01 = little-endian, 0x00 0x00 = big-endian, then 2 option bytes), then, aligned relative to
 the byte after the header: stamp.sec int32, stamp.nanosec uint32, frame_id as uint32 length
@@ -12,7 +13,7 @@ the byte after the header: stamp.sec int32, stamp.nanosec uint32, frame_id as ui
 (PoseStamped: position x y z, orientation x y z w; WrenchStamped: force x y z, torque x y z).
 
 Readers refuse truncated or inconsistent bytes with a ValueError naming the field, and messages longer than
-MAX_BYTES of their type before reading anything (a 2 MB Marker took 15 ms to decode in the 1 kHz loop);
+MAX_BYTES of their type before reading anything (decoding a long Marker would hold up the 1 kHz loop);
 checking that the numbers are finite is the caller's (msg_defs.poses, msg_defs.forces).
 """
 from __future__ import annotations
@@ -139,3 +140,69 @@ def marker_fields(data: bytes) -> dict:
     read.skip_sequence(8, 4, "uv_coordinates")
     fields["text"] = read.string("text")
     return fields
+
+
+class _Writer:
+    """Writes a little-endian serialized message field by field, with XCDR1 alignment counted from the byte after
+    the 4-byte encapsulation header (the mirror of _Cursor)."""
+
+    def __init__(self):
+        self.parts = [_LITTLE]
+        self.offset = 0  # bytes written after the encapsulation header
+
+    def _align(self, alignment: int) -> None:
+        padding = -self.offset % alignment
+        if padding:
+            self.parts.append(b"\x00" * padding)
+            self.offset += padding
+
+    def values(self, code: str, values) -> None:
+        layout = _layout("<", len(values), code)
+        self._align(struct.calcsize(code))
+        self.parts.append(layout.pack(*values))
+        self.offset += layout.size
+
+    def string(self, text: str) -> None:
+        encoded = text.encode() + b"\x00"
+        self.values("I", (len(encoded),))
+        self.parts.append(encoded)
+        self.offset += len(encoded)
+
+    def empty_sequence(self) -> None:
+        self.values("I", (0,))
+
+    def result(self) -> bytes:
+        return b"".join(self.parts)
+
+
+def marker_bytes(stamp: tuple[int, int], frame_id: str, ns: str, marker_id: int, marker_type: int, action: int,
+                 pose, scale, colour, lifetime: tuple[int, int], text: str) -> bytes:
+    """A serialized visualization_msgs/Marker (Jazzy) with these fields, no points, colours, texture or mesh: the
+    bytes rmw_fastrtps writes for the same message (a test holds them equal)."""
+    write = _Writer()
+    write.values("i", stamp[:1])
+    write.values("I", stamp[1:])
+    write.string(frame_id)
+    write.string(ns)
+    write.values("i", (marker_id, marker_type, action))
+    write.values("d", tuple(pose))
+    write.values("d", tuple(scale))
+    write.values("f", tuple(colour))
+    write.values("i", lifetime[:1])
+    write.values("I", lifetime[1:])
+    write.values("?", (False,))            # frame_locked
+    write.empty_sequence()                 # points
+    write.empty_sequence()                 # colors
+    write.string("")                       # texture_resource
+    write.values("i", (0,))                # texture.header.stamp
+    write.values("I", (0,))
+    write.string("")                       # texture.header.frame_id
+    write.string("")                       # texture.format
+    write.empty_sequence()                 # texture.data
+    write.empty_sequence()                 # uv_coordinates
+    write.string(text)
+    write.string("")                       # mesh_resource
+    write.string("")                       # mesh_file.filename
+    write.empty_sequence()                 # mesh_file.data
+    write.values("?", (False,))            # mesh_use_embedded_materials
+    return write.result()

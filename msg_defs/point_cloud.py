@@ -1,14 +1,17 @@
-"""Node positions (/liver/nodes) as PointCloud2, and back."""
+"""Node positions (/liver/nodes) as PointCloud2 (a message, or its bytes), and back."""
 from __future__ import annotations
 
 import array
+import functools
+import struct
 
 import numpy as np
 from numpy.lib.recfunctions import structured_to_unstructured
+from rclpy.serialization import serialize_message
 from sensor_msgs.msg import PointCloud2, PointField
 
 from msg_defs.finite import finite_array
-from msg_defs.stamps import header_msg
+from msg_defs.stamps import header_msg, stamp_parts
 
 
 def nodes_to_pointcloud2(positions, stamp, frame_id: str) -> PointCloud2:
@@ -19,6 +22,25 @@ def nodes_to_pointcloud2(positions, stamp, frame_id: str) -> PointCloud2:
     fields = [PointField(name=axis, offset=4 * i, datatype=PointField.FLOAT32, count=1) for i, axis in enumerate("xyz")]
     return PointCloud2(header=header_msg(stamp, frame_id), height=1, width=n, fields=fields, is_bigendian=False,
                        point_step=12, row_step=12 * n, data=array.array("B", xyz.tobytes()), is_dense=True)
+
+
+@functools.lru_cache(maxsize=4)
+def _pointcloud2_template(nodes: int, frame_id: str) -> tuple[bytes, int]:
+    """(serialized nodes_to_pointcloud2 of `nodes` zero points, stamp 0, the offset of its point data): every
+    field but the stamp and the points is the same for a node count and a frame."""
+    template = serialize_message(nodes_to_pointcloud2(np.zeros((nodes, 3)), (0, 0), frame_id))
+    return template, len(template) - 1 - 12 * nodes  # the data, then is_dense (one byte) last
+
+
+def nodes_pointcloud2_bytes(positions, stamp, frame_id: str) -> bytes:
+    """The serialized :func:`nodes_to_pointcloud2` (for ``Publisher.publish(bytes)``), without a message object:
+    a template of the node count (cached) with the stamp and the points written in."""
+    xyz = finite_array(positions, (-1, 3), "positions", dtype="<f4")
+    template, data_at = _pointcloud2_template(len(xyz), frame_id)
+    message = bytearray(template)
+    struct.pack_into("<iI", message, 4, *stamp_parts(stamp))
+    message[data_at:data_at + xyz.nbytes] = xyz.tobytes()
+    return bytes(message)
 
 
 def pointcloud2_to_nodes(msg: PointCloud2) -> np.ndarray:

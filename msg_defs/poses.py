@@ -34,13 +34,23 @@ def pose_to_arrays(msg_pose: Pose | PoseStamped) -> tuple[np.ndarray, np.ndarray
     return pose_arrays(msg_pose, "Pose")
 
 
+#: The identity orientation (x, y, z, w), taken as it is (no normalising) by :func:`pose_stamped_bytes`.
+IDENTITY = (0.0, 0.0, 0.0, 1.0)
+
+
 def pose_stamped_bytes(position, orientation_xyzw, stamp, frame_id: str) -> bytes:
-    """Serialized :func:`pose_stamped` (for ``Publisher.publish(bytes)``), without a message object."""
-    if type(position) is np.ndarray and position.shape == (3,):
+    """Serialized :func:`pose_stamped` (for ``Publisher.publish(bytes)``), without a message object; a tuple
+    position and the IDENTITY orientation take the 1 kHz path (no numpy)."""
+    if type(position) is tuple:
+        x, y, z = finite_floats(position, (3,), "position")
+    elif type(position) is np.ndarray and position.shape == (3,):
         x, y, z = finite_floats(tuple(position.tolist()), (3,), "position")
     else:
         x, y, z = finite_array(position, (3,), "position").tolist()
-    quaternion = unit_quaternion(orientation_xyzw, "orientation_xyzw").tolist()
+    if type(orientation_xyzw) is tuple and orientation_xyzw == IDENTITY:
+        quaternion = IDENTITY
+    else:
+        quaternion = unit_quaternion(orientation_xyzw, "orientation_xyzw").tolist()
     return cdr.encode(*stamp_parts(stamp), frame_id, (x, y, z, *quaternion))
 
 
@@ -50,3 +60,11 @@ def pose_from_bytes(data: bytes) -> tuple[np.ndarray, np.ndarray, tuple[int, int
     sec, nanosec, _, values = cdr.decode(data, cdr.POSE_FIELDS, "PoseStamped")
     position = np.array(finite_floats(values[:3], (3,), "PoseStamped.pose.position"))
     return position, unit_quaternion(values[3:], "PoseStamped.pose.orientation"), (sec, nanosec)
+
+
+def position_from_bytes(data: bytes) -> tuple[tuple[float, float, float], tuple[int, int]]:
+    """(position (x, y, z) m as floats, stamp (sec, nanosec)) of a serialized PoseStamped, its orientation not read:
+    what a 1 kHz loop that places a point needs; refuses malformed bytes and a non-finite position, naming the
+    field."""
+    sec, nanosec, _, values = cdr.decode(data, cdr.POSE_FIELDS, "PoseStamped")
+    return finite_floats(values[:3], (3,), "PoseStamped.pose.position"), (sec, nanosec)

@@ -29,6 +29,23 @@ class Latest:
         return self._item
 
 
+class RosTime:
+    """Stamps on a node's ROS clock at the cost of the system clock's: time.time_ns unless the node runs on /clock
+    (use_sim_time), then its clock. Which one is read at construction and at each :meth:`refresh` (a node calls it
+    from its 1 s timer), not at every stamp (asking costs as much as the system clock's time itself)."""
+
+    def __init__(self, node):
+        self._clock = node.get_clock()
+        self.refresh()
+
+    def refresh(self) -> None:
+        self._simulated = self._clock.ros_time_is_active
+
+    def stamp(self) -> tuple[int, int]:
+        """(sec, nanosec) now."""
+        return divmod(self._clock.now().nanoseconds if self._simulated else time.time_ns(), 1_000_000_000)
+
+
 class Handoff:
     """A value one thread hands to another to take once: :meth:`offer` replaces a value not yet taken, :meth:`take`
     returns it once, then `Handoff.NOTHING` until the next offer. One tuple swapped whole (atomic under the GIL):
@@ -89,20 +106,24 @@ class LoopInputs:
         With `link`, raw messages of a stamped type pass through it (class docstring)."""
         resolved = self._owner.resolve_topic_name(topic)
         subscription = self._node.create_subscription(msg_type, resolved, callback, qos, raw=raw)
-        self._inputs.append((subscription, callback, every, received, link))
+        once = qos.depth == 1 and not every and link is None  # the reader keeps the newest message only: one take
+        self._inputs.append((subscription, callback, every, received, link, once))
         return subscription
 
     def poll(self) -> None:
-        for subscription, callback, every, received, link in self._inputs:
+        for subscription, callback, every, received, link, once in self._inputs:
             newest = None
             with subscription.handle:
-                while (taken := subscription.handle.take_message(subscription.msg_type, subscription.raw)):
-                    if link is not None:
-                        link.send(taken[0], received_monotonic(taken[1]))
-                    elif every:
-                        callback(*taken)
-                    else:
-                        newest = taken
+                if once:
+                    newest = subscription.handle.take_message(subscription.msg_type, subscription.raw)
+                else:
+                    while (taken := subscription.handle.take_message(subscription.msg_type, subscription.raw)):
+                        if link is not None:
+                            link.send(taken[0], received_monotonic(taken[1]))
+                        elif every:
+                            callback(*taken)
+                        else:
+                            newest = taken
             if link is not None:
                 self._release(subscription, callback, received, link)
                 continue

@@ -3,7 +3,8 @@
 A RateLoop at `rate_hz` (1 kHz) steps `liver_sim.phantom.device.PhantomSim` — a stylus with mass held by a
 virtual hand playing a `tool_scripts` script — and publishes the stylus on /phantom/measured_cp (frame
 `phantom_base`, stamped with the sample's time). The newest force command from /phantom/servo_cf (format
-`force_output`) pushes the stylus; a command older than `command_timeout_s` (counted from its reception), or a
+`force_output`, taken best effort and volatile as the loop's input: a simulator may drop one, a real driver
+subscribes reliable) pushes the stylus; a command older than `command_timeout_s` (counted from its reception), or a
 malformed one, counts as zero, as a real driver's safety would do. Its diagnostics carry the energy the commands
 really gave the hand (the applied force times the stylus's own motion) and the largest energy generated in a
 window (haptic_bridge.passivity): the truth a bridge's passivity observer estimates. A running node changes only
@@ -20,16 +21,16 @@ from rclpy.node import Node
 from haptic_bridge.passivity import GenerationMonitor
 from liver_sim.base.geometry.device_map import DeviceMap
 from liver_sim.nodes.diagnostics import loop_status, publish_diagnostics
-from liver_sim.nodes.inputs import Latest, LoopInputs
+from liver_sim.nodes.inputs import Latest, LoopInputs, RosTime
 from liver_sim.nodes.parameters import declare_parameters, on_parameter_changes, read_at_start
 from liver_sim.nodes.rate_loop import RateLoop, warn
 from liver_sim.nodes.run import run_node
 from liver_sim.phantom.device import PhantomSim, StylusParams
 from liver_sim.phantom.parameters import PARAMETERS
-from liver_sim.tool.scripts import IDENTITY_XYZW, ScriptParameters, script_from
+from liver_sim.tool.scripts import ScriptParameters, script_from
 from msg_defs.forces import force_from_bytes, force_message_type
-from msg_defs.poses import pose_stamped_bytes
-from msg_defs.topics import TOPICS, device_command_qos
+from msg_defs.poses import IDENTITY, pose_stamped_bytes
+from msg_defs.topics import TOPICS, loop_input_qos
 
 _ZERO = np.zeros(3)
 
@@ -51,7 +52,8 @@ class PhantomNode(Node):
                                                   TOPICS["diagnostics"].qos)
         self._inputs = LoopInputs(self)  # read by the 1 kHz loop itself, not by the executor
         self._inputs.subscribe(force_message_type(p["force_output"]), p["servo_cf_topic"],
-                               device_command_qos(TOPICS["servo_cf"]), self._on_command, raw=True, received=True)
+                               loop_input_qos(TOPICS["servo_cf"]), self._on_command, raw=True, received=True)
+        self._time = RosTime(self)
         self.create_timer(1.0, self._publish_diagnostics)
         self._refuse = read_at_start("phantom_sim", {"command_timeout_s"})
         on_parameter_changes(self, PARAMETERS, self._apply)
@@ -96,12 +98,13 @@ class PhantomNode(Node):
             force = _ZERO
         if self.sim.advance_to(now - self._start, force, self._loop.period_s) == 0 and self.sim.time_s > 0.0:
             return  # a late tick already caught up with this one's sample
-        self._generation.record(now, self.sim.energy_to_hand_j, bool(self.sim.force.any()))
-        stamp = self.get_clock().now().seconds_nanoseconds()  # the sample holds now: the stylus is advanced to it
-        self._publisher.publish(pose_stamped_bytes(self.sim.position, IDENTITY_XYZW, stamp,
+        self._generation.record(now, self.sim.energy_to_hand_j, self.sim.pushing)
+        stamp = self._time.stamp()  # the sample holds now: the stylus is advanced to it
+        self._publisher.publish(pose_stamped_bytes(self.sim.tip, IDENTITY, stamp,
                                                    self.p["frame_id"]))
 
     def _publish_diagnostics(self) -> None:
+        self._time.refresh()
         _, received = self._command.get()
         extra = {"commanded_force_n": float(np.linalg.norm(self.sim.force)),
                  "command_age_s": float(time.monotonic() - received), "bad_commands": self.bad_commands,

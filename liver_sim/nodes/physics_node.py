@@ -25,8 +25,8 @@ from liver_sim.nodes.run import run_node
 from liver_sim.physics.parameters import PARAMETERS, PhysicsParameters, build_model
 from liver_sim.physics.pipeline import Frame, FramePipeline
 from msg_defs.forces import wrench_stamped_bytes
-from msg_defs.local_model import local_model_marker
-from msg_defs.point_cloud import nodes_to_pointcloud2
+from msg_defs.local_model import local_model_marker_bytes
+from msg_defs.point_cloud import nodes_pointcloud2_bytes
 from msg_defs.poses import pose_from_bytes
 from msg_defs.skin import skin_marker_serialized, skin_mesh_msg
 from msg_defs.topics import TOPICS, loop_input_qos
@@ -136,8 +136,8 @@ class PhysicsNode(Node):
         result = frame.result
         frame_id = self.p.frame_id
         positions = self.model.state.positions
-        self._outputs["nodes"].publish(nodes_to_pointcloud2(positions, stamp, frame_id))
-        self._outputs["contact_plane"].publish(local_model_marker(
+        self._outputs["nodes"].publish(nodes_pointcloud2_bytes(positions, stamp, frame_id))
+        self._outputs["contact_plane"].publish(local_model_marker_bytes(
             result.local_model, stamp, frame_id, self.p.local_model_lifetime_s))
         self._outputs["tool_wrench"].publish(wrench_stamped_bytes(result.tool_force_n, stamp, frame_id))
         if frame.marker_due:
