@@ -75,7 +75,9 @@ PARAMETERS = {
                              "takes: maps on device_map_topic while any other node publishes there are refused"),
     "force_output": Param("wrench_stamped", "message type of the force command", choices=FORCE_OUTPUT_FORMATS),
     "force_topic": Param(TOPIC_NAMES["servo_cf"], "force command to the device driver"),
-    "tool_pose_topic": Param(TOPIC_NAMES["tool_pose"], "tool tip pose in the liver frame (PoseStamped)"),
+    "measured_cp_topic": Param(TOPIC_NAMES["measured_cp"], "the device's stylus pose, device frame (PoseStamped, "
+                               "CRTK measured_cp): the loop's 1 kHz input, placed in the liver frame with the device "
+                               "map"),
     "local_model_topic": Param(TOPIC_NAMES["contact_plane"], "local model from the physics (Marker)"),
     "tool_wrench_topic": Param(TOPIC_NAMES["tool_wrench"], "physics contact force on the tool, liver frame "
                                "(WrenchStamped); rendered with local_model: none"),

@@ -233,11 +233,14 @@ class BridgeTick:
             model, lambda m: penetration(m, tip, radius)[0] if tip is not None else 0.0,
             lambda m: rendered_stiffness(m, cap), self.passivity.episode_energy_j - self.passivity.energy_j)
 
-    def sample(self, stamp_s: float, arrival_s: float, tip: np.ndarray) -> None:
-        """A new stylus sample for the passivity observer: its stamp and arrival (s, the clock of the `sent_s` of
-        :meth:`step`) and the tool tip it gives (m, liver frame)."""
-        if self.device_map is not None:
-            self.passivity.sample(stamp_s, arrival_s, (self.device_map.liver_to_device_motion @ tip).tolist())
+    def sample(self, stamp_s: float, arrival_s: float, position_m: np.ndarray) -> np.ndarray | None:
+        """A new stylus sample: its stamp and arrival (s, the clock of the `sent_s` of :meth:`step`) and position (m,
+        device frame), for the passivity observer; returns the tool tip it places in the liver frame through the
+        device map (None before a map)."""
+        if self.device_map is None:
+            return None
+        self.passivity.sample(stamp_s, arrival_s, position_m.tolist())
+        return self.device_map.device_to_liver(position_m)
 
     def step(self, now_s: float, tip: np.ndarray | None, pose_age_s: float, source, source_age_s: float,
              sent_s: float | None = None) -> np.ndarray:

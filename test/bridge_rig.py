@@ -1,6 +1,7 @@
-"""The test side of haptic_bridge as a real process (test_bridge_node, test_bridge_inputs): it plays the physics
-and the tool, publishing the device map (latched, as liver_tool does), a local model (or a physics wrench) and
-the tool pose every 10 ms, and listens to the force command and the diagnostics. Every wait is bounded."""
+"""The test side of haptic_bridge as a real process (test_bridge_node, test_bridge_inputs, ...): it plays the physics,
+the tool and the device, publishing the device map (latched, as liver_tool does), a local model (or a physics
+wrench) and the device's stylus sample (placing the tool where asked, through its own device map) every 10 ms, and
+listens to the force command and the diagnostics. Every wait is bounded."""
 import math
 import signal
 import subprocess
@@ -100,7 +101,7 @@ class Rig:
         self.executor.add_node(self.node)
         self.force_output = force_output
         self.forces, self.stamps, self.pose_stamps, self.diagnostics = [], [], set(), []
-        self.tool = None      # tip position (m) published as the tool pose, or None
+        self.tool = None      # tool tip (m, liver frame), published as the stylus sample that places it, or None
         self.nan_pose = False
         self.model = None     # a LocalModel published as the contact marker, or None
         self.zero_quaternion = False
@@ -108,7 +109,7 @@ class Rig:
         self.wrench = None    # a force (N) published as the physics wrench, or None
         self._publishers = {key: self.node.create_publisher(TOPICS[key].type, (names or {}).get(key, TOPICS[key].name),
                                                             TOPICS[key].qos if input_qos is None else input_qos)
-                            for key in ("tool_pose", "contact_plane", "tool_wrench")}
+                            for key in ("measured_cp", "contact_plane", "tool_wrench")}
         self.node.create_subscription(force_message_type(force_output), TOPICS["servo_cf"].name,
                                       self._on_force, TOPICS["servo_cf"].qos)
         self.node.create_subscription(TOPICS["diagnostics"].type, TOPICS["diagnostics"].name,
@@ -119,8 +120,10 @@ class Rig:
         self.publish_map(rotation_xyzw)
 
     def publish_map(self, rotation_xyzw) -> None:
-        """Latch a device map of this rotation (no translation, scale 1) on the map topic."""
-        self._map.publish(device_map_message(DeviceMap(rotation_xyzw)))
+        """Latch a device map of this rotation (no translation, scale 1) on the map topic; the stylus samples place
+        the tool through it from now on."""
+        self.device_map = DeviceMap(rotation_xyzw)
+        self._map.publish(device_map_message(self.device_map))
 
     def _on_force(self, message) -> None:
         self.forces.append(force_from_message(self.force_output, message))
@@ -130,12 +133,13 @@ class Rig:
     def _publish(self) -> None:
         stamp = self.node.get_clock().now().to_msg()
         if self.tool is not None:
-            pose = pose_stamped(self.tool, (0.0, 0.0, 0.0, 1.0), stamp, "liver")
+            pose = pose_stamped(self.device_map.liver_to_device(np.asarray(self.tool, dtype=float)),
+                                (0.0, 0.0, 0.0, 1.0), stamp, "phantom_base")
             if self.nan_pose:
                 pose = PoseStamped(header=pose.header)
                 pose.pose.position.z = math.nan
             self.pose_stamps.add((stamp.sec, stamp.nanosec))
-            self._publishers["tool_pose"].publish(pose)
+            self._publishers["measured_cp"].publish(pose)
         if self.model is not None:
             marker = local_model_marker(self.model, stamp, "liver", 0.05)
             if self.zero_quaternion:

@@ -41,10 +41,10 @@ def test_an_old_local_model_kept_by_its_publisher_is_not_rendered_when_the_bridg
 
 def test_remapped_inputs_reach_the_loop(rig_factory, ros_env):
     rig = rig_factory(rotation_xyzw=QUARTER_TURN_X,
-                      names={"tool_pose": "/rig/tool_pose", "contact_plane": "/rig/contact_plane"})
+                      names={"measured_cp": "/rig/measured_cp", "contact_plane": "/rig/contact_plane"})
     rig.model, rig.tool = local_model("plane"), INSIDE
     bridge = start_bridge(ros_env, [sys.executable, "-m", "liver_sim.nodes.bridge_node", "--ros-args",
-                                    "-r", "/tool/pose:=/rig/tool_pose",
+                                    "-r", "/phantom/measured_cp:=/rig/measured_cp",
                                     "-r", "/liver/contact_plane:=/rig/contact_plane", "--"])
     try:
         rig.wait_for_force(EXPECTED_INSIDE, bridge)  # the loop's own subscriptions took the remaps

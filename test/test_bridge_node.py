@@ -119,7 +119,7 @@ def test_watchdog_zeroes_the_force_on_a_stale_model_and_recovers(rig_factory, ro
     assert_safe(rig.forces)
 
 
-@pytest.mark.parametrize("bad_input, counter", [("nan_pose", "bad_tool_pose"),
+@pytest.mark.parametrize("bad_input, counter", [("nan_pose", "bad_device_pose"),
                                                 ("zero_quaternion", "bad_local_model"),
                                                 ("huge_marker", "bad_local_model")])
 def test_bad_input_is_counted_and_ignored(rig_factory, ros_env, bad_input, counter):

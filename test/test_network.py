@@ -86,13 +86,13 @@ def network(ros_domain_id, tmp_path):
 
 
 def start_pressing_network(net):
-    """Physics, bridge, and the tool holding the tool tip 1 cm inside the top of the liver."""
-    top = np.array(default_anchor())
-    tip = top + [0.0, 0.0, 0.015 - 0.01]
+    """Physics, bridge, the tool from the device, and the simulated device whose hand presses 1 cm into the top of
+    the liver and holds there (the bridge renders to the device it takes its samples from)."""
     net.processes.start("liver_physics", command_line("liver_physics"))
     net.processes.start("haptic_bridge", command_line("haptic_bridge"))
-    net.processes.start("liver_tool", command_line("liver_tool", {"source": "static",
-                                                                   "static_position_m": tip.tolist()}))
+    net.processes.start("liver_tool", command_line("liver_tool", {"source": "device"}))
+    net.processes.start("phantom_sim", command_line("phantom_sim", {"script": "press", "anchor_m": default_anchor(),
+                                                                     "approach_s": 0.2, "press_s": 0.3}))
     net.wait_for(lambda: np.linalg.norm(net.forces_since(0.0), axis=1).max(initial=0.0) > 0.1, 60.0,
                  "contact force")
 

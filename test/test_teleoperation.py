@@ -164,7 +164,8 @@ def test_the_bridge_counts_the_energy_of_what_it_sent_in_the_device_frame():
 
 
 def test_the_observer_takes_the_stylus_motion_through_the_device_map():
-    """With a turned and scaled map the energy is the command (device frame) times the stylus's motion, Rᵀ·Δtip/s."""
+    """With a turned and scaled map the energy is the command (device frame) times the stylus's motion (device frame),
+    and the sample places the tool tip through the map."""
     from liver_sim.base.geometry.device_map import DeviceMap
 
     device_map = DeviceMap([0.0, 0.0, np.sin(np.pi / 8), np.cos(np.pi / 8)], [0.1, 0.0, 0.0], 2.0)
@@ -172,10 +173,10 @@ def test_the_observer_takes_the_stylus_motion_through_the_device_map():
     tick = BridgeTick({**p, "stiffness_n_per_m": 90.0}, device_map)  # passive at this map's scale 2
     tips = [np.array([0.01, 0.02, 0.03]), np.array([0.012, 0.017, 0.034]), np.array([0.011, 0.02, 0.031])]
     forces = [np.array([0.3, -0.2, 0.5]), np.array([-0.1, 0.4, 0.2])]
-    tick.sample(0.0, 0.0, tips[0])
+    assert tick.sample(0.0, 0.0, device_map.liver_to_device(tips[0])) == pytest.approx(tips[0])  # placed by it
     for k, (force, tip) in enumerate(zip(forces, tips[1:])):
         tick.passivity.commanded(k * T + 0.0005, force)
-        tick.sample((k + 1) * T, (k + 1) * T, tip)
+        tick.sample((k + 1) * T, (k + 1) * T, device_map.liver_to_device(tip))
     expected = sum(float(f @ (device_map.liver_to_device(b) - device_map.liver_to_device(a)))
                    for f, a, b in zip(forces, tips, tips[1:]))
     assert tick.passivity.energy_j == pytest.approx(expected, rel=1e-12)

@@ -23,7 +23,7 @@ LOOP_TARGETS = {"physics_rate_hz": (147.0, 153.0), "haptic_rate_hz_min": 995.0, 
                 "fig8_smoothness_ratio_min": 5.0, "fig8_smoothness_ratio_outside_machine_stalls_min": 5.0}
 #: What a neighbour on the rig must see (docs/contract.md): an independent client at normal priority (the listener:
 #: this process) counts the frames and commands by their header stamps and times each command from the stamp of
-#: the tool pose it was computed from to its own reception.
+#: the device sample it was computed from to its own reception.
 NEIGHBOUR_TARGETS = {"frames_hz_by_stamp_min": 148.0, "commands_hz_by_stamp_min": 990.0,
                      "pose_to_command_at_client_p99_s_max": 0.005}
 #: After a machine stall the simulated hand has moved on by the stall's length and the physics catches up two
@@ -61,9 +61,9 @@ def loop_run(duration_s: float, log_dir, progress=None, observers: dict | None =
 
     Rates and period errors are given twice: as each node's own loop measured them (diagnostics)
     and as the messages went on the wire (DDS publication times), over the `duration_s` in which all
-    nodes ran.  The pose-to-force latency runs from the publication of a tool pose on /tool/pose to
+    nodes ran.  The pose-to-force latency runs from the publication of a device sample on /phantom/measured_cp to
     that of the force command computed from it.  The Fig. 8 baseline (local_model none) is the node's
-    BridgeTick run offline at the live bridge's tick times on the physics wrenches and tool poses the
+    BridgeTick run offline at the live bridge's tick times on the physics wrenches and device samples the
     listener received (analysis.held_wrench_baseline): no second live bridge.  `processes` gives what
     each process cost over the window (network.process_costs: share of one core, context switches per
     second), `load_average` the machine's before and after.  `observers` (label -> argv) run beside the
@@ -98,7 +98,7 @@ def loop_run(duration_s: float, log_dir, progress=None, observers: dict | None =
     latency_calm = latency[calm & np.isfinite(latency)]
     latency = latency[np.isfinite(latency)]
     baseline = held_wrench_baseline(sent_local, run.wrench_arrival_s, run.wrench_n,
-                                    run.tool_arrival_s, node_parameters(())["haptic_bridge"])
+                                    run.device_arrival_s, node_parameters(())["haptic_bridge"])
     fig8 = fig8_figures(force, baseline, sent_local, FIG8_MAX_PERIOD_S)
     fig8_calm = fig8_figures(force[calm], baseline[calm], sent_local[calm], FIG8_MAX_PERIOD_S)
     on_wire = wire_rates(run)

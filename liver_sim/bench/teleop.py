@@ -55,7 +55,8 @@ OSCILLATION_SUSTAINED_S = 2.0
 #: The bridge's energy estimate agrees with the device's truth within this fraction of it (or ESTIMATE_FLOOR_J).
 ESTIMATE_TOLERANCE = 0.1
 ESTIMATE_FLOOR_J = 2e-5
-#: A tool pose that has moved this far (m) from the first one marks the start of the script (the hand's first move).
+#: A device sample that has moved this far (m) from the first one marks the start of the script (the hand's first
+#: move).
 SCRIPT_START_MOTION_M = 1e-4
 ROW_KEYS = ("variant", "passive_model_update", "controller_on", "delay_ms", "jitter_ms", "loss", "stable", "passive",
             "energy_to_hand_j", "energy_generated_max_j", "bridge_energy_to_hand_j", "bridge_energy_generated_max_j",
@@ -160,13 +161,13 @@ def teleop_run(variant: str, link: LinkSettings, duration_s: float, log_dir: Pat
 def script_times(run) -> tuple[np.ndarray, np.ndarray]:
     """(script time s, command (K, 3) N) of the commands published within the run's window, in order of their
     publication (DDS source times: unlike the listener's arrivals, which a burst delivers at one instant, no two
-    are equal); script time counts from the arrival of the first tool pose that moved (the hand's first move)."""
+    are equal); script time counts from the arrival of the first device sample that moved (the hand's first move)."""
     published, force = run.force_published_s["local_model"], run.forces["local_model"][1]
     order = np.argsort(published, kind="stable")
     published, force = published[order], force[order]
-    positions = run.tool_position_m
+    positions = run.device_position_m
     moved = np.linalg.norm(positions - positions[0], axis=1) > SCRIPT_START_MOTION_M if len(positions) else []
-    start = run.tool_arrival_s[np.argmax(moved)] if np.any(moved) else published[0] if len(published) else 0.0
+    start = run.device_arrival_s[np.argmax(moved)] if np.any(moved) else published[0] if len(published) else 0.0
     keep = (published >= start) & (published <= run.window_s[1])
     return published[keep] - start, force[keep]
 

@@ -1,13 +1,15 @@
 """`haptic_bridge`: the 1 kHz haptic loop between the physics (150 Hz) and the device driver.
 
-Each tick of a RateLoop (own thread) turns the newest tool pose and local model into a contact force (paper §2.5,
-P11 of docs/paper.md) — or, with `local_model: none`, holds the newest physics contact wrench (the "without local
-model" baseline of Fig. 8, R4) — maps it into the device frame with the device map `liver_tool` publishes
-(liver_sim.nodes.device_map_source: taken from `device_map_node` only, judged by each sample's writer; zero force
-before one arrives) and sends it through SafeForceOutput (clamp, rate limit, watchdog, soft start) to the driver's
+Each tick of a RateLoop (own thread) takes the newest stylus sample of the device (`measured_cp_topic`, device frame),
+places the tool tip in the liver frame with the device map `liver_tool` publishes (liver_sim.nodes.device_map_source:
+taken from `device_map_node` only, judged by each sample's writer; zero force before one arrives), turns it and the
+newest local model into a contact force (paper §2.5, P11 of docs/paper.md) — or, with `local_model: none`, holds the
+newest physics contact wrench (the "without local model" baseline of Fig. 8, R4) — turns that force into the device
+frame with the same map and sends it through SafeForceOutput (clamp, rate limit, watchdog, soft start) to the driver's
 force topic. The loop reads its inputs itself; each input's age counts from its reception by DDS, an input without
 a matched publisher is stale, and an implausible one is refused and counted. The command is stamped with the
-stamp of the input it was computed from (the tool pose; the wrench in `none` mode), or the node's clock before any.
+stamp of the input it was computed from (the device sample; the wrench in `none` mode), or the node's clock before
+any: a rig measures the device → force latency by it. One hop: the device's own samples are the loop's input.
 
 A Supervisor thread (haptic_bridge.supervisor) publishes zero whenever the loop stalls beyond stall_bound_s, raises,
 or ends, and holds it until the loop is back; on an ending signal (run_node) or close the last message on each of
@@ -36,26 +38,26 @@ from liver_sim.base.link import link_text
 from liver_sim.nodes.bridge_diagnostics import BridgeState, bridge_status
 from liver_sim.nodes.device_map_source import DeviceMapSource
 from liver_sim.nodes.diagnostics import publish_diagnostics
-from liver_sim.nodes.inputs import Handoff, Latest, LoopInputs, emulated_link, link_report
+from liver_sim.nodes.inputs import Handoff, Latest, LoopInputs, RosTime, emulated_link, link_report
 from liver_sim.nodes.occupants import UNKNOWN_NODE_NAME, node_path
 from liver_sim.nodes.parameters import declare_parameters, on_parameter_changes
 from liver_sim.nodes.rate_loop import RateLoop, warn
 from liver_sim.nodes.rcl_take import endpoint_gid, publisher_gid
-from liver_sim.nodes.run import run_node
+from liver_sim.nodes.run import close_ack_timeout_s, run_node
 from msg_defs.forces import force_message_bytes, force_message_type, stamped_force_from_bytes
 from msg_defs.local_model import local_model_from_bytes
-from msg_defs.poses import pose_from_bytes
+from msg_defs.poses import position_from_bytes
 from msg_defs.topics import TOPICS, loop_input_qos
 
-#: How often (s) the bridge looks for another publisher on its force topic (a second bridge on the device).
-RIVAL_CHECK_S = 0.1
-#: How long (s) close waits for the driver to acknowledge the last zero (and a recorder the last diagnostics).
-ZERO_ACK_TIMEOUT_S = 1.0
+#: How often (s) the bridge looks at the graph: another publisher on its force topic (a second bridge on the device),
+#: and whether its inputs have a publisher (one without is stale); not in the 1 kHz loop.
+GRAPH_CHECK_S = 0.1
 #: The warning of a close whose last zero a reliable subscriber (the driver) has not acknowledged.
 ZERO_NOT_ACKED = "the last zero force was not acknowledged"
 #: The bridge's inputs: name → (topic parameter, TOPICS key, decoder of the serialized message). Each decoded value
-#: is a tuple whose first item InputCheck judges (the tip, the local model, the force).
-INPUTS = {"tool_pose": ("tool_pose_topic", "tool_pose", pose_from_bytes),
+#: is a tuple whose first item InputCheck judges (the local model, the force; the stylus once the device map has
+#: placed it in the liver frame, by the loop).
+INPUTS = {"device_pose": ("measured_cp_topic", "measured_cp", position_from_bytes),
           "local_model": ("local_model_topic", "contact_plane", local_model_from_bytes),
           "tool_wrench": ("tool_wrench_topic", "tool_wrench", stamped_force_from_bytes)}
 
@@ -73,13 +75,15 @@ class BridgeShell:
         self.mode = p["local_model"]
         self.source = "tool_wrench" if self.mode == "none" else "local_model"
         checks = InputCheck(p["workspace_centre_m"], p["workspace_radius_m"])
-        self._checks = {"tool_pose": checks.tip, "local_model": checks.model, "tool_wrench": checks.force}
+        self._checks = {"device_pose": lambda _: None, "local_model": checks.model, "tool_wrench": checks.force}
+        self._tip_check = checks.tip
         self._params, self._maps = Handoff(), Handoff()  # for the loop's next tick
-        self._latest = {"tool_pose": Latest(), self.source: Latest()}
+        self._latest = {"device_pose": Latest(), self.source: Latest()}
         self._bad = {kind: 0 for kind in (*INPUTS, "device_map")}
         self._bad_reason, self._bad_logged = {}, dict(self._bad)
         self._map_problem = f"waiting for the device map on {p['device_map_topic']}"
-        self._sampled = None  # the tool pose last handed to the passivity observer
+        self._sampled = None  # the device sample last mapped to a tool tip
+        self._tip = None      # the newest plausible tool tip (m, liver frame)
         self._last_force = np.zeros(3)
         self._last_report = time.monotonic()
         self._loop = self.supervisor = None
@@ -96,8 +100,10 @@ class BridgeShell:
         self._inputs = LoopInputs(node)  # read by the 1 kHz loop itself, not by the executor
         self.link = emulated_link(p)  # the teleoperation link from the physics' side, if emulated
         self._subscriptions = {kind: self._subscribe(kind) for kind in self._latest}
+        self._publishers_seen = dict.fromkeys(self._latest, 0)  # matched publishers per input, from the graph timer
+        self._time = RosTime(node)
         self._timer = node.create_timer(1.0, self._publish_diagnostics)
-        self._rival_timer = node.create_timer(RIVAL_CHECK_S, self._check_rivals)
+        self._graph_timer = node.create_timer(GRAPH_CHECK_S, self._check_graph)
 
     def _subscribe(self, kind: str):
         topic_parameter, key, decode = INPUTS[kind]
@@ -117,7 +123,7 @@ class BridgeShell:
 
         return self._inputs.subscribe(TOPICS[key].type, self.p[topic_parameter], loop_input_qos(TOPICS[key]),
                                       on_message, raw=True, received=True,
-                                      link=None if kind == "tool_pose" else self.link)
+                                      link=None if kind == "device_pose" else self.link)
 
     # -- life cycle
     def start(self) -> None:
@@ -136,11 +142,12 @@ class BridgeShell:
     def stop(self, cause: str) -> None:
         """Zero force as the last command on each writer (nothing after it), the loop stopped, the zero
         acknowledged, and the last diagnostics too (`destroy` would take messages not yet acknowledged with their
-        publisher), within ZERO_ACK_TIMEOUT_S, the zero first; a zero not acknowledged by then is logged."""
+        publisher), within run.close_ack_timeout_s(), the zero first; a zero not acknowledged by then is logged."""
         if self.supervisor is not None and not self.supervisor.closed:
             self.supervisor.close(cause)
             self._loop.stop()
-            deadline = time.monotonic() + ZERO_ACK_TIMEOUT_S
+            timeout_s = close_ack_timeout_s()
+            deadline = time.monotonic() + timeout_s
             for publisher in (self._publisher, self._zero_publisher, self._diagnostics):
                 try:
                     acked = publisher.wait_for_all_acked(Duration(seconds=max(0.0, deadline - time.monotonic())))
@@ -148,12 +155,12 @@ class BridgeShell:
                     continue
                 if not acked and publisher is not self._diagnostics:
                     self.node.get_logger().warning(
-                        f"{ZERO_NOT_ACKED} on {publisher.topic_name} within {ZERO_ACK_TIMEOUT_S:g} s")
+                        f"{ZERO_NOT_ACKED} on {publisher.topic_name} within {timeout_s:g} s")
 
     def destroy(self) -> None:
         self._inputs.destroy()
         self.map_source.destroy()
-        for timer in (self._rival_timer, self._timer):
+        for timer in (self._graph_timer, self._timer):
             self.node.destroy_timer(timer)
         for publisher in (self._publisher, self._zero_publisher, self._diagnostics):
             self.node.destroy_publisher(publisher)
@@ -167,11 +174,12 @@ class BridgeShell:
         self._params.offer(self.p)
         return None
 
-    # -- one bridge per device (executor thread)
-    def _check_rivals(self) -> None:
-        """Note every publisher on force_topic but this bridge's own two writers (known by their GIDs): two bridges
-        interleaving their commands would defeat the rate limit and the watchdog, so while any other publishes
-        there, this one sends zero."""
+    # -- the graph (executor thread): one bridge per device, inputs with a publisher
+    def _check_graph(self) -> None:
+        """Count each input's publishers (an input without one is stale), and note every publisher on force_topic
+        but this bridge's own two writers (known by their GIDs): two bridges interleaving their commands would defeat
+        the rate limit and the watchdog, so while any other publishes there, this one sends zero."""
+        self._publishers_seen = {kind: sub.get_publisher_count() for kind, sub in self._subscriptions.items()}
         names = sorted(node_path(info.node_namespace, info.node_name) if info.node_name != UNKNOWN_NODE_NAME
                        else "a node not yet named by the graph"
                        for info in self.node.get_publishers_info_by_topic(self._publisher.topic_name)
@@ -223,14 +231,22 @@ class BridgeShell:
             tick.set_device_map(device_map)
         self._inputs.poll()
         wall = time.time()
-        pose, pose_received = self._latest["tool_pose"].get()
+        pose, pose_received = self._latest["device_pose"].get()
         source, source_received = self._latest[self.source].get()
-        pose_age = now - pose_received if self._subscriptions["tool_pose"].get_publisher_count() else math.inf
-        source_age = now - source_received if self._subscriptions[self.source].get_publisher_count() else math.inf
-        tip, stamp = (pose[0], pose[2]) if pose is not None else (None, None)
-        if pose is not None and pose is not self._sampled:
+        publishers = self._publishers_seen
+        pose_age = now - pose_received if publishers["device_pose"] else math.inf
+        source_age = now - source_received if publishers[self.source] else math.inf
+        stamp = pose[1] if pose is not None else None
+        if pose is not None and pose is not self._sampled:  # a new stylus sample: its tool tip in the liver frame
             self._sampled = pose
-            tick.sample(stamp[0] + stamp[1] * 1e-9, wall - (now - pose_received), tip)
+            tip = tick.sample(stamp[0] + stamp[1] * 1e-9, wall - (now - pose_received), np.array(pose[0]))
+            problem = self._tip_check(tip) if tip is not None else None
+            if problem:
+                self._bad["device_pose"] += 1
+                self._bad_reason["device_pose"] = problem
+            else:
+                self._tip = tip
+        tip = self._tip if tick.device_map is not None else None
         if self.mode == "none":
             source, stamp = (source[0], source[1]) if source is not None else (None, None)
         elif source is not None:
@@ -241,18 +257,18 @@ class BridgeShell:
             command = np.zeros(3)
         self._last_force = command
         if stamp is None or (source_age if self.mode == "none" else pose_age) > self.p["lifetime_s"]:
-            stamp = self.node.get_clock().now().seconds_nanoseconds()  # no fresh input: the command holds now
+            stamp = self._time.stamp()  # no fresh input: the command holds now
         self.supervisor.send(force_message_bytes(self.p["force_output"], command, stamp, self.p["device_frame_id"]))
 
     def _on_error(self, now: float, exc: Exception) -> None:
         self.supervisor.error(now, exc)
 
     def _zero_message(self) -> bytes:
-        return force_message_bytes(self.p["force_output"], np.zeros(3), self.node.get_clock().now().to_msg(),
-                                   self.p["device_frame_id"])
+        return force_message_bytes(self.p["force_output"], np.zeros(3), self._time.stamp(), self.p["device_frame_id"])
 
     # -- diagnostics (executor thread)
     def _publish_diagnostics(self) -> None:
+        self._time.refresh()
         now = time.monotonic()
         logger = self.node.get_logger()
         for kind, count in self._bad.items():
@@ -265,9 +281,9 @@ class BridgeShell:
         self._last_report = now
         stats = self._loop.report()
         state = BridgeState(
-            {"tool_pose": now - self._latest["tool_pose"].get()[1], "source": now - self._latest[self.source].get()[1]},
-            {kind: self._subscriptions[self.source if kind == "source" else kind].get_publisher_count()
-             for kind in ("tool_pose", "source")},
+            {"device_pose": now - self._latest["device_pose"].get()[1],
+             "source": now - self._latest[self.source].get()[1]},
+            {"device_pose": self._publishers_seen["device_pose"], "source": self._publishers_seen[self.source]},
             self._bad, self._map_problem, self._rivals, float(np.linalg.norm(self._last_force)))
         status, events = bridge_status(self.node.get_name(), self.p, self.tick, stats, report, state,
                                        link_report(self.link, self._inputs))
@@ -283,7 +299,7 @@ class BridgeShell:
                      f"local model (K {p['stiffness_n_per_m']:g} N/m, B {p['damping_ns_per_m']:g} N·s/m, "
                      f"glide {p['model_glide_s']:g} s, tool radius {p['tool_radius_m']:g} m)")
         return (f"haptic_bridge: {p['rate_hz']:g} Hz, local_model {self.mode}: {rendering}; passivity controller "
-                f"{'on' if self.tick.passivity.control else 'off'}; in: {p['tool_pose_topic']}, "
+                f"{'on' if self.tick.passivity.control else 'off'}; in: {p['measured_cp_topic']}, "
                 f"{p[INPUTS[self.source][0]]}{link_text(self.link)}, device map {p['device_map_topic']} from "
                 f"{p['device_map_node']}; out: {p['force_topic']} ({p['force_output']}, frame {p['device_frame_id']}, "
                 f"max {p['max_force_n']:g} N, {p['max_force_rate_n_per_s']:g} N/s, soft start {p['soft_start_s']:g} "

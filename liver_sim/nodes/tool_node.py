@@ -1,8 +1,10 @@
-"""`liver_tool`: publishes the tool tip on /tool/pose (frame `liver`) from the device, a script, or held still.
+"""`liver_tool`: publishes the tool tip on /tool/pose (frame `liver`) at `rate_hz` (the physics' rate, 150 Hz) from
+the device, a script, or held still.
 
-- source=device: every /phantom/measured_cp sample is mapped device→liver and republished at once
-  with the sample's stamp; implausible samples (NaN, beyond `workspace_radius_m`) are counted,
-  logged (throttled) and dropped;
+- source=device: a RateLoop at `rate_hz` takes the newest /phantom/measured_cp sample (a subscription the loop
+  polls, not an executor callback per sample), maps it device→liver and publishes it with the sample's stamp;
+  implausible samples (NaN, beyond `workspace_radius_m`) are counted, logged (throttled) and dropped. The haptic
+  loop takes the device's samples itself (one hop): this node feeds the physics only;
 - source=script: a RateLoop at `rate_hz` plays a `liver_sim.tool.scripts` script;
 - source=static: a RateLoop at `rate_hz` holds `static_position_m`, `static_orientation_xyzw`.
 
@@ -24,8 +26,9 @@ from rclpy.node import Node
 from liver_sim.base.geometry.device_map import DeviceMap
 from liver_sim.base.parameters import quaternion_parameter, vector_parameter
 from liver_sim.nodes.diagnostics import loop_status, publish_diagnostics
+from liver_sim.nodes.inputs import Latest, LoopInputs
 from liver_sim.nodes.parameters import declare_parameters, on_parameter_changes, read_at_start
-from liver_sim.nodes.rate_loop import LoopStats, RateLoop, warn
+from liver_sim.nodes.rate_loop import RateLoop, warn
 from liver_sim.nodes.run import run_node
 from liver_sim.tool.parameters import PARAMETERS
 from liver_sim.tool.scripts import IDENTITY_XYZW, ScriptedTrajectory, ScriptParameters, script_from
@@ -55,12 +58,13 @@ class ToolNode(Node):
         self._device_map = device_map
         self.published = 0
         self.rejected = 0
-        self._loop = None
+        self._device = self._inputs = None
         if p["source"] == "device":
-            self._arrivals = LoopStats(1.0 / p["rate_hz"])
-            self._last_arrival = None
-            self.create_subscription(TOPICS["measured_cp"].type, p["measured_cp_topic"], self._on_device,
-                                     loop_input_qos(TOPICS["measured_cp"]), raw=True)
+            self._device, self._last_sample = Latest(), None
+            self._inputs = LoopInputs(self)  # read by the loop at its rate, not by the executor per sample
+            self._inputs.subscribe(TOPICS["measured_cp"].type, p["measured_cp_topic"],
+                                   loop_input_qos(TOPICS["measured_cp"]), self._device.set, raw=True, received=True)
+            step = self._step_device
             origin = (f"device {p['measured_cp_topic']} mapped by R={list(p['device_rotation_xyzw'])}, "
                       f"t={list(p['device_translation_m'])} m, scale {p['device_scale']:g}")
         else:
@@ -73,20 +77,20 @@ class ToolNode(Node):
                 self._orientation = static_orientation
                 origin = f"static {static_position.tolist()} m"
             self._start = None
-            self._loop = RateLoop(p["rate_hz"], self._step, "liver_tool", realtime_priority=p["realtime_priority"],
+            step = self._step
+        self._loop = RateLoop(p["rate_hz"], step, "liver_tool", realtime_priority=p["realtime_priority"],
                               on_refused=warn(self))
         self.create_timer(1.0, self._publish_diagnostics)
         self._refuse = read_at_start("liver_tool", {"workspace_radius_m"})
         on_parameter_changes(self, PARAMETERS, self._apply)
-        rate = "as the device" if self._loop is None else f"{p['rate_hz']:g} Hz"
-        self.get_logger().info(f"liver_tool: {origin} → {p['tool_pose_topic']} (frame {p['frame_id']}, {rate}); "
-                               f"device map latched on {p['device_map_topic']}")
-        if self._loop is not None:
-            self._loop.start()
+        self.get_logger().info(f"liver_tool: {origin} → {p['tool_pose_topic']} (frame {p['frame_id']}, "
+                               f"{p['rate_hz']:g} Hz); device map latched on {p['device_map_topic']}")
+        self._loop.start()
 
     def close(self) -> None:
-        if self._loop is not None:
-            self._loop.stop()
+        self._loop.stop()
+        if self._inputs is not None:
+            self._inputs.destroy()
 
     def _apply(self, changes: dict) -> str | None:
         refused = self._refuse(changes)
@@ -95,12 +99,13 @@ class ToolNode(Node):
             self.p = {**self.p, **changes}
         return refused
 
-    def _on_device(self, data: bytes) -> None:
-        now = time.monotonic()
-        if self._last_arrival is not None:
-            gap = now - self._last_arrival
-            self._arrivals.record(gap, gap > 2.0 * self._arrivals.period_s)
-        self._last_arrival = now
+    def _step_device(self, now: float) -> None:
+        """Publish the newest device sample, mapped, once (none new: nothing)."""
+        self._inputs.poll()
+        data, _ = self._device.get()
+        if data is None or data is self._last_sample:
+            return
+        self._last_sample = data
         try:
             position, orientation, stamp = pose_from_bytes(data)
             position, orientation = self._device_map.pose(position, orientation)
@@ -121,15 +126,11 @@ class ToolNode(Node):
 
     def _publish_diagnostics(self) -> None:
         extra = {"source": self.p["source"], "published": self.published}
-        if self._loop is None:
-            stats = self._arrivals.summary()
+        if self._device is not None:
             extra["rejected_samples"] = self.rejected
-            extra["sample_age_s"] = (float(time.monotonic() - self._last_arrival) if self._last_arrival is not None
-                                     else float("inf"))
-        else:
-            stats = self._loop.report()
+            extra["sample_age_s"] = float(time.monotonic() - self._device.get()[1])
         publish_diagnostics(self, self._diagnostics,
-                            [loop_status(f"{self.get_name()}: loop", stats, self.p["rate_hz"], extra)])
+                            [loop_status(f"{self.get_name()}: loop", self._loop.report(), self.p["rate_hz"], extra)])
 
 
 def main(args=None) -> int:

@@ -39,21 +39,21 @@ class NetworkSnapshot:
     forces: dict
     #: label -> publication times (K,) of those force commands
     force_published_s: dict
-    #: label -> for each force command stamped with a tool pose, the time from that pose's publication to the
-    #: command's (K,) s; NaN where the pose was not seen
+    #: label -> for each force command stamped with a device sample, the time from that sample's publication to the
+    #: command's (K,) s (the one hop: device → force); NaN where the sample was not seen
     pose_to_force_s: dict
-    #: label -> header stamps (K,) of the force commands (s, ROS time: the tool pose a command was computed
+    #: label -> header stamps (K,) of the force commands (s, ROS time: the device sample a command was computed
     #: from, or the bridge's clock); NaN for formats without a header
     force_stamp_s: dict
-    #: label -> for each force command, from its header stamp to its arrival here (K,) s: the tool pose's
-    #: sampling to the command reaching this client, as a neighbour on the rig sees it
+    #: label -> for each force command, from its header stamp to its arrival here (K,) s: the device's sampling
+    #: to the command reaching this client, as a neighbour on the rig sees it
     stamp_to_arrival_s: dict
     #: arrival times (W,) and forces (W, 3) of the physics contact force on the tool (/liver/tool_wrench)
     wrench_arrival_s: np.ndarray
     wrench_n: np.ndarray
-    #: arrival times (P,) and tip positions (P, 3) of /tool/pose
-    tool_arrival_s: np.ndarray
-    tool_position_m: np.ndarray
+    #: arrival times (P,) and stylus positions (P, 3) m, device frame, of /phantom/measured_cp
+    device_arrival_s: np.ndarray
+    device_position_m: np.ndarray
     #: arrival, publication and header-stamp times (F,) of /liver/nodes
     nodes_arrival_s: np.ndarray
     nodes_published_s: np.ndarray
@@ -72,10 +72,11 @@ class NetworkSnapshot:
 
 
 class NetworkListener(Node):
-    """Listens to the force commands, the tool pose, the nodes, the physics wrench, /liver/surface and /diagnostics.
+    """Listens to the force commands, the device's samples, the nodes, the physics wrench, /liver/surface and
+    /diagnostics.
 
     `force_topics` maps a label to (topic, force_output format), e.g. {'local_model': ('/phantom/servo_cf',
-    'wrench_stamped')}. The force commands, tool poses, nodes and physics wrenches are taken in batches by a
+    'wrench_stamped')}. The force commands, device samples, nodes and physics wrenches are taken in batches by a
     POLL_RATE_HZ loop (cheaper than a callback each) and timed by DDS: `*_arrival_s` is when the message reached
     this process (the rmw's receive time, on the time.monotonic() scale). Messages are decoded in
     `snapshot()`, only those not decoded by an earlier call. `peak_nodes` are the node positions
@@ -90,7 +91,7 @@ class NetworkListener(Node):
         self._monotonic_minus_wall_s = time.monotonic() - time.time()
         self._force_formats = {label: fmt for label, (_, fmt) in force_topics.items()}
         self._received = {("force", label): [] for label in force_topics}
-        self._received["tool_pose"], self._received["nodes"], self._received["tool_wrench"] = [], [], []
+        self._received["device_pose"], self._received["nodes"], self._received["tool_wrench"] = [], [], []
         self._decoded = {key: [] for key in self._received}
         self.diagnostics: dict[str, dict] = {}
         self.initial_surface = self.surface = None
@@ -100,7 +101,7 @@ class NetworkListener(Node):
         self._polled = LoopInputs(self)
         for label, (topic, fmt) in force_topics.items():
             self._take(("force", label), force_message_type(fmt), topic, TOPICS["servo_cf"])
-        self._take("tool_pose", TOPICS["tool_pose"].type, TOPICS["tool_pose"].name, TOPICS["tool_pose"])
+        self._take("device_pose", TOPICS["measured_cp"].type, TOPICS["measured_cp"].name, TOPICS["measured_cp"])
         self._take("nodes", TOPICS["nodes"].type, TOPICS["nodes"].name, TOPICS["nodes"])
         self._take("tool_wrench", TOPICS["tool_wrench"].type, TOPICS["tool_wrench"].name, TOPICS["tool_wrench"])
         self.create_subscription(TOPICS["surface"].type, TOPICS["surface"].name, self._on_surface,
@@ -152,10 +153,10 @@ class NetworkListener(Node):
         return (np.array([d[0] for d in decoded]), np.array([d[1] for d in decoded]),
                 np.array([d[2] for d in decoded]).reshape(-1, 3), np.array([d[3] for d in decoded]))
 
-    def _decode_tool_poses(self) -> tuple:
-        """(arrival_s, published_s, stamp_s, positions (K, 3) m) of the tool poses so far."""
-        decoded = self._decoded["tool_pose"]
-        for arrival, published, data in self._new("tool_pose"):
+    def _decode_device_poses(self) -> tuple:
+        """(arrival_s, published_s, stamp_s, positions (K, 3) m, device frame) of the device's samples so far."""
+        decoded = self._decoded["device_pose"]
+        for arrival, published, data in self._new("device_pose"):
             try:
                 position, _, (sec, nanosec) = pose_from_bytes(data)
             except ValueError:
@@ -216,7 +217,7 @@ class NetworkListener(Node):
         run, so that the listener's memory stays bounded."""
         for label in self._force_formats:
             self._decode_forces(label)
-        self._decode_tool_poses()
+        self._decode_device_poses()
         self._decode_nodes()
         self._decode_wrenches()
 
@@ -225,14 +226,14 @@ class NetworkListener(Node):
 
         `*_arrival_s` are when messages reached this process, `*_published_s` when their publisher sent
         them (DDS times, independent of how promptly this process runs). `pose_to_force_s[label]`: for
-        each force command stamped with a tool pose, the time from that pose's publication to the
-        command's (s; NaN when the pose was not seen).
+        each force command stamped with a device sample, the time from that sample's publication to the
+        command's (s; NaN when the sample was not seen).
         """
         decoded = {label: self._decode_forces(label) for label in self._force_formats}
-        tool_arrival, tool_published, tool_stamp, tool_position = self._decode_tool_poses()
+        device_arrival, device_published, device_stamp, device_position = self._decode_device_poses()
         nodes_arrival, nodes_published, nodes_stamp = self._decode_nodes()
         wrench_arrival, wrench = self._decode_wrenches()
-        published_by_stamp = dict(zip(tool_stamp.tolist(), tool_published.tolist()))
+        published_by_stamp = dict(zip(device_stamp.tolist(), device_published.tolist()))
         with self._lock:
             return NetworkSnapshot(
                 forces={label: (arrival, values) for label, (arrival, _, values, _) in decoded.items()},
@@ -245,8 +246,8 @@ class NetworkListener(Node):
                                     for label, (arrival, _, _, stamps) in decoded.items()},
                 wrench_arrival_s=wrench_arrival,
                 wrench_n=wrench,
-                tool_arrival_s=tool_arrival,
-                tool_position_m=tool_position,
+                device_arrival_s=device_arrival,
+                device_position_m=device_position,
                 nodes_arrival_s=nodes_arrival,
                 nodes_published_s=nodes_published,
                 nodes_stamp_s=nodes_stamp,

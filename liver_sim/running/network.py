@@ -175,8 +175,8 @@ def run_network(plan: NetworkPlan, duration_s: float, log_dir: Path, progress=pr
         for label in late:
             processes.start(label, plan.commands[label])
         if late:
-            _wait_until(listener, processes, f"the tool pose from {', '.join(late)}",
-                        lambda heard: len(heard.snapshot().tool_arrival_s) > 0)
+            _wait_until(listener, processes, f"the device samples from {', '.join(late)}",
+                        lambda heard: len(heard.snapshot().device_arrival_s) > 0)
         for k in range(extra_load):
             loads.append(subprocess.Popen(CORE_BOUND_PROCESS))
             progress(f"  extra load {k + 1}: pid {loads[-1].pid}, one core busy at normal priority")

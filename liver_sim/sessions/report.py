@@ -27,6 +27,7 @@ from liver_sim.base.topic_names import BASELINE_FORCE_TOPIC
 from liver_sim.sessions.bag import BagError, bag_info, read_messages
 from liver_sim.sessions.parameters import node_parameters
 from liver_sim.sessions.record import message_class, type_name
+from msg_defs.device_map import device_map_from_message
 from msg_defs.forces import FORCE_OUTPUT_FORMATS, force_from_message, force_message_type
 from msg_defs.local_model import marker_to_local_model
 from msg_defs.poses import pose_to_arrays
@@ -46,11 +47,14 @@ def _force_format(msgtype: str) -> str | None:
 
 
 def session_arrays(bag: Path, physics: dict, bridge: dict) -> dict:
-    """One pass over the bag: log times of every topic, forces, wrench, tool tips, local models, diagnostics."""
+    """One pass over the bag: log times of every topic, forces, wrench, tool tips, local models, diagnostics. The
+    tool tips are the device's samples placed in the liver frame by the recorded device map (1 kHz, what the
+    bridge rendered), or, in a bag without them, the tool poses."""
 
     force_topics = {"local_model": bridge["force_topic"], "without_local_model": BASELINE_FORCE_TOPIC}
     decoded = {bridge["force_topic"], BASELINE_FORCE_TOPIC, physics.tool_wrench_topic, physics.tool_pose_topic,
-               physics.contact_plane_topic, TOPICS["diagnostics"].name}
+               physics.contact_plane_topic, TOPICS["diagnostics"].name, bridge["measured_cp_topic"],
+               bridge["device_map_topic"]}
     times: dict[str, list] = {}
     values: dict[str, list] = {}
     diagnostics: list = []
@@ -71,8 +75,10 @@ def session_arrays(bag: Path, physics: dict, bridge: dict) -> dict:
                 value = force_from_message(fmt, message)
             elif m.topic == physics.tool_wrench_topic:
                 value = force_from_message("wrench_stamped", message)
-            elif m.topic == physics.tool_pose_topic:
+            elif m.topic in (physics.tool_pose_topic, bridge["measured_cp_topic"]):
                 value = pose_to_arrays(message.pose)[0]
+            elif m.topic == bridge["device_map_topic"]:
+                value = device_map_from_message(message)
             elif m.topic == physics.contact_plane_topic:
                 value = marker_to_local_model(message)[0]
             else:
@@ -94,7 +100,12 @@ def session_arrays(bag: Path, physics: dict, bridge: dict) -> dict:
         if len(t):
             forces[label] = (t, np.array(f).reshape(-1, 3))
     wrench_t, wrench = series(physics.tool_wrench_topic)
-    pose_t, tips = series(physics.tool_pose_topic)
+    sample_t, samples = series(bridge["measured_cp_topic"])
+    device_maps = series(bridge["device_map_topic"])[1]
+    if len(sample_t) and device_maps:
+        pose_t, tips = sample_t, [device_maps[0].device_to_liver(sample) for sample in samples]
+    else:
+        pose_t, tips = series(physics.tool_pose_topic)
     plane_t, models = series(physics.contact_plane_topic)
     return {"origin_s": origin, "times": {k: np.array(v) - origin for k, v in times.items()},
             "forces": forces, "wrench": (wrench_t, np.array(wrench).reshape(-1, 3)),
@@ -247,7 +258,7 @@ def write_report(bag: Path, out: Path, progress=print) -> dict:
     summary = {"bag": str(bag), "storage": info.storage, "duration_s": info.duration_ns * 1e-9,
                "topics": {t: {"type": kind, "messages": n} for t, (kind, n) in sorted(info.topics.items())},
                "recorder": info.custom_data}
-    nominal = {physics.tool_pose_topic: bridge["rate_hz"], bridge["force_topic"]: bridge["rate_hz"],
+    nominal = {physics.tool_pose_topic: physics.rate_hz, bridge["force_topic"]: bridge["rate_hz"],
                TOPICS["measured_cp"].name: bridge["rate_hz"], physics.nodes_topic: physics.rate_hz,
                physics.contact_plane_topic: physics.rate_hz, physics.tool_wrench_topic: physics.rate_hz}
     rate_topics = [t for t in nominal if t in data["times"]]

@@ -9,8 +9,8 @@ _SCRIPT = ScriptSettings()
 PARAMETERS = {
     "source": Param("device", "where the tool pose comes from: device, script or static",
                     choices=("device", "script", "static")),
-    "rate_hz": Param(1000.0, "publishing rate for script and static; expected device rate for diagnostics (Hz)",
-                     1.0, 10000.0),
+    "rate_hz": Param(150.0, "publishing rate of the tool pose, whatever the source (Hz): the physics' rate, the "
+                     "only consumer (source device: the newest device sample at each tick)", 1.0, 10000.0),
     "realtime_priority": realtime_priority_parameter(75),
     "frame_id": Param("liver", "frame of the published tool pose"),
     "tool_pose_topic": Param(TOPIC_NAMES["tool_pose"], "tool tip pose out, liver frame (PoseStamped)"),
