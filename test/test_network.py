@@ -374,15 +374,18 @@ def test_the_neighbour_counts_by_header_stamps_within_the_window():
     now = time.monotonic()
     wall = time.time() - time.monotonic()
     stamps = np.arange(0.0, 10.0, 0.001) + now + wall  # 1 kHz commands over 10 s, stamped in ROS time
+    arrivals = np.arange(0.0, 10.0, 0.001) + now
+    arrivals[5000:] += 0.012  # a 13 ms wait between two commands halfway
     run = SimpleNamespace(window_s=(now + 1.0, now + 9.0), nodes_stamp_s=np.arange(0.0, 10.0, 1 / 150) + now + wall,
-                          force_stamp_s={"local_model": stamps},
+                          force_stamp_s={"local_model": stamps}, forces={"local_model": (arrivals, None)},
                           stamp_to_arrival_s={"local_model": np.where(np.arange(stamps.size) % 50, 0.002, 0.008)})
     figures = neighbour_figures(run)
     assert figures["frames_hz_by_stamp"] == pytest.approx(150.0, rel=0.01)
     assert figures["commands_hz_by_stamp"] == pytest.approx(1000.0, rel=0.01)
     assert figures["pose_to_command_at_client_p99_s"] == pytest.approx(0.008)  # 2 % of them 8 ms late
+    assert figures["command_gap_at_client_max_s"] == pytest.approx(0.013)
     assert figures["met"] == {"frames_hz_by_stamp_min": True, "commands_hz_by_stamp_min": True,
-                              "pose_to_command_at_client_p99_s_max": False}
+                              "pose_to_command_at_client_p99_s_max": False, "command_gap_at_client_max_s_max": False}
 
 
 def test_domain_occupants_name_product_nodes_devices_and_bridges_but_not_observers():
