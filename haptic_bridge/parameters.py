@@ -5,7 +5,7 @@ The device map is not among them: the bridge takes the one `liver_tool` publishe
 (latched), so the map that places the tool and the map that turns the force can never differ."""
 from haptic_bridge.safety import DEFAULT_MAX_FORCE_N, PHANTOM_MAX_FORCE_N
 from liver_sim.base.link import LINK_PARAMETERS
-from liver_sim.base.parameters import Param, realtime_priority_parameter
+from liver_sim.base.parameters import Param, parameter_record, realtime_priority_parameter
 from liver_sim.base.topic_names import FORCE_OUTPUT_FORMATS, TOPIC_NAMES
 
 MODES = ("plane", "sphere", "none")
@@ -84,3 +84,7 @@ PARAMETERS = {
     "device_frame_id": Param("phantom_base", "frame_id of the force command"),
     **LINK_PARAMETERS,  # on the inputs from the other side of a teleoperation link
 }
+
+#: The bridge's parameters as one typed record (liver_sim.base.parameters.parameter_record): a wrong name fails where
+#: the values are read, not in the 1 kHz tick.
+BridgeParameters = parameter_record("BridgeParameters", PARAMETERS, "The parameters of haptic_bridge (PARAMETERS).")

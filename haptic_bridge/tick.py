@@ -10,6 +10,7 @@ import math
 
 import numpy as np
 
+from haptic_bridge.parameters import BridgeParameters
 from haptic_bridge.passivity import PassivityObserver
 from haptic_bridge.rendering import ModelGlide, PassiveModelUpdate, contact_force, max_passive_stiffness
 from haptic_bridge.safety import SafeForceOutput
@@ -21,15 +22,15 @@ _ZERO = np.zeros(3)
 _ZERO.setflags(write=False)
 
 
-def hold_time_s(p: dict) -> float:
+def hold_time_s(p: BridgeParameters) -> float:
     """The longest time T (s) a command can be held at the device while the bridge drives it: a period of what
     is rendered (1/rate_hz; with `local_model: none` the physics wrench, 1/physics_rate_hz), or the longest
     gap between ticks before the supervisor sends zero (stall_bound_s), whichever is longer."""
-    rate = p["physics_rate_hz"] if p["local_model"] == "none" else p["rate_hz"]
-    return max(1.0 / rate, p["stall_bound_s"])
+    rate = p.physics_rate_hz if p.local_model == "none" else p.rate_hz
+    return max(1.0 / rate, p.stall_bound_s)
 
 
-def passivity_problem(p: dict, scale: float = 1.0) -> str | None:
+def passivity_problem(p: BridgeParameters, scale: float = 1.0) -> str | None:
     """Why the force `p` renders is not passive at the device (Colgate: b > K·T/2 + |B|), or None.
 
     Every mode is checked with what it renders: the local model's K, B; with `local_model: none` the physics
@@ -37,21 +38,21 @@ def passivity_problem(p: dict, scale: float = 1.0) -> str | None:
     not the nominal period: ticks may lie up to stall_bound_s apart. At the device a liver-side K and B are felt
     as K·scale and B·scale (`scale`: the device map's).
     """
-    if p["local_model"] == "none":
+    if p.local_model == "none":
         names, rate_name = ("contact_stiffness_n_per_m", "contact_damping_ns_per_m"), "physics_rate_hz"
     else:
         names, rate_name = ("stiffness_n_per_m", "damping_ns_per_m"), "rate_hz"
-    stiffness, damping, hold = p[names[0]], p[names[1]], hold_time_s(p)
-    limit = max_passive_stiffness(p["device_damping_ns_per_m"], hold, damping * scale)
+    stiffness, damping, hold = getattr(p, names[0]), getattr(p, names[1]), hold_time_s(p)
+    limit = max_passive_stiffness(p.device_damping_ns_per_m, hold, damping * scale)
     if stiffness * scale < limit or stiffness + damping <= 0.0:
         return None
-    return (f"parameter {names[0]}={stiffness:g} is not passive with local_model {p['local_model']}: with "
-            f"device_damping_ns_per_m={p['device_damping_ns_per_m']:g}, {names[1]}={damping:g}, device scale "
+    return (f"parameter {names[0]}={stiffness:g} is not passive with local_model {p.local_model}: with "
+            f"device_damping_ns_per_m={p.device_damping_ns_per_m:g}, {names[1]}={damping:g}, device scale "
             f"{scale:g} and a hold of T={hold * 1e3:g} ms (the longer of 1/{rate_name} and stall_bound_s), "
             f"Colgate's b > K·T/2 + B allows {names[0]} < {limit / scale:g} N/m")
 
 
-def check_passivity(p: dict, scale: float = 1.0) -> None:
+def check_passivity(p: BridgeParameters, scale: float = 1.0) -> None:
     """ValueError with :func:`passivity_problem`'s reason when the rendering is not passive."""
     problem = passivity_problem(p, scale)
     if problem:
@@ -69,7 +70,8 @@ ENVELOPE = {"max_force_n": "at most", "max_force_rate_n_per_s": "at most", "life
 RUNTIME_PARAMETERS = frozenset(ENVELOPE)
 
 
-def checked_change(p: dict, changes: dict, scale: float = 1.0, start: dict | None = None) -> dict:
+def checked_change(p: BridgeParameters, changes: dict, scale: float = 1.0,
+                   start: BridgeParameters | None = None) -> BridgeParameters:
     """The parameters `p` with `changes` applied, checked as a start would check them (passivity with the
     device map's `scale` unless `drives_device` is false, the rate limit against the clamp) and against the
     ENVELOPE of the `start` parameters (default `p`); ValueError with the reason for a name outside
@@ -81,24 +83,25 @@ def checked_change(p: dict, changes: dict, scale: float = 1.0, start: dict | Non
     start = p if start is None else start
     for name, value in sorted(changes.items()):
         bound = ENVELOPE.get(name)
-        if (bound == "at most" and value > start[name]) or (bound == "at least" and value < start[name]):
+        start_value = getattr(start, name)
+        if (bound == "at most" and value > start_value) or (bound == "at least" and value < start_value):
             raise ValueError(f"{name}={value:g} would loosen the safety envelope fixed at start: at run time it "
-                             f"may only be {bound} {start[name]:g}; restart haptic_bridge to loosen it")
-    candidate = {**p, **changes}
-    if candidate.get("drives_device", True):
+                             f"may only be {bound} {start_value:g}; restart haptic_bridge to loosen it")
+    candidate = p.replace(**changes)
+    if candidate.drives_device:
         check_passivity(candidate, scale)
     safe_output(candidate)  # refuses a rate limit too low for the new clamp and ramp
     return candidate
 
 
-def safe_output(p: dict) -> SafeForceOutput:
+def safe_output(p: BridgeParameters) -> SafeForceOutput:
     """The SafeForceOutput of the parameters `p`; ValueError naming the parameters that conflict."""
     try:
-        return SafeForceOutput(p["max_force_n"], p["max_force_rate_n_per_s"], 1.0 / p["rate_hz"], p["lifetime_s"],
-                               p["ramp_time_s"], p["soft_start_s"])
+        return SafeForceOutput(p.max_force_n, p.max_force_rate_n_per_s, 1.0 / p.rate_hz, p.lifetime_s,
+                               p.ramp_time_s, p.soft_start_s)
     except ValueError as exc:
-        raise ValueError(f"parameter max_force_rate_n_per_s={p['max_force_rate_n_per_s']:g} with "
-                         f"max_force_n={p['max_force_n']:g}, ramp_time_s={p['ramp_time_s']:g}: {exc}") from None
+        raise ValueError(f"parameter max_force_rate_n_per_s={p.max_force_rate_n_per_s:g} with "
+                         f"max_force_n={p.max_force_n:g}, ramp_time_s={p.ramp_time_s:g}: {exc}") from None
 
 
 def rendered_stiffness(model: LocalModel | None, cap_n_per_m: float) -> float:
@@ -143,10 +146,10 @@ class DepthRate:
         return self.rate
 
 
-def passive_model_update_on(p: dict) -> bool:
+def passive_model_update_on(p: BridgeParameters) -> bool:
     """Whether the bridge renders new local models through a PassiveModelUpdate: `passive_model_update` always, or
     auto with an emulated link (a delay, jitter or loss between the physics and the bridge)."""
-    mode = p["passive_model_update"]
+    mode = p.passive_model_update
     return mode == "always" or (mode == "auto" and LinkSettings.from_parameters(p).emulated)
 
 
@@ -165,28 +168,28 @@ class BridgeTick:
     checks the passivity of `none` (:func:`check_passivity`), which offline baselines that drive no device skip.
     """
 
-    def __init__(self, p: dict, device_map: DeviceMap | None = DeviceMap()):
-        if p["local_model"] != "none":
+    def __init__(self, p: BridgeParameters, device_map: DeviceMap | None = DeviceMap()):
+        if p.local_model != "none":
             check_passivity(p, 1.0 if device_map is None else device_map.scale)
         self.p = p
-        self.mode = p["local_model"]
+        self.mode = p.local_model
         self.device_map = device_map
         self.map_waiting: DeviceMap | None = None
         self.maps_taken = 0 if device_map is None else 1
         self.safety = safe_output(p)
-        self.depth_rate = DepthRate(1.0 / p["rate_hz"], p["depth_rate_cutoff_hz"])
-        self.glide = ModelGlide(p["model_glide_s"])
-        self.passivity = PassivityObserver(1.0 / p["rate_hz"], p["passivity_control"],
-                                           p["passivity_max_damping_ns_per_m"])
-        self.passive_update = PassiveModelUpdate(p["max_force_n"]) if passive_model_update_on(p) else None
+        self.depth_rate = DepthRate(1.0 / p.rate_hz, p.depth_rate_cutoff_hz)
+        self.glide = ModelGlide(p.model_glide_s)
+        self.passivity = PassivityObserver(1.0 / p.rate_hz, p.passivity_control,
+                                           p.passivity_max_damping_ns_per_m)
+        self.passive_update = PassiveModelUpdate(p.max_force_n) if passive_model_update_on(p) else None
 
-    def configure(self, p: dict) -> None:
+    def configure(self, p: BridgeParameters) -> None:
         """Take parameters checked by :func:`checked_change`, from this tick on (called by the loop)."""
-        self.safety.configure(p["max_force_n"], p["max_force_rate_n_per_s"], p["lifetime_s"], p["ramp_time_s"],
-                              p["soft_start_s"])
-        self.glide.duration_s = p["model_glide_s"]
+        self.safety.configure(p.max_force_n, p.max_force_rate_n_per_s, p.lifetime_s, p.ramp_time_s,
+                              p.soft_start_s)
+        self.glide.duration_s = p.model_glide_s
         if self.passive_update is not None:
-            self.passive_update.max_force_n = p["max_force_n"]
+            self.passive_update.max_force_n = p.max_force_n
         self.p = p
 
     def set_device_map(self, device_map: DeviceMap | None) -> None:
@@ -208,7 +211,7 @@ class BridgeTick:
     def restart(self) -> None:
         """Zero force now, a soft start from the next fresh inputs (after a stall or an error of the loop)."""
         self.safety.restart()
-        self.depth_rate = DepthRate(self.depth_rate.period_s, self.p["depth_rate_cutoff_hz"])
+        self.depth_rate = DepthRate(self.depth_rate.period_s, self.p.depth_rate_cutoff_hz)
         if self.passive_update is not None:
             self.passive_update.forget()
         self.passivity.episode_energy_j = self.passivity.energy_j  # zero force now: a new contact begins
@@ -220,15 +223,15 @@ class BridgeTick:
         if model is None or tip is None:
             depth, direction = 0.0, np.zeros(3)
         else:
-            depth, direction = penetration(model, tip, self.p["tool_radius_m"])
+            depth, direction = penetration(model, tip, self.p.tool_radius_m)
         rate = self.depth_rate.update(depth)
-        return contact_force(depth, rate, direction, rendered_stiffness(model, self.p["stiffness_n_per_m"]),
-                             self.p["damping_ns_per_m"])
+        return contact_force(depth, rate, direction, rendered_stiffness(model, self.p.stiffness_n_per_m),
+                             self.p.damping_ns_per_m)
 
     def _admit(self, model: LocalModel | None, tip: np.ndarray | None) -> LocalModel | None:
         """`model` through the PassiveModelUpdate, the energies taken at `tip` with the rendered K, the budget the
         passivity observer's: what the hand put into the contact since it began."""
-        radius, cap = self.p["tool_radius_m"], self.p["stiffness_n_per_m"]
+        radius, cap = self.p.tool_radius_m, self.p.stiffness_n_per_m
         return self.passive_update.admit(
             model, lambda m: penetration(m, tip, radius)[0] if tip is not None else 0.0,
             lambda m: rendered_stiffness(m, cap), self.passivity.episode_energy_j - self.passivity.energy_j)
@@ -253,9 +256,9 @@ class BridgeTick:
         """
         if self.mode == "none":
             force = source if source is not None else _ZERO
-            lifetime = self.p["lifetime_s"]
+            lifetime = self.p.lifetime_s
         else:
-            model, lifetime = source if source is not None else (None, self.p["lifetime_s"])
+            model, lifetime = source if source is not None else (None, self.p.lifetime_s)
             model = self.glide.update(model, now_s)
             if self.passive_update is not None:
                 model = self._admit(model, tip)
@@ -268,8 +271,8 @@ class BridgeTick:
             command = self.safety.step(_ZERO, math.inf, math.inf, None, now_s)
         else:
             command = self.safety.step(self.passivity.damp(self.device_map.liver_to_device_force(force)),
-                                       source_age_s, pose_age_s, min(lifetime, self.p["lifetime_s"]), now_s)
-        if pose_age_s > self.p["lifetime_s"]:
+                                       source_age_s, pose_age_s, min(lifetime, self.p.lifetime_s), now_s)
+        if pose_age_s > self.p.lifetime_s:
             self.passivity.forget_motion()
         if self.passive_update is not None and self.safety.watchdog.gain == 0.0:
             self.passive_update.forget()

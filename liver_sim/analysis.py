@@ -56,7 +56,7 @@ def held_wrench_baseline(tick_s: np.ndarray, wrench_arrival_s: np.ndarray, wrenc
     same clock): the node's own BridgeTick with `bridge_parameters`, ages counted from those arrivals. No
     second live bridge needed, hence no second 1 kHz process competing for the cores."""
 
-    tick = BridgeTick({**bridge_parameters, "local_model": "none"})
+    tick = BridgeTick(bridge_parameters.replace(local_model="none"))
     newest_wrench = np.searchsorted(wrench_arrival_s, tick_s, side="right") - 1
     newest_pose = np.searchsorted(pose_arrival_s, tick_s, side="right") - 1
     commands = np.zeros((len(tick_s), 3))

@@ -34,10 +34,10 @@ def test_largest_jump_ignores_pairs_sent_further_apart_than_a_tick():
 
 
 def test_the_offline_baseline_holds_the_newest_physics_force_between_frames():
-    from haptic_bridge.parameters import PARAMETERS
+    from haptic_bridge.parameters import BridgeParameters
     from liver_sim.analysis import held_wrench_baseline
 
-    p = {name: spec.default for name, spec in PARAMETERS.items()}
+    p = BridgeParameters.defaults()
     ticks = 1.0 + np.arange(2000) * 1e-3
     wrench_at = 1.0 + np.arange(0, 2.0, 1 / 150)
     wrench = np.zeros((len(wrench_at), 3))

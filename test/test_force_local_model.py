@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from haptic_bridge.parameters import PARAMETERS as BRIDGE_PARAMETERS
+from haptic_bridge.parameters import BridgeParameters
 from haptic_bridge.tick import BridgeTick, rendered_stiffness
 from liver_sim.base.local_model import penetration
 from liver_sim.mesh.landmarks import press_anchor
@@ -37,11 +37,11 @@ def demo_run():
     parameters ticking at 1 kHz on the script's tip between the frames."""
     mesh = default_liver()
     model = LiverModel(mesh, ModelParams())
-    bridge = {name: spec.default for name, spec in BRIDGE_PARAMETERS.items()}
+    bridge = BridgeParameters.defaults()
     tick = BridgeTick(bridge)
     script = make_script("press_slide_release", ScriptSettings(anchor_m=tuple(press_anchor(mesh)), rest_s=0.5))
     frames, ticks = [], []
-    period, tick_s = model.structure.frame_period_s, 1.0 / bridge["rate_hz"]
+    period, tick_s = model.structure.frame_period_s, 1.0 / bridge.rate_hz
     t = 0.0
     for k in range(int(script.duration_s / period)):
         pose = ToolPose(script.position_at(k * period))
@@ -51,7 +51,7 @@ def demo_run():
                                                             "liver", 0.05))
         frames.append((pose.position, result.tool_force_n, local))
         while t < (k + 1) * period:  # the ticks until the next frame, with this one's model
-            command = tick.step(t, script.position_at(t), 0.0, (local, bridge["lifetime_s"]), t - k * period)
+            command = tick.step(t, script.position_at(t), 0.0, (local, bridge.lifetime_s), t - k * period)
             ticks.append((t, k, command))
             t += tick_s
     return bridge, frames, ticks
@@ -64,14 +64,14 @@ def test_at_each_update_the_rendered_force_is_the_physics_force(demo_run):
         if local is None:
             assert np.linalg.norm(force) == 0.0
             continue
-        depth, direction = penetration(local, tip, bridge["tool_radius_m"])
-        rendered = rendered_stiffness(local, bridge["stiffness_n_per_m"]) * depth * direction
+        depth, direction = penetration(local, tip, bridge.tool_radius_m)
+        rendered = rendered_stiffness(local, bridge.stiffness_n_per_m) * depth * direction
         assert agree(rendered, force), (rendered, force)
         touching += np.linalg.norm(force) > 0.05
         if np.linalg.norm(force) == 0.0:
             assert depth == 0.0  # no contact in the physics: none in the local model
         else:
-            assert 0.0 < local.stiffness_n_per_m < bridge["stiffness_n_per_m"]  # the tissue's K, below the cap
+            assert 0.0 < local.stiffness_n_per_m < bridge.stiffness_n_per_m  # the tissue's K, below the cap
     assert touching > 100  # a real press and slide
 
 
@@ -88,15 +88,15 @@ def test_between_updates_the_command_follows_the_physics_force(demo_run):
     bridge, frames, ticks = demo_run
     checked = 0
     for t, k, command in ticks:
-        if t < bridge["soft_start_s"] + 0.05 or k == 0:
+        if t < bridge.soft_start_s + 0.05 or k == 0:
             continue
         tip, force, local = frames[k]
         if local is None or abs(t - k / 150.0 - (1 / 150.0 - 1e-3)) > 1e-3 / 2 or np.linalg.norm(force) < 0.05:
             continue
-        stiffness = rendered_stiffness(local, bridge["stiffness_n_per_m"])
+        stiffness = rendered_stiffness(local, bridge.stiffness_n_per_m)
         moved = np.linalg.norm(frames[min(k + 1, len(frames) - 1)][0] - tip)
         assert np.linalg.norm(command - force) <= max(0.05 * np.linalg.norm(force), 0.01) + stiffness * moved \
-            + bridge["damping_ns_per_m"] * 0.2 + 1e-9, (t, command, force)
+            + bridge.damping_ns_per_m * 0.2 + 1e-9, (t, command, force)
         checked += 1
     assert checked > 100
 
@@ -120,9 +120,9 @@ def test_the_stiffness_travels_in_the_markers_text_and_bad_values_are_refused_by
 def test_the_bridge_renders_the_models_stiffness_capped_at_its_own():
     from liver_sim.base.local_model import LocalModel
 
-    bridge = {name: spec.default for name, spec in BRIDGE_PARAMETERS.items()}
-    tip = np.array([0.0, 0.0, bridge["tool_radius_m"] - 0.002])  # 2 mm into the plane z = 0
-    for own, expected in ((40.0, 40.0), (1e4, bridge["stiffness_n_per_m"]), (None, bridge["stiffness_n_per_m"])):
-        tick = BridgeTick({**bridge, "model_glide_s": 0.0, "damping_ns_per_m": 0.0})
+    bridge = BridgeParameters.defaults()
+    tip = np.array([0.0, 0.0, bridge.tool_radius_m - 0.002])  # 2 mm into the plane z = 0
+    for own, expected in ((40.0, 40.0), (1e4, bridge.stiffness_n_per_m), (None, bridge.stiffness_n_per_m)):
+        tick = BridgeTick(bridge.replace(model_glide_s=0.0, damping_ns_per_m=0.0))
         force = tick.render(LocalModel.plane([0.0, 0.0, 0.0], [0.0, 0.0, 1.0], own), tip)
         np.testing.assert_allclose(force, [0.0, 0.0, expected * 0.002])

@@ -4,7 +4,7 @@ import math
 import numpy as np
 import pytest
 
-from haptic_bridge.parameters import PARAMETERS
+from haptic_bridge.parameters import BridgeParameters
 from haptic_bridge.safety import (
     PHANTOM_MAX_FORCE_N,
     RateLimiter,
@@ -67,11 +67,12 @@ def test_rate_limiter_holds_per_second_of_tick_time_through_a_burst():
 
 
 def test_passivity_is_checked_at_the_longest_hold_not_the_nominal_period():
-    p = {name: spec.default for name, spec in PARAMETERS.items()}
-    assert hold_time_s(p) == p["stall_bound_s"] == 0.005  # ticks 1 ms apart, but up to 5 ms before a zero
+    p = BridgeParameters.defaults()
+    assert hold_time_s(p) == p.stall_bound_s == 0.005  # ticks 1 ms apart, but up to 5 ms before a zero
     assert passivity_problem(p) is None  # K 190 < 2·0.5/0.005 = 200 N/m
-    assert passivity_problem({**p, "stall_bound_s": 0.001}) is None  # then T is the period
-    problem = passivity_problem({**p, "stall_bound_s": 0.008})  # 2·0.5/0.008 = 125 N/m
+    slow = p.replace(rate_hz=250.0, stall_bound_s=0.002, stiffness_n_per_m=240.0)
+    assert hold_time_s(slow) == 0.004 and passivity_problem(slow) is None  # then T is the period: 240 < 250 N/m
+    problem = passivity_problem(p.replace(stall_bound_s=0.008))  # 2·0.5/0.008 = 125 N/m
     assert "T=8 ms" in problem and "stall_bound_s" in problem and "< 125 N/m" in problem
 
 

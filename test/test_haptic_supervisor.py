@@ -9,14 +9,14 @@ import numpy as np
 import pytest
 
 from haptic_bridge.inputs import InputCheck
-from haptic_bridge.parameters import PARAMETERS
+from haptic_bridge.parameters import BridgeParameters
 from haptic_bridge.safety import SafeForceOutput
 from haptic_bridge.supervisor import GapLog, Supervisor
 from haptic_bridge.tick import BridgeTick, DepthRate, check_passivity, checked_change, passivity_problem
 from liver_sim.base.geometry.device_map import DeviceMap
 from liver_sim.base.local_model import LocalModel
 
-DEFAULTS = {name: spec.default for name, spec in PARAMETERS.items()}
+DEFAULTS = BridgeParameters.defaults()
 #: Tick times (s), 1 ms apart: the rate limit counts the time between ticks.
 TICKS = itertools.count(0.0, 0.001)
 ZERO = "zero"
@@ -229,12 +229,12 @@ def test_inputs_outside_the_workspace_are_refused():
 
 def test_passivity_is_checked_for_every_mode():
     assert passivity_problem(DEFAULTS) is None
-    none = {**DEFAULTS, "local_model": "none"}
+    none = DEFAULTS.replace(local_model="none")
     problem = passivity_problem(none)  # 300 N/m held for 1/150 s with 1 N·s/m: needs b > 2 N·s/m
     assert "contact_stiffness_n_per_m" in problem and "T=6.66667 ms" in problem
-    check_passivity({**none, "device_damping_ns_per_m": 2.5})
+    check_passivity(none.replace(device_damping_ns_per_m=2.5))
     with pytest.raises(ValueError, match="stiffness_n_per_m"):
-        check_passivity({**DEFAULTS, "stiffness_n_per_m": 700.0}, scale=2.0)  # felt as 1400 N/m
+        check_passivity(DEFAULTS.replace(stiffness_n_per_m=700.0), scale=2.0)  # felt as 1400 N/m
     BridgeTick(none)  # an offline baseline drives no device: not refused by the tick
 
 
@@ -245,12 +245,13 @@ def test_passivity_is_checked_for_every_mode():
 def test_run_time_changes_never_loosen_the_envelope_fixed_at_start(name, looser):
     with pytest.raises(ValueError, match=f"{name}=.* would loosen the safety envelope"):
         checked_change(DEFAULTS, {name: looser})
-    tighter = {"soft_start_s": 0.5}.get(name, DEFAULTS[name] * 0.5)
+    tighter = {"soft_start_s": 0.5}.get(name, getattr(DEFAULTS, name) * 0.5)
     tightened = checked_change(DEFAULTS, {name: tighter})
-    assert tightened[name] == tighter
+    assert getattr(tightened, name) == tighter
     with pytest.raises(ValueError, match="would loosen"):  # the envelope is the start's, not the current value's
         checked_change(tightened, {name: looser}, start=DEFAULTS)
-    assert checked_change(tightened, {name: DEFAULTS[name]}, start=DEFAULTS)[name] == DEFAULTS[name]
+    start = getattr(DEFAULTS, name)
+    assert getattr(checked_change(tightened, {name: start}, start=DEFAULTS), name) == start
 
 
 def test_the_device_damping_is_read_at_start_only():
@@ -260,7 +261,7 @@ def test_the_device_damping_is_read_at_start_only():
 
 def test_run_time_changes_are_checked_or_refused_with_a_reason():
     lowered = checked_change(DEFAULTS, {"max_force_n": 0.05, "stiffness_n_per_m": 100.0})
-    assert lowered["max_force_n"] == 0.05 and DEFAULTS["max_force_n"] == 2.0
+    assert lowered.max_force_n == 0.05 and DEFAULTS.max_force_n == 2.0
     with pytest.raises(ValueError, match="not passive"):  # within the envelope, not with a device map's scale 4
         checked_change(DEFAULTS, {"max_force_n": 1.0}, scale=4.0)
     with pytest.raises(ValueError, match="restart haptic_bridge"):

@@ -150,9 +150,9 @@ def test_resimulation_cuts_in_cut_mode_and_records_the_new_surface(tmp_path):
 
 def test_parameter_overrides_are_checked_as_the_nodes_check_them():
     both = node_parameters(["tool_radius_m:=0.01"])
-    assert both["liver_physics"].tool_radius_m == both["haptic_bridge"]["tool_radius_m"] == 0.01
+    assert both["liver_physics"].tool_radius_m == both["haptic_bridge"].tool_radius_m == 0.01
     one = node_parameters(["haptic_bridge.rate_hz:=500"])
-    assert one["haptic_bridge"]["rate_hz"] == 500.0 and one["liver_physics"].rate_hz == 150.0
+    assert one["haptic_bridge"].rate_hz == 500.0 and one["liver_physics"].rate_hz == 150.0
     for override, named in (("contact_stiffness_n_per_m:=-1", "contact_stiffness_n_per_m"),
                             ("integrator:=rk4", "integrator"), ("substeps:=many", "substeps"),
                             ("no_such_parameter:=1", "no_such_parameter"), ("rate_hz", "name:=value"),

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from haptic_bridge.parameters import PARAMETERS as BRIDGE
+from haptic_bridge.parameters import BridgeParameters
 from haptic_bridge.passivity import (
     GENERATED_LIMIT_J,
     WINDOW_S,
@@ -124,17 +125,17 @@ def test_the_controller_damps_measured_motion_only_and_only_what_the_contact_gav
 
 
 def test_passive_model_updates_are_on_by_default_exactly_when_a_link_is_emulated():
-    p = {name: spec.default for name, spec in BRIDGE.items()}
+    p = BridgeParameters.defaults()
     assert not passive_model_update_on(p)
-    assert passive_model_update_on({**p, "link_delay_s": 0.05})
-    assert passive_model_update_on({**p, "link_loss_fraction": 0.1})
-    assert not passive_model_update_on({**p, "link_delay_s": 0.05, "passive_model_update": "never"})
-    assert passive_model_update_on({**p, "passive_model_update": "always"})
+    assert passive_model_update_on(p.replace(link_delay_s=0.05))
+    assert passive_model_update_on(p.replace(link_loss_fraction=0.1))
+    assert not passive_model_update_on(p.replace(link_delay_s=0.05, passive_model_update="never"))
+    assert passive_model_update_on(p.replace(passive_model_update="always"))
 
 
 def _plane_tick(control: bool) -> BridgeTick:
-    p = {name: spec.default for name, spec in BRIDGE.items()}
-    p.update(passivity_control=control, soft_start_s=0.1, max_force_rate_n_per_s=100000.0)
+    p = BridgeParameters.defaults().replace(passivity_control=control, soft_start_s=0.1,
+                                            max_force_rate_n_per_s=100000.0)
     return BridgeTick(p)
 
 
@@ -169,8 +170,8 @@ def test_the_observer_takes_the_stylus_motion_through_the_device_map():
     from liver_sim.base.geometry.device_map import DeviceMap
 
     device_map = DeviceMap([0.0, 0.0, np.sin(np.pi / 8), np.cos(np.pi / 8)], [0.1, 0.0, 0.0], 2.0)
-    p = {name: spec.default for name, spec in BRIDGE.items()}
-    tick = BridgeTick({**p, "stiffness_n_per_m": 90.0}, device_map)  # passive at this map's scale 2
+    p = BridgeParameters.defaults()
+    tick = BridgeTick(p.replace(stiffness_n_per_m=90.0), device_map)  # passive at this map's scale 2
     tips = [np.array([0.01, 0.02, 0.03]), np.array([0.012, 0.017, 0.034]), np.array([0.011, 0.02, 0.031])]
     forces = [np.array([0.3, -0.2, 0.5]), np.array([-0.1, 0.4, 0.2])]
     assert tick.sample(0.0, 0.0, device_map.liver_to_device(tips[0])) == pytest.approx(tips[0])  # placed by it
@@ -359,8 +360,8 @@ def _pumped_energy(update: str) -> float:
     from liver_sim.phantom.device import PhantomSim
     from liver_sim.tool.scripts import ScriptedTrajectory
 
-    p = {name: spec.default for name, spec in BRIDGE.items()}
-    tick = BridgeTick({**p, "passive_model_update": update, "soft_start_s": 0.1})
+    p = BridgeParameters.defaults()
+    tick = BridgeTick(p.replace(passive_model_update=update, soft_start_s=0.1))
     rest = np.array([0.0, 0.0, 0.015 - 0.002])  # the hand holds the tip 2 mm into the mean surface
     device = PhantomSim(ScriptedTrajectory("rest", np.zeros(1), rest[np.newaxis]))
     monitor = GenerationMonitor(T)
@@ -411,8 +412,8 @@ def test_a_passive_model_update_stores_no_more_than_the_hand_put_in():
 def test_after_a_restart_in_contact_a_passive_update_builds_the_contact_again_from_touching():
     """A stall while the hand rests 5 mm deep: a soft start back to the full force would store energy the hand never
     put in. With passive updates the surface comes back touching the tool, and the force with the hand's push."""
-    p = {name: spec.default for name, spec in BRIDGE.items()}
-    tick = BridgeTick({**p, "passive_model_update": "always", "soft_start_s": 0.1})
+    p = BridgeParameters.defaults()
+    tick = BridgeTick(p.replace(passive_model_update="always", soft_start_s=0.1))
     plane = LocalModel("plane", True, np.zeros(3), np.array([0.0, 0.0, 1.0]), np.zeros(3), 0.0, 0.0, True, 190.0)
     depths = np.concatenate([np.linspace(-0.005, 0.005, 500), np.full(300, 0.005)])
     forces = []

@@ -44,8 +44,9 @@ class LinkSettings:
     seed: int = 0
 
     @classmethod
-    def from_parameters(cls, p: dict) -> LinkSettings:
-        return cls(p["link_delay_s"], p["link_jitter_s"], p["link_loss_fraction"], p["link_seed"])
+    def from_parameters(cls, p) -> LinkSettings:
+        """The settings of a node's LINK_PARAMETERS in its typed parameter record `p`."""
+        return cls(p.link_delay_s, p.link_jitter_s, p.link_loss_fraction, p.link_seed)
 
     def parameters(self) -> dict:
         """These settings as the LINK_PARAMETERS of a node."""

@@ -127,17 +127,25 @@ def parameter_record(name: str, table: dict[str, Param], doc: str | None = None)
     return record
 
 
-def vector_parameter(values: dict, name: str, length: int) -> np.ndarray:
-    """Parameter `name` of `values` as a finite float array of `length`, or ValueError naming it."""
-    vector = np.asarray(values[name], dtype=np.float64)
+def parameter_value(values, name: str):
+    """Parameter `name` of `values`: a {name: value} mapping or a typed record."""
+    return values[name] if isinstance(values, Mapping) else getattr(values, name)
+
+
+def vector_parameter(values, name: str, length: int) -> np.ndarray:
+    """Parameter `name` of `values` (a mapping or a record) as a finite float array of `length`, or ValueError
+    naming it."""
+    vector = np.asarray(parameter_value(values, name), dtype=np.float64)
     if vector.shape != (length,) or not np.isfinite(vector).all():
-        raise ValueError(f"parameter {name} must be {length} finite numbers, got {values[name]!r}")
+        raise ValueError(f"parameter {name} must be {length} finite numbers, got {parameter_value(values, name)!r}")
     return vector
 
 
-def quaternion_parameter(values: dict, name: str) -> np.ndarray:
-    """Parameter `name` of `values` as a finite, non-zero (x, y, z, w) quaternion, or ValueError naming it."""
+def quaternion_parameter(values, name: str) -> np.ndarray:
+    """Parameter `name` of `values` (a mapping or a record) as a finite, non-zero (x, y, z, w) quaternion, or
+    ValueError naming it."""
     quaternion = vector_parameter(values, name, 4)
     if not np.linalg.norm(quaternion) > 0.0:
-        raise ValueError(f"parameter {name} must be a non-zero quaternion (x, y, z, w), got {values[name]!r}")
+        raise ValueError(f"parameter {name} must be a non-zero quaternion (x, y, z, w), got "
+                         f"{parameter_value(values, name)!r}")
     return quaternion

@@ -42,7 +42,7 @@ def bridge_status(name: str, p: dict, tick: BridgeTick, stats: dict, report: dic
               + (f" (zero held {(e.end_s - e.start_s) * 1e3:.1f} ms)" if e.end_s is not None else " (now)")
               for e in report["events"]]
     watchdog = tick.safety.state
-    problems = [] if on_rate(stats, p["rate_hz"]) else ["below rate"]
+    problems = [] if on_rate(stats, p.rate_hz) else ["below rate"]
     if stats["new_gaps"]:
         problems.append(stats["new_gaps"])
     if watchdog != "ok":
@@ -52,14 +52,14 @@ def bridge_status(name: str, p: dict, tick: BridgeTick, stats: dict, report: dic
     if tick.map_waiting is not None:
         problems.append("a new device map waits for the force to reach zero")
     if state.rivals:
-        problems.append(f"another publisher on {p['force_topic']} ({', '.join(state.rivals)}): not driving")
-    if not p["drives_device"]:
+        problems.append(f"another publisher on {p.force_topic} ({', '.join(state.rivals)}): not driving")
+    if not p.drives_device:
         problems += filter(None, [passivity_problem(p, tick.device_map.scale if tick.device_map else 1.0)])
     error = (report["error"] or (state.map_problem or "").startswith("device map refused") or bool(state.rivals))
-    source_age = "tool_wrench_age_s" if p["local_model"] == "none" else "local_model_age_s"
-    values = {"watchdog": watchdog, "local_model": p["local_model"], "drives_device": p["drives_device"],
+    source_age = "tool_wrench_age_s" if p.local_model == "none" else "local_model_age_s"
+    values = {"watchdog": watchdog, "local_model": p.local_model, "drives_device": p.drives_device,
               "bad_messages": sum(state.bad.values()), **{f"bad_{k}": v for k, v in state.bad.items()},
-              "last_force_n": state.last_force_n, "max_force_n": p["max_force_n"],
+              "last_force_n": state.last_force_n, "max_force_n": p.max_force_n,
               "device_pose_age_s": state.ages_s["device_pose"], source_age: state.ages_s["source"],
               "device_pose_publishers": state.publishers["device_pose"],
               "source_publishers": state.publishers["source"],

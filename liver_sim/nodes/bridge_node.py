@@ -31,7 +31,7 @@ from rclpy.lifecycle import LifecycleNode, TransitionCallbackReturn
 from rclpy.node import Node
 
 from haptic_bridge.inputs import InputCheck
-from haptic_bridge.parameters import PARAMETERS
+from haptic_bridge.parameters import PARAMETERS, BridgeParameters
 from haptic_bridge.supervisor import Supervisor
 from haptic_bridge.tick import BridgeTick, check_passivity, checked_change
 from liver_sim.base.link import link_text
@@ -67,35 +67,35 @@ class BridgeShell:
     `p`): inputs, device map, outputs, loop, supervisor, diagnostics, run-time parameters. :meth:`start` runs the
     loop; :meth:`stop` leaves zero on the wire."""
 
-    def __init__(self, node, p: dict, start_p: dict | None = None):
-        if p["drives_device"]:
+    def __init__(self, node, p: BridgeParameters, start_p: BridgeParameters | None = None):
+        if p.drives_device:
             check_passivity(p)  # every mode; again with the device map's scale when it arrives
         self.node, self.p, self.start_p = node, p, start_p or p
         self.tick = BridgeTick(p, device_map=None)
-        self.mode = p["local_model"]
+        self.mode = p.local_model
         self.source = "tool_wrench" if self.mode == "none" else "local_model"
-        checks = InputCheck(p["workspace_centre_m"], p["workspace_radius_m"])
+        checks = InputCheck(p.workspace_centre_m, p.workspace_radius_m)
         self._checks = {"device_pose": lambda _: None, "local_model": checks.model, "tool_wrench": checks.force}
         self._tip_check = checks.tip
         self._params, self._maps = Handoff(), Handoff()  # for the loop's next tick
         self._latest = {"device_pose": Latest(), self.source: Latest()}
         self._bad = {kind: 0 for kind in (*INPUTS, "device_map")}
         self._bad_reason, self._bad_logged = {}, dict(self._bad)
-        self._map_problem = f"waiting for the device map on {p['device_map_topic']}"
+        self._map_problem = f"waiting for the device map on {p.device_map_topic}"
         self._sampled = None  # the device sample last mapped to a tool tip
         self._tip = None      # the newest plausible tool tip (m, liver frame)
         self._last_force = np.zeros(3)
         self._last_report = time.monotonic()
         self._loop = self.supervisor = None
         self._rivals: list[str] = []  # the other publishers on force_topic: while any, the bridge sends zero
-        force_type, qos = force_message_type(p["force_output"]), TOPICS["servo_cf"].qos
-        self._publisher = node.create_publisher(force_type, p["force_topic"], qos)
+        force_type, qos = force_message_type(p.force_output), TOPICS["servo_cf"].qos
+        self._publisher = node.create_publisher(force_type, p.force_topic, qos)
         # the supervisor's zeros: a writer of their own, not held up by a publish of the loop
-        self._zero_publisher = node.create_publisher(force_type, p["force_topic"], qos)
+        self._zero_publisher = node.create_publisher(force_type, p.force_topic, qos)
         self._own_gids = {publisher_gid(self._publisher), publisher_gid(self._zero_publisher)}
         self._diagnostics = node.create_publisher(TOPICS["diagnostics"].type, TOPICS["diagnostics"].name,
                                                   TOPICS["diagnostics"].qos)
-        self.map_source = DeviceMapSource(node, p["device_map_topic"], p["device_map_node"], self._on_map,
+        self.map_source = DeviceMapSource(node, p.device_map_topic, p.device_map_node, self._on_map,
                                           self._on_refused_map)
         self._inputs = LoopInputs(node)  # read by the 1 kHz loop itself, not by the executor
         self.link = emulated_link(p)  # the teleoperation link from the physics' side, if emulated
@@ -121,7 +121,7 @@ class BridgeShell:
             else:
                 latest.set(value, received)
 
-        return self._inputs.subscribe(TOPICS[key].type, self.p[topic_parameter], loop_input_qos(TOPICS[key]),
+        return self._inputs.subscribe(TOPICS[key].type, getattr(self.p, topic_parameter), loop_input_qos(TOPICS[key]),
                                       on_message, raw=True, received=True,
                                       link=None if kind == "device_pose" else self.link)
 
@@ -130,11 +130,11 @@ class BridgeShell:
         """A new loop and supervisor; the force starts from zero (soft start)."""
         p = self.p
         self.tick.restart()
-        self._loop = RateLoop(p["rate_hz"], self._step, "haptic_bridge", on_error=self._on_error,
-                              realtime_priority=p["realtime_priority"], on_refused=warn(self.node))
-        self.supervisor = Supervisor(p["stall_bound_s"], self._loop.period_s, self._publisher.publish,
+        self._loop = RateLoop(p.rate_hz, self._step, "haptic_bridge", on_error=self._on_error,
+                              realtime_priority=p.realtime_priority, on_refused=warn(self.node))
+        self.supervisor = Supervisor(p.stall_bound_s, self._loop.period_s, self._publisher.publish,
                                      self._zero_message, self._loop.is_alive,
-                                     realtime_priority=p["realtime_priority"],
+                                     realtime_priority=p.realtime_priority,
                                      publish_zero=self._zero_publisher.publish)
         self._loop.start()
         self.supervisor.start()
@@ -185,27 +185,27 @@ class BridgeShell:
                        for info in self.node.get_publishers_info_by_topic(self._publisher.topic_name)
                        if endpoint_gid(info) not in self._own_gids)
         if names and not self._rivals:
-            self.node.get_logger().error(f"another publisher on {self.p['force_topic']} ({', '.join(names)}): "
+            self.node.get_logger().error(f"another publisher on {self.p.force_topic} ({', '.join(names)}): "
                                          "sending zero, not driving the device while it publishes there")
         elif self._rivals and not names:
-            self.node.get_logger().info(f"{self.p['force_topic']} has no other publisher: driving again (soft start)")
+            self.node.get_logger().info(f"{self.p.force_topic} has no other publisher: driving again (soft start)")
         self._rivals = names
 
     # -- the device map (executor thread): from device_map_node only, changed only through zero force
     def _on_map(self, device_map) -> None:
         scale_problem = None
-        if self.p["drives_device"]:
+        if self.p.drives_device:
             try:
                 check_passivity(self.p, device_map.scale)
             except ValueError as exc:
                 scale_problem = str(exc)
         if scale_problem:
-            self._on_refused_map(f"from {self.p['device_map_node']}: {scale_problem}", True)
+            self._on_refused_map(f"from {self.p.device_map_node}: {scale_problem}", True)
             return
         self._map_problem = None
         self._maps.offer(device_map)
         self.node.get_logger().info(
-            f"device map from {self.p['device_map_node']} on {self.p['device_map_topic']}: "
+            f"device map from {self.p.device_map_node} on {self.p.device_map_topic}: "
             f"R {np.round(device_map.rotation, 6).tolist()}, t {device_map.translation.tolist()} m, "
             f"scale {device_map.scale:g} (a change applies once the force is zero, then a soft start)")
 
@@ -250,21 +250,21 @@ class BridgeShell:
         if self.mode == "none":
             source, stamp = (source[0], source[1]) if source is not None else (None, None)
         elif source is not None:
-            source = (source[0], min(source[1], self.p["lifetime_s"]) if source[1] > 0.0 else self.p["lifetime_s"])
+            source = (source[0], min(source[1], self.p.lifetime_s) if source[1] > 0.0 else self.p.lifetime_s)
         command = tick.step(now, tip, pose_age, source, source_age, wall)
         if self._rivals:  # another bridge on the device: zero, and a soft start once it has gone
             tick.restart()
             command = np.zeros(3)
         self._last_force = command
-        if stamp is None or (source_age if self.mode == "none" else pose_age) > self.p["lifetime_s"]:
+        if stamp is None or (source_age if self.mode == "none" else pose_age) > self.p.lifetime_s:
             stamp = self._time.stamp()  # no fresh input: the command holds now
-        self.supervisor.send(force_message_bytes(self.p["force_output"], command, stamp, self.p["device_frame_id"]))
+        self.supervisor.send(force_message_bytes(self.p.force_output, command, stamp, self.p.device_frame_id))
 
     def _on_error(self, now: float, exc: Exception) -> None:
         self.supervisor.error(now, exc)
 
     def _zero_message(self) -> bytes:
-        return force_message_bytes(self.p["force_output"], np.zeros(3), self._time.stamp(), self.p["device_frame_id"])
+        return force_message_bytes(self.p.force_output, np.zeros(3), self._time.stamp(), self.p.device_frame_id)
 
     # -- diagnostics (executor thread)
     def _publish_diagnostics(self) -> None:
@@ -296,15 +296,15 @@ class BridgeShell:
     def describe(self) -> str:
         p = self.p
         rendering = ("physics wrench held between updates" if self.mode == "none" else
-                     f"local model (K {p['stiffness_n_per_m']:g} N/m, B {p['damping_ns_per_m']:g} N·s/m, "
-                     f"glide {p['model_glide_s']:g} s, tool radius {p['tool_radius_m']:g} m)")
-        return (f"haptic_bridge: {p['rate_hz']:g} Hz, local_model {self.mode}: {rendering}; passivity controller "
-                f"{'on' if self.tick.passivity.control else 'off'}; in: {p['measured_cp_topic']}, "
-                f"{p[INPUTS[self.source][0]]}{link_text(self.link)}, device map {p['device_map_topic']} from "
-                f"{p['device_map_node']}; out: {p['force_topic']} ({p['force_output']}, frame {p['device_frame_id']}, "
-                f"max {p['max_force_n']:g} N, {p['max_force_rate_n_per_s']:g} N/s, soft start {p['soft_start_s']:g} "
-                f"s); watchdog: lifetime {p['lifetime_s']:g} s, ramp {p['ramp_time_s']:g} s; supervisor: zero after "
-                f"{p['stall_bound_s'] * 1e3:g} ms without a tick")
+                     f"local model (K {p.stiffness_n_per_m:g} N/m, B {p.damping_ns_per_m:g} N·s/m, "
+                     f"glide {p.model_glide_s:g} s, tool radius {p.tool_radius_m:g} m)")
+        return (f"haptic_bridge: {p.rate_hz:g} Hz, local_model {self.mode}: {rendering}; passivity controller "
+                f"{'on' if self.tick.passivity.control else 'off'}; in: {p.measured_cp_topic}, "
+                f"{getattr(p, INPUTS[self.source][0])}{link_text(self.link)}, device map {p.device_map_topic} from "
+                f"{p.device_map_node}; out: {p.force_topic} ({p.force_output}, frame {p.device_frame_id}, "
+                f"max {p.max_force_n:g} N, {p.max_force_rate_n_per_s:g} N/s, soft start {p.soft_start_s:g} "
+                f"s); watchdog: lifetime {p.lifetime_s:g} s, ramp {p.ramp_time_s:g} s; supervisor: zero after "
+                f"{p.stall_bound_s * 1e3:g} ms without a tick")
 
 
 class HapticBridge(Node):
@@ -312,7 +312,7 @@ class HapticBridge(Node):
 
     def __init__(self):
         super().__init__("haptic_bridge")
-        self.p = declare_parameters(self, PARAMETERS)
+        self.p = BridgeParameters.from_values(declare_parameters(self, PARAMETERS))
         self.shell = BridgeShell(self, self.p)
         on_parameter_changes(self, PARAMETERS, self.shell.apply)
         self.get_logger().info(self.shell.describe())
@@ -331,7 +331,7 @@ class ManagedHapticBridge(LifecycleNode):
 
     def __init__(self):
         super().__init__("haptic_bridge")
-        self.p = self.start_p = declare_parameters(self, PARAMETERS)
+        self.p = self.start_p = BridgeParameters.from_values(declare_parameters(self, PARAMETERS))
         self.shell = None
         on_parameter_changes(self, PARAMETERS, self._apply)
 

@@ -155,9 +155,9 @@ class LoopInputs:
         self._node.destroy_node()
 
 
-def emulated_link(p: dict) -> EmulatedLink | None:
-    """The EmulatedLink of a node's link parameters (liver_sim.base.link.LINK_PARAMETERS), or None when they
-    emulate nothing: the inputs then bypass it at no cost."""
+def emulated_link(p) -> EmulatedLink | None:
+    """The EmulatedLink of the link parameters (liver_sim.base.link.LINK_PARAMETERS) in a node's record `p`, or
+    None when they emulate nothing: the inputs then bypass it at no cost."""
     settings = LinkSettings.from_parameters(p)
     return EmulatedLink(settings) if settings.emulated else None
 

@@ -53,7 +53,7 @@ class PhysicsNode(Node):
                                                   TOPICS["diagnostics"].qos)
         # 1 kHz of poses for a 150 Hz consumer: the loop takes the newest bytes each frame
         self._inputs = LoopInputs(self)
-        self._link = emulated_link(p.as_dict())  # the teleoperation link from the operator's side, if emulated
+        self._link = emulated_link(p)  # the teleoperation link from the operator's side, if emulated
         self._inputs.subscribe(TOPICS["tool_pose"].type, p.tool_pose_topic, loop_input_qos(TOPICS["tool_pose"]),
                                self._pose.set, raw=True, received=self._link is not None, link=self._link)
         self._last_pose_bytes = None

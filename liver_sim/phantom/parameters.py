@@ -3,7 +3,7 @@ defaults from StylusParams."""
 from __future__ import annotations
 
 from liver_sim.base.geometry.device_map import DEVICE_MAP_PARAMETERS
-from liver_sim.base.parameters import Param, realtime_priority_parameter
+from liver_sim.base.parameters import Param, parameter_record, realtime_priority_parameter
 from liver_sim.base.topic_names import FORCE_OUTPUT_FORMATS, TOPIC_NAMES
 from liver_sim.phantom.device import StylusParams
 from liver_sim.tool.scripts import SCRIPT_PARAMETERS
@@ -32,3 +32,6 @@ PARAMETERS = {
     **SCRIPT_PARAMETERS,
     **DEVICE_MAP_PARAMETERS,
 }
+
+#: The node's parameters as one typed record (liver_sim.base.parameters.parameter_record).
+PhantomParameters = parameter_record("PhantomParameters", PARAMETERS, "The parameters of phantom_sim (PARAMETERS).")

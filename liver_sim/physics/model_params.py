@@ -12,7 +12,8 @@ from dataclasses import dataclass, fields, replace
 import numpy as np
 
 #: The integrators and their steps per 150 Hz frame when `substeps` is not given: linearised backward
-#: Euler is stable at one step per frame; the explicit ones need the parenchyma's viscous bound (~105 µs).
+#: Euler is stable at one step per frame; the explicit ones need steps under the parenchyma's viscous stability
+#: bound (physics.springs.stable_time_step), a fraction of a millisecond on the default liver.
 INTEGRATOR_SUBSTEPS = {"implicit_euler": 1, "symplectic_euler": 72, "explicit_euler": 72}
 INTEGRATORS = tuple(INTEGRATOR_SUBSTEPS)
 #: Where the springs' λ1, λ2, μ come from: the tissue's properties and the mesh (physics.materials), or the

@@ -1,13 +1,12 @@
 """Machine stalls: spans in which this machine ran none of its threads that were due, measured by a sentinel,
 so that a gap in a loop can be told from the product's own doing.
 
-On a virtual machine the host may not run a virtual CPU for milliseconds (measured here: 5-14 ms, often on both
-CPUs at once, on the idle VM as beside busy loops, some hours dozens of times in 10 s). The
-guest's clocks go on, so every loop on that CPU misses its deadlines and nothing inside the guest can tell
-why but a thread that should have run there: a sentinel, one process per CPU, pinned to it at SCHED_FIFO 99
-(above every loop), which sleeps to absolute deadlines SENTINEL_PERIOD_S apart and notes each wake-up later
-than STALL_S. A stall is (last wake-up before it, late wake-up) on the time.monotonic() scale; a loop's gap
-overlapping a stall of either CPU was, for that overlap, the machine's.
+On a virtual machine the host may not run a virtual CPU for milliseconds (the README gives what was seen here),
+often on both CPUs at once, on an idle VM as beside busy loops. The guest's clocks go on, so every loop on that CPU
+misses its deadlines and nothing inside the guest can tell why but a thread that should have run there: a sentinel,
+one process per CPU, pinned to it at SCHED_FIFO 99 (above every loop), which sleeps to absolute deadlines
+SENTINEL_PERIOD_S apart and notes each wake-up later than STALL_S. A stall is (last wake-up before it, late wake-up)
+on the time.monotonic() scale; a loop's gap overlapping a stall of either CPU was, for that overlap, the machine's.
 
 `python -m liver_sim.running.machine_stalls OUT CPU` runs the sentinel of CPU until SIGTERM or SIGINT, one JSON line
 [start_s, end_s] per stall in OUT. Refused SCHED_FIFO, it would take the loops' own use of the CPU for the

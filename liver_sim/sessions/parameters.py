@@ -1,7 +1,7 @@
 """The physics' and the bridge's parameters for offline runs: the nodes' own declarations
 (PARAMETERS), their config/<node>.yaml values, then `name:=value` overrides, range-checked as the
-nodes check them (liver_sim.base.parameters.check_parameter); the physics' as its typed record
-(liver_sim.physics.parameters.PhysicsParameters).
+nodes check them (liver_sim.base.parameters.ParameterRecord), as their typed records
+(liver_sim.physics.parameters.PhysicsParameters, haptic_bridge.parameters.BridgeParameters).
 
 An override `name:=value` applies to every node declaring `name` (tool_radius_m: both);
 `liver_physics.name:=value` or `haptic_bridge.name:=value` to one.  Values are YAML, as after `-p`.
@@ -11,7 +11,7 @@ from __future__ import annotations
 import yaml
 
 from haptic_bridge.parameters import PARAMETERS as BRIDGE
-from liver_sim.base.parameters import check_parameter, typed_value
+from haptic_bridge.parameters import BridgeParameters
 from liver_sim.base.process_settings import config_dir
 from liver_sim.physics.parameters import PARAMETERS as PHYSICS
 from liver_sim.physics.parameters import PhysicsParameters
@@ -51,7 +51,7 @@ def parse_override(text: str) -> tuple[str | None, str, object]:
 
 
 def node_parameters(overrides=()) -> dict:
-    """{node: parameters} for liver_physics (a PhysicsParameters) and haptic_bridge ({name: value}): defaults,
+    """{node: parameters} for liver_physics (a PhysicsParameters) and haptic_bridge (a BridgeParameters): defaults,
     config file, overrides; checked."""
 
     declared = declarations()
@@ -68,8 +68,6 @@ def node_parameters(overrides=()) -> dict:
                              f": neither {' nor '.join(NODES)} declares it"))
         for target in targets:
             values[target][name] = value
-    for name, spec in declared["haptic_bridge"].items():
-        values["haptic_bridge"][name] = check_parameter(name, spec, typed_value(name, spec.default,
-                                                                                values["haptic_bridge"][name]))
     values["liver_physics"] = PhysicsParameters.from_values(values["liver_physics"])
+    values["haptic_bridge"] = BridgeParameters.from_values(values["haptic_bridge"])
     return values

@@ -51,10 +51,10 @@ def session_arrays(bag: Path, physics: dict, bridge: dict) -> dict:
     tool tips are the device's samples placed in the liver frame by the recorded device map (1 kHz, what the
     bridge rendered), or, in a bag without them, the tool poses."""
 
-    force_topics = {"local_model": bridge["force_topic"], "without_local_model": BASELINE_FORCE_TOPIC}
-    decoded = {bridge["force_topic"], BASELINE_FORCE_TOPIC, physics.tool_wrench_topic, physics.tool_pose_topic,
-               physics.contact_plane_topic, TOPICS["diagnostics"].name, bridge["measured_cp_topic"],
-               bridge["device_map_topic"]}
+    force_topics = {"local_model": bridge.force_topic, "without_local_model": BASELINE_FORCE_TOPIC}
+    decoded = {bridge.force_topic, BASELINE_FORCE_TOPIC, physics.tool_wrench_topic, physics.tool_pose_topic,
+               physics.contact_plane_topic, TOPICS["diagnostics"].name, bridge.measured_cp_topic,
+               bridge.device_map_topic}
     times: dict[str, list] = {}
     values: dict[str, list] = {}
     diagnostics: list = []
@@ -75,9 +75,9 @@ def session_arrays(bag: Path, physics: dict, bridge: dict) -> dict:
                 value = force_from_message(fmt, message)
             elif m.topic == physics.tool_wrench_topic:
                 value = force_from_message("wrench_stamped", message)
-            elif m.topic in (physics.tool_pose_topic, bridge["measured_cp_topic"]):
+            elif m.topic in (physics.tool_pose_topic, bridge.measured_cp_topic):
                 value = pose_to_arrays(message.pose)[0]
-            elif m.topic == bridge["device_map_topic"]:
+            elif m.topic == bridge.device_map_topic:
                 value = device_map_from_message(message)
             elif m.topic == physics.contact_plane_topic:
                 value = marker_to_local_model(message)[0]
@@ -100,8 +100,8 @@ def session_arrays(bag: Path, physics: dict, bridge: dict) -> dict:
         if len(t):
             forces[label] = (t, np.array(f).reshape(-1, 3))
     wrench_t, wrench = series(physics.tool_wrench_topic)
-    sample_t, samples = series(bridge["measured_cp_topic"])
-    device_maps = series(bridge["device_map_topic"])[1]
+    sample_t, samples = series(bridge.measured_cp_topic)
+    device_maps = series(bridge.device_map_topic)[1]
     if len(sample_t) and device_maps:
         pose_t, tips = sample_t, [device_maps[0].device_to_liver(sample) for sample in samples]
     else:
@@ -258,8 +258,8 @@ def write_report(bag: Path, out: Path, progress=print) -> dict:
     summary = {"bag": str(bag), "storage": info.storage, "duration_s": info.duration_ns * 1e-9,
                "topics": {t: {"type": kind, "messages": n} for t, (kind, n) in sorted(info.topics.items())},
                "recorder": info.custom_data}
-    nominal = {physics.tool_pose_topic: physics.rate_hz, bridge["force_topic"]: bridge["rate_hz"],
-               TOPICS["measured_cp"].name: bridge["rate_hz"], physics.nodes_topic: physics.rate_hz,
+    nominal = {physics.tool_pose_topic: physics.rate_hz, bridge.force_topic: bridge.rate_hz,
+               TOPICS["measured_cp"].name: bridge.rate_hz, physics.nodes_topic: physics.rate_hz,
                physics.contact_plane_topic: physics.rate_hz, physics.tool_wrench_topic: physics.rate_hz}
     rate_topics = [t for t in nominal if t in data["times"]]
     summary["rates_received"] = {t: rate_figures(data["times"][t], nominal[t]) for t in rate_topics}
@@ -279,7 +279,7 @@ def write_report(bag: Path, out: Path, progress=print) -> dict:
     tool_t, tips = data["tool"]
     if len(tool_t):
         model_t, models = data["local_models"]
-        depth = penetration_series(tool_t, tips, model_t, models, bridge["tool_radius_m"])
+        depth = penetration_series(tool_t, tips, model_t, models, bridge.tool_radius_m)
         summary["penetration_max_m"] = float(depth.max())
         summary["tool_path"] = {"samples": len(tips), "length_m": float(np.linalg.norm(np.diff(tips, axis=0),
                                                                                         axis=1).sum()),

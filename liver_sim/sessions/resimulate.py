@@ -61,8 +61,8 @@ class _Session:
         self.device_map = device_map
         self.tick = BridgeTick(bridge, device_map)
         #: the Fig. 8 baseline: a second bridge holding the physics wrench (local_model: none)
-        self.baseline = (BridgeTick({**bridge, "local_model": "none"}, device_map)
-                         if compare and bridge["local_model"] != "none" else None)
+        self.baseline = (BridgeTick(bridge.replace(local_model="none"), device_map)
+                         if compare and bridge.local_model != "none" else None)
         self.emit, self.progress = emit, progress
         self.commands = 0
         self.peak_force_n = 0.0
@@ -102,7 +102,7 @@ class _Session:
             messages.append((self.p.marker_topic, "marker", skin_marker_serialized(
                 self.model.state.positions, self.model.structure.mesh.skin, stamp, frame_id)))
         model, lifetime = local_model_from_bytes(marker_bytes)  # as the live bridge reads it
-        return (t, messages, (model, lifetime if lifetime > 0.0 else self.b["lifetime_s"]),
+        return (t, messages, (model, lifetime if lifetime > 0.0 else self.b.lifetime_s),
                 force_from_message("wrench_stamped", wrench))
 
     def run(self, poses: list, input_topic: str, input_key: str) -> None:
@@ -133,18 +133,18 @@ class _Session:
                 if self.baseline is not None:
                     self.baseline.sample(seconds_from_stamp(message.header.stamp), t, sample)
             self.emit(input_topic, input_key, t, data)
-            command = self.tick.step(t, tip, t - tip_time, held if self.b["local_model"] == "none" else local,
+            command = self.tick.step(t, tip, t - tip_time, held if self.b.local_model == "none" else local,
                                      t - source_time)
             self.peak_force_n = max(self.peak_force_n, float(np.linalg.norm(command)))
-            self.emit(self.b["force_topic"], "servo_cf", t, serialize_message(force_message(
-                self.b["force_output"], command, message.header.stamp, self.b["device_frame_id"])))
+            self.emit(self.b.force_topic, "servo_cf", t, serialize_message(force_message(
+                self.b.force_output, command, message.header.stamp, self.b.device_frame_id)))
             if self.trace is not None:
                 self.trace["command_s"].append(t)
                 self.trace["command_n"].append(command)
             if self.baseline is not None:
                 command = self.baseline.step(t, tip, t - tip_time, held, t - source_time)
                 self.emit(BASELINE_FORCE_TOPIC, "servo_cf", t, serialize_message(force_message(
-                    self.b["force_output"], command, message.header.stamp, self.b["device_frame_id"])))
+                    self.b.force_output, command, message.header.stamp, self.b.device_frame_id)))
                 if self.trace is not None:
                     self.trace["baseline_n"].append(command)
             self.commands += 1
@@ -183,13 +183,13 @@ def session_inputs(bag: Path, physics: PhysicsParameters, bridge: dict) -> tuple
     in a bag of the older layout, the tool poses and the identity map; BagError when it holds neither."""
 
     topics = bag_info(bag).topics
-    samples = recorded_poses(bag, bridge["measured_cp_topic"]) if bridge["measured_cp_topic"] in topics else []
+    samples = recorded_poses(bag, bridge.measured_cp_topic) if bridge.measured_cp_topic in topics else []
     if samples:
-        return samples, recorded_device_map(bag, bridge["device_map_topic"]), bridge["measured_cp_topic"], \
+        return samples, recorded_device_map(bag, bridge.device_map_topic), bridge.measured_cp_topic, \
             "measured_cp"
     poses = recorded_poses(bag, physics.tool_pose_topic) if physics.tool_pose_topic in topics else []
     if not poses:
-        raise BagError(bag, f"holds neither {bridge['measured_cp_topic']} nor {physics.tool_pose_topic} messages "
+        raise BagError(bag, f"holds neither {bridge.measured_cp_topic} nor {physics.tool_pose_topic} messages "
                             "to re-simulate")
     return poses, DeviceMap(), physics.tool_pose_topic, "tool_pose"
 
@@ -206,7 +206,7 @@ def resimulate(bag: Path, out: Path, overrides=(), storage: str = "mcap", progre
     known = known_topics()
     types = {key: (type_name(topic.type) if topic.type else None, known[topic.name][1])
              for key, topic in TOPICS.items()}
-    types["servo_cf"] = (type_name(force_message_type(bridge["force_output"])), types["servo_cf"][1])
+    types["servo_cf"] = (type_name(force_message_type(bridge.force_output)), types["servo_cf"][1])
     progress(f"re-simulating {len(poses)} samples of {input_topic} ({poses[-1][0] - poses[0][0]:.2f} s) of {bag}"
              + (f" with {' '.join(overrides)}" if overrides else ""))
     session = _Session(physics, bridge, None, progress, compare, device_map)  # refuses bad parameters first
@@ -244,11 +244,11 @@ def play_script(script, duration_s: float, overrides=(), progress=lambda line: N
 
     params = node_parameters(overrides)
     physics, bridge = params["liver_physics"], params["haptic_bridge"]
-    if bridge["local_model"] == "none":
+    if bridge.local_model == "none":
         raise ValueError("parameter local_model must not be none: Fig. 8 compares the local model with none")
     session = _Session(physics, bridge, lambda *message: None, progress, compare=True)
     session.trace = {key: [] for key in ("command_s", "command_n", "baseline_n", "wrench_s", "wrench_n")}
-    period_s = 1.0 / bridge["rate_hz"]
+    period_s = 1.0 / bridge.rate_hz
     poses = []
     for k in range(int(round(duration_s / period_s))):
         t = k * period_s

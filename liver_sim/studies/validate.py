@@ -138,8 +138,8 @@ def b4_and_continuity(mesh: TetMesh, params: ModelParams, bridge: dict) -> tuple
     script = make_script("press_slide_release", settings)
     slide_start = settings.approach_s + settings.press_s + settings.hold_s
     slide_end = slide_start + settings.slide_s
-    tick = BridgeTick({**bridge, "model_glide_s": 0.0})
-    period = 1.0 / bridge["rate_hz"]
+    tick = BridgeTick(bridge.replace(model_glide_s=0.0))
+    period = 1.0 / bridge.rate_hz
     frame_s = model.structure.frame_period_s
     frames = int(round(script.duration_s / frame_s))
     frame_force, frame_time, rendered = [], [], []
@@ -148,7 +148,7 @@ def b4_and_continuity(mesh: TetMesh, params: ModelParams, bridge: dict) -> tuple
         published = (k + 1) * frame_s  # the frame ends with the tool where the script has it then
         result = model.step_frame(ToolPose(script.position_at(published)))
         first = True
-        local = (result.local_model if result.local_model.valid else None, bridge["lifetime_s"])
+        local = (result.local_model if result.local_model.valid else None, bridge.lifetime_s)
         frame_force.append(result.tool_force_n)
         frame_time.append(published)
         for tick_index in range(int(round(published / period)), int(round((published + frame_s) / period))):

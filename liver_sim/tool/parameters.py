@@ -1,7 +1,7 @@
 """The `liver_tool` node's parameters (no ROS): where the tool pose comes from (device, script or static),
 the script's settings and the device map: declared here, published latched for haptic_bridge."""
 from liver_sim.base.geometry.device_map import DEVICE_MAP_PARAMETERS
-from liver_sim.base.parameters import Param, realtime_priority_parameter
+from liver_sim.base.parameters import Param, parameter_record, realtime_priority_parameter
 from liver_sim.base.topic_names import TOPIC_NAMES
 from liver_sim.tool.scripts import IDENTITY_XYZW, SCRIPT_PARAMETERS, ScriptSettings
 
@@ -25,3 +25,6 @@ PARAMETERS = {
     **SCRIPT_PARAMETERS,
     **DEVICE_MAP_PARAMETERS,
 }
+
+#: The node's parameters as one typed record (liver_sim.base.parameters.parameter_record).
+ToolParameters = parameter_record("ToolParameters", PARAMETERS, "The parameters of liver_tool (PARAMETERS).")

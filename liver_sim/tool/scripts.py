@@ -218,7 +218,7 @@ ScriptParameters = parameter_record("ScriptParameters", SCRIPT_PARAMETERS,
 def script_from(p: ScriptParameters) -> ScriptedTrajectory:
     """The script named by the script parameters `p`, or ValueError naming the bad parameter."""
     settings = ScriptSettings(
-        anchor_m=tuple(vector_parameter(p.as_dict(), "anchor_m", 3)), loop=p.loop_script,
+        anchor_m=tuple(vector_parameter(p, "anchor_m", 3)), loop=p.loop_script,
         tool_radius_m=p.tool_radius_m, depth_m=p.depth_m, clearance_m=p.clearance_m, slide_m=p.slide_m,
         pull_m=p.pull_m, start_delay_s=p.start_delay_s, approach_s=p.approach_s, press_s=p.press_s,
         hold_s=p.hold_s, slide_s=p.slide_s, withdraw_s=p.withdraw_s, rest_s=p.rest_s, hand_speed_m_s=p.hand_speed_m_s)

@@ -13,7 +13,7 @@ import numpy as np
 
 from liver_sim.base.checks import positive, vector3
 from liver_sim.base.geometry.rotations import matrix_to_quaternion, quaternion_to_matrix
-from liver_sim.base.parameters import Param, quaternion_parameter, vector_parameter
+from liver_sim.base.parameters import Param, parameter_value, quaternion_parameter, vector_parameter
 
 #: The device map's parameters, declared alike by every node that uses the map.
 DEVICE_MAP_PARAMETERS = {
@@ -73,10 +73,12 @@ class DeviceMap:
                 and np.array_equal(self.translation, other.translation))
 
     @classmethod
-    def from_parameters(cls, values: dict, workspace_radius_m: float = 0.5) -> DeviceMap:
-        """The map named by the DEVICE_MAP_PARAMETERS `values`, or ValueError naming the bad parameter."""
+    def from_parameters(cls, values, workspace_radius_m: float = 0.5) -> DeviceMap:
+        """The map named by the DEVICE_MAP_PARAMETERS of `values` (a mapping or a node's record), or ValueError
+        naming the bad parameter."""
         return cls(quaternion_parameter(values, "device_rotation_xyzw"),
-                   vector_parameter(values, "device_translation_m", 3), values["device_scale"], workspace_radius_m)
+                   vector_parameter(values, "device_translation_m", 3), parameter_value(values, "device_scale"),
+                   workspace_radius_m)
 
     def device_to_liver(self, point: np.ndarray) -> np.ndarray:
         """Device point (m) → liver point (m): scale·R·p + translation."""
