@@ -15,7 +15,7 @@ import pytest
 
 from haptic_bridge.parameters import PARAMETERS as BRIDGE
 from liver_sim.base.local_model import LocalModel
-from liver_sim.nodes.bridge_node import ZERO_NOT_ACKED
+from liver_sim.nodes.bridge_shell import ZERO_NOT_ACKED
 from msg_defs.forces import force_message_type
 from msg_defs.topics import TOPICS
 

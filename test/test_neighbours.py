@@ -8,7 +8,7 @@ import time
 import pytest
 
 from liver_sim.base.process_settings import command_line, set_realtime_priority
-from liver_sim.nodes.rate_loop import RateLoop
+from liver_sim.realtime.rate_loop import RateLoop
 
 from network_clients import wait_for
 

@@ -2,7 +2,7 @@
 import pytest
 
 from liver_sim.base.process_settings import set_realtime_priority
-from liver_sim.nodes.rate_loop import CATCH_UP_PERIODS, RateLoop
+from liver_sim.realtime.rate_loop import CATCH_UP_PERIODS, RateLoop
 
 PERIOD_S = 0.001
 
@@ -81,8 +81,8 @@ def test_a_gap_gets_its_cause_named_from_what_the_thread_did_meanwhile():
     import threading
     import time
 
-    from liver_sim.nodes.gap_causes import GapCauses
-    from liver_sim.nodes.garbage import GARBAGE
+    from liver_sim.realtime.gap_causes import GapCauses
+    from liver_sim.realtime.garbage import GARBAGE
 
     causes = GapCauses()
     causes.sample()
@@ -136,7 +136,7 @@ def test_a_gap_gets_its_cause_named_from_what_the_thread_did_meanwhile():
 
 def test_loop_statistics_keep_a_ring_of_the_newest_periods():
     from liver_sim.nodes.inputs import Latest
-    from liver_sim.nodes.rate_loop import LoopStats
+    from liver_sim.realtime.rate_loop import LoopStats
 
     stats = LoopStats(0.001, window=10)
     for k in range(25):
@@ -155,7 +155,7 @@ def test_freezing_the_collector_moves_everything_to_the_permanent_generation_and
     import subprocess
     import sys
 
-    script = ("import gc; from liver_sim.nodes.garbage import freeze_garbage, garbage_fields, collect_garbage\n"
+    script = ("import gc; from liver_sim.realtime.garbage import freeze_garbage, garbage_fields, collect_garbage\n"
               "freeze_garbage(); f = garbage_fields(); collect_garbage()\n"
               "assert f['gc_frozen_objects'] > 1000, f\n"
               "assert f['gc_automatic_full_collection'] is False, f\n"

@@ -23,8 +23,8 @@ from rclpy.node import Node
 
 from liver_sim.bench.machine import machine
 from liver_sim.nodes.inputs import LoopInputs
-from liver_sim.nodes.rate_loop import RateLoop
 from liver_sim.nodes.run import run_node
+from liver_sim.realtime.rate_loop import RateLoop
 from liver_sim.running.launcher import NodeProcesses
 from liver_sim.running.network import process_costs, process_counters
 from msg_defs.forces import force_message_type, wrench_stamped_bytes

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 
-from liver_sim.nodes.garbage import garbage_fields
+from liver_sim.realtime.garbage import garbage_fields
 
 #: A loop is on rate while it achieves at least this fraction of its rate (diagnostics).
 ON_RATE_FRACTION = 0.98

@@ -23,10 +23,10 @@ from liver_sim.base.geometry.device_map import DeviceMap
 from liver_sim.nodes.diagnostics import loop_status, publish_diagnostics
 from liver_sim.nodes.inputs import Latest, LoopInputs, RosTime
 from liver_sim.nodes.parameters import declare_parameters, on_parameter_changes, read_at_start
-from liver_sim.nodes.rate_loop import RateLoop, warn
 from liver_sim.nodes.run import run_node
 from liver_sim.phantom.device import PhantomSim, StylusParams
 from liver_sim.phantom.parameters import PARAMETERS, PhantomParameters
+from liver_sim.realtime.rate_loop import RateLoop, warn
 from liver_sim.tool.scripts import ScriptParameters, script_from
 from msg_defs.forces import force_from_bytes, force_message_type
 from msg_defs.poses import IDENTITY, pose_stamped_bytes

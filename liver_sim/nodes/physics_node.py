@@ -20,10 +20,10 @@ from liver_sim.base.parameters import check_parameter
 from liver_sim.nodes.diagnostics import loop_status, publish_diagnostics
 from liver_sim.nodes.inputs import Latest, LoopInputs, emulated_link, link_report
 from liver_sim.nodes.parameters import declare_parameters
-from liver_sim.nodes.rate_loop import RateLoop, warn
 from liver_sim.nodes.run import run_node
 from liver_sim.physics.parameters import PARAMETERS, PhysicsParameters, build_model
 from liver_sim.physics.pipeline import Frame, FramePipeline
+from liver_sim.realtime.rate_loop import RateLoop, warn
 from msg_defs.forces import wrench_stamped_bytes
 from msg_defs.local_model import local_model_marker_bytes
 from msg_defs.point_cloud import nodes_pointcloud2_bytes

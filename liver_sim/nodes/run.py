@@ -14,7 +14,7 @@ from rclpy.signals import SignalHandlerOptions
 
 from liver_sim.base.process_settings import use_dds_profile
 from liver_sim.base.stop_request import ENDING_SIGNALS, STOP_SIGNALS, StopRequest
-from liver_sim.nodes.garbage import FULL_COLLECTION_PERIOD_S, collect_garbage, freeze_garbage
+from liver_sim.realtime.garbage import FULL_COLLECTION_PERIOD_S, collect_garbage, freeze_garbage
 
 #: How often (s) a thread holding the GIL is asked to hand it over.
 GIL_SWITCH_INTERVAL_S = 0.0002

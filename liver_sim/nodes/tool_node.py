@@ -28,8 +28,8 @@ from liver_sim.base.parameters import quaternion_parameter, vector_parameter
 from liver_sim.nodes.diagnostics import loop_status, publish_diagnostics
 from liver_sim.nodes.inputs import Latest, LoopInputs
 from liver_sim.nodes.parameters import declare_parameters, on_parameter_changes, read_at_start
-from liver_sim.nodes.rate_loop import RateLoop, warn
 from liver_sim.nodes.run import run_node
+from liver_sim.realtime.rate_loop import RateLoop, warn
 from liver_sim.tool.parameters import PARAMETERS, ToolParameters
 from liver_sim.tool.scripts import IDENTITY_XYZW, ScriptedTrajectory, ScriptParameters, script_from
 from msg_defs.device_map import device_map_message

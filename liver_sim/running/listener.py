@@ -11,7 +11,7 @@ from rclpy.node import Node
 from rclpy.serialization import deserialize_message
 
 from liver_sim.nodes.inputs import LoopInputs
-from liver_sim.nodes.rate_loop import RateLoop
+from liver_sim.realtime.rate_loop import RateLoop
 from msg_defs.forces import force_from_bytes, force_message_type
 from msg_defs.point_cloud import pointcloud2_to_nodes
 from msg_defs.poses import pose_from_bytes

@@ -28,7 +28,7 @@ from rclpy.node import Node
 
 from liver_sim.base.local_model import LocalModel
 from liver_sim.nodes.inputs import LoopInputs
-from liver_sim.nodes.rate_loop import RateLoop
+from liver_sim.realtime.rate_loop import RateLoop
 from liver_sim.view.defaults import DEFAULT_HOST, DEFAULT_PORT, VIEW_RATE_HZ
 from liver_sim.view.foxglove_scene import scene_update
 from liver_sim.view.scene import build_scene, lip_edges

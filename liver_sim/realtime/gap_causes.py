@@ -7,7 +7,7 @@ import threading
 from collections import deque
 from pathlib import Path
 
-from liver_sim.nodes.garbage import GARBAGE
+from liver_sim.realtime.garbage import GARBAGE
 
 #: A gap between two ticks longer than this (s), or than two periods of a slower loop, gets its cause named
 #: (GapCauses).

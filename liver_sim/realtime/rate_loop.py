@@ -19,8 +19,8 @@ import numpy as np
 import rclpy
 
 from liver_sim.base.process_settings import set_realtime_priority
-from liver_sim.nodes.gap_causes import GAP_CAUSE_S, SCHEDSTAT_EVERY_TICKS, GapCauses
-from liver_sim.nodes.garbage import freeze_garbage
+from liver_sim.realtime.gap_causes import GAP_CAUSE_S, SCHEDSTAT_EVERY_TICKS, GapCauses
+from liver_sim.realtime.garbage import freeze_garbage
 
 #: Seconds before a deadline at which a loop stops sleeping and spins.
 SPIN_MARGIN_S = 0.0001
