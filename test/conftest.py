@@ -34,17 +34,15 @@
 These settings are made at import time, before any test module imports
 rclpy or matplotlib.
 """
-import fcntl
 import os
 import socket
-import tempfile
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
 
 import numpy as np
 import pytest
-from _pytest.nodeid import coerce_node_id  # pytest 9's node ids: see XdistGroupIds
+from ros_domains import VALID_DOMAIN_IDS, claim_domain_id, try_lock
 
 from liver_sim.base.process_settings import use_dds_profile
 
@@ -54,58 +52,11 @@ os.environ.pop("ROS_LOCALHOST_ONLY", None)
 os.environ["MPLBACKEND"] = "Agg"
 use_dds_profile()  # the product's Fast DDS profile, for the in-process participants as for the nodes
 
-# Domain ids whose Fast DDS ports stay clear of the Linux ephemeral range.
-# 0 is left out: it is every ROS installation's default.
-VALID_DOMAIN_IDS = tuple(range(1, 102)) + tuple(range(215, 233))
-_LOCK_DIR = Path(tempfile.gettempdir()) / "liver_sim-ros-domain-locks"
-
-
-def _try_lock(domain_id):
-    """Open file handle holding the exclusive lock of ``domain_id``, or None."""
-    _LOCK_DIR.mkdir(mode=0o777, parents=True, exist_ok=True)
-    handle = open(_LOCK_DIR / f"{domain_id}.lock", "a+")
-    try:
-        fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
-    except OSError:
-        handle.close()
-        return None
-    return handle
-
-
-_next_index = (os.getpid() * 7919) % len(VALID_DOMAIN_IDS)
-
-
-def claim_domain_id(exclude=()):
-    """Lock a free domain id; return ``(domain_id, handle)``.
-
-    The lock lasts until ``handle`` is closed or the process ends (even by a
-    crash), so a dead test run never keeps a domain. The search starts where
-    the previous claim of this process stopped (first: at a place derived
-    from the process id), so consecutive tests get different domains -- a
-    process a test failed to stop cannot talk to the next test -- and
-    concurrent runs rarely contend for the same lock.
-    """
-    global _next_index
-    n = len(VALID_DOMAIN_IDS)
-    for k in range(n):
-        index = (_next_index + k) % n
-        domain_id = VALID_DOMAIN_IDS[index]
-        if domain_id in exclude:
-            continue
-        handle = _try_lock(domain_id)
-        if handle is not None:
-            _next_index = (index + 1) % n
-            return domain_id, handle
-    raise RuntimeError(
-        f"no free ROS domain id among {n}: too many liver_sim test sessions "
-        f"on this machine (locks in {_LOCK_DIR})")
-
-
 def _session_domain():
     """The session's own domain: the given one unless another session holds it."""
     given = os.environ.get("ROS_DOMAIN_ID", "").strip()
     if given.isdigit() and int(given) in VALID_DOMAIN_IDS:
-        handle = _try_lock(int(given))
+        handle = try_lock(int(given))
         if handle is not None:
             return int(given), handle
     return claim_domain_id()
@@ -150,7 +101,7 @@ class XdistGroupIds:
         for item in items:
             suffixed = item.__dict__.get("_nodeid")
             if suffixed and suffixed != item.nodeid:
-                item._id = coerce_node_id(suffixed)
+                item._id = type(item._id).parse(suffixed)  # pytest 9's structured node id, by its own class
 
 
 def pytest_configure(config):

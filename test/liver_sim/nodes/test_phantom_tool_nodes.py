@@ -21,7 +21,7 @@ from msg_defs.poses import pose_to_arrays
 from msg_defs.stamps import seconds_from_stamp, stamp_from_seconds
 from msg_defs.topics import TOPICS
 
-CONFIG = Path(__file__).resolve().parent.parent / "config"
+CONFIG = Path(__file__).resolve().parents[3] / "config"
 MODULES = {"phantom_sim": "liver_sim.nodes.phantom_node", "liver_tool": "liver_sim.nodes.tool_node"}
 WAIT_S = 30.0
 #: A short script anchored at the origin: up at z = 0.025, contact at 0.015, deep at 0.005 (m).

@@ -27,7 +27,7 @@ from msg_defs.local_model import local_model_marker
 from msg_defs.poses import pose_stamped
 from msg_defs.topics import TOPICS, device_command_qos
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 CONFIG = ROOT / "config" / "haptic_bridge.yaml"
 #: Deadline (s) of every wait: a bridge starting on a busy 2-core machine (a closed loop and a core-bound process
 #: beside it) may take 15 s before its first command; a wait that passes ends as soon as its condition holds.

@@ -13,7 +13,7 @@ from liver_sim.cli.main import main
 from liver_sim.mesh.io import load_mesh
 from liver_sim.mesh.liver_shape import default_liver
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[3]
 SIDE, HEIGHT = 0.06, 0.04  # m: right-triangle legs and height of the prism fixture
 
 

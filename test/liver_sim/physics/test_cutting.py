@@ -1,6 +1,7 @@
 """Cutting along the tool path (paper §3.5; P14, R5 of docs/paper.md): the cut follows the path, the mesh stays
 sound."""
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -358,7 +359,10 @@ print(json.dumps({name: n for name, n in versions().items() if n != before.get(n
 def test_after_the_warm_up_a_cut_and_a_tear_compile_nothing():
     """The model's warm-up compiles what a frame, a tear and a cut run: a kernel compiled inside the 150 Hz loop
     stalls it for seconds. In a fresh interpreter, so that kernels other tests compiled do not count."""
+    support = Path(__file__).resolve().parents[2] / "support"
     result = subprocess.run([sys.executable, "-c", COMPILES_AFTER_WARM_UP], cwd=Path(__file__).parent,
+                            env={**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, (
+                                str(support), os.environ.get("PYTHONPATH"))))},
                             capture_output=True, text=True, timeout=600)
     assert result.returncode == 0, result.stderr
     assert json.loads(result.stdout) == {}

@@ -29,7 +29,7 @@ from msg_defs.poses import pose_stamped
 
 from network_clients import Tally, read_bag, wait_for
 
-PUBLISHER = Path(__file__).with_name("session_publisher.py")
+PUBLISHER = Path(__file__).resolve().parents[2] / "support" / "session_publisher.py"
 POSE = "geometry_msgs/msg/PoseStamped"
 WRENCH = "geometry_msgs/msg/WrenchStamped"
 PNG = b"\x89PNG\r\n\x1a\n"

@@ -10,7 +10,7 @@ import pytest
 
 from liver_sim.mesh.liver_shape import DEFAULT_TARGET_TETS, build_liver, default_liver, liver_signed_distance
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[3]
 # Nominal liver size in frame `liver` (x left-right, y antero-posterior, z cranio-caudal), metres.
 NOMINAL_SIZE = np.array([0.25, 0.15, 0.13])
 
