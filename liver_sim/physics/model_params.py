@@ -18,6 +18,10 @@ INTEGRATORS = tuple(INTEGRATOR_SUBSTEPS)
 #: Where the springs' λ1, λ2, μ come from: the tissue's properties and the mesh (physics.materials), or the
 #: paper's per-spring constants (`capsule`, `parenchyma`; its figures and the traction test R1).
 SPRING_CONSTANTS = ("material", "paper")
+#: How the tool meets the skin (contact.surface_contacts): 'probe', Eq. 3 as the paper has it, one penalty λ per
+#: contact probe at its closest points; 'surface', a ball meets the skin as a surface, a penalty per unit area at
+#: every skin node and face it presses (implicit integrator only).
+CONTACT_MODELS = ("probe", "surface")
 #: How the liver is held (physics.support): 'organ' (anchored where a liver is held) or 'paper' (§3.1's scene).
 SUPPORTS = ("organ", "paper")
 #: The default liver's supports (physics.support), spheres (x, y, z, radius; m) with a stiffness per unit
@@ -105,6 +109,9 @@ class ModelParams:
     `support_damping_s` × stiffness (physics.support); no node is fixed unless `fixed_nodes` says so;
     'paper': §3.1's scene, `fixed_nodes` None fixes the central tet (as it does when the regions hold no
     capsule node).
+    `contact_model` 'probe' (default): Eq. 3 with one penalty `contact_stiffness_n_per_m` per contact probe;
+    'surface': a ball tool (sphere, capsule) meets the skin as a surface, `contact_stiffness_per_area_n_per_m3` per
+    unit area of every node and face it presses (contact.surface_contacts; implicit integrator only).
     With `tearing`, an interior face whose stretch across it exceeds `tear_strain_parenchyma`
     (`tear_strain_capsule` for a face with an edge on the capsule) opens (P13, §2.6).
     """
@@ -126,6 +133,8 @@ class ModelParams:
     support_damping_s: float = 0.01
     contact_stiffness_n_per_m: float = 300.0
     contact_damping_ns_per_m: float = 1.0
+    contact_model: str = "probe"
+    contact_stiffness_per_area_n_per_m3: float = 3.0e7
     max_node_speed_m_s: float = 20.0
     tearing: bool = False
     tear_strain_parenchyma: float = 0.4
@@ -168,6 +177,7 @@ class ModelParams:
             "environment_damping_per_s": self.environment_damping_per_s,
             "contact_stiffness_n_per_m": self.contact_stiffness_n_per_m,
             "contact_damping_ns_per_m": self.contact_damping_ns_per_m,
+            "contact_stiffness_per_area_n_per_m3": self.contact_stiffness_per_area_n_per_m3,
             "support_damping_s": self.support_damping_s,
         }
         for name, value in non_negative.items():
@@ -177,6 +187,11 @@ class ModelParams:
             raise ValueError(f"parameter spring_constants must be one of {SPRING_CONSTANTS}, "
                              f"got {self.spring_constants!r}")
         self.tissue.validate()
+        if self.contact_model not in CONTACT_MODELS:
+            raise ValueError(f"parameter contact_model must be one of {CONTACT_MODELS}, got {self.contact_model!r}")
+        if self.contact_model == "surface" and self.integrator != "implicit_euler":
+            raise ValueError("parameter contact_model 'surface' needs integrator 'implicit_euler', "
+                             f"got {self.integrator!r}")
         if self.support not in SUPPORTS:
             raise ValueError(f"parameter support must be one of {SUPPORTS}, got {self.support!r}")
         regions = np.asarray(self.support_regions, dtype=np.float64)

@@ -20,7 +20,7 @@ from liver_sim.physics.implicit import ImplicitEuler
 from liver_sim.physics.model_params import ModelParams
 from liver_sim.physics.spring_kernels import SpringArrays
 from liver_sim.physics.springs import SpringNetwork, build_springs, estimate_stable_time_step, stable_time_step
-from liver_sim.physics.support import SupportArrays, build_support
+from liver_sim.physics.support import SupportArrays, build_support, node_areas_m2
 from liver_sim.physics.tearing import TearDetector
 
 #: Above this many springs the parallel kernel is used (below it thread start-up costs more).
@@ -92,6 +92,12 @@ class Structure:
     def skin(self) -> np.ndarray:
         """The skin triangles (K, 3) as the contact kernels take them (contiguous int64)."""
         return np.ascontiguousarray(self.mesh.skin, dtype=np.int64)
+
+    @cached_property
+    def skin_node_area_m2(self) -> np.ndarray:
+        """Per node, a third of the area of the skin triangles around it at rest (m², 0 off the skin): its share of
+        the tool's contact (contact.surface_contacts)."""
+        return node_areas_m2(self.mesh.points, self.mesh.skin)
 
     @cached_property
     def step_settings(self) -> StepSettings:
