@@ -18,6 +18,10 @@ INTEGRATORS = tuple(INTEGRATOR_SUBSTEPS)
 #: Where the springs' λ1, λ2, μ come from: the tissue's properties and the mesh (physics.materials), or the
 #: paper's per-spring constants (`capsule`, `parenchyma`; its figures and the traction test R1).
 SPRING_CONSTANTS = ("material", "paper")
+#: The parenchyma's law: 'springs', the paper's Eq. 1 springs on the tet edges (physics.springs, physics.materials);
+#: 'fem', co-rotational linear tetrahedra with the tissue's E, ν and η (physics.fem_kernels; implicit integrator
+#: and material constants only).  The capsule is Eq. 1 springs on the skin edges with either.
+TISSUE_LAWS = ("springs", "fem")
 #: How the tool meets the skin (contact.surface_contacts): 'probe', Eq. 3 as the paper has it, one penalty λ per
 #: contact probe at its closest points; 'surface', a ball meets the skin as a surface, a penalty per unit area at
 #: every skin node and face it presses (implicit integrator only).
@@ -109,6 +113,9 @@ class ModelParams:
     `support_damping_s` × stiffness (physics.support); no node is fixed unless `fixed_nodes` says so;
     'paper': §3.1's scene, `fixed_nodes` None fixes the central tet (as it does when the regions hold no
     capsule node).
+    `tissue_law` 'springs' (default): the parenchyma is Eq. 1 springs on the tet edges; 'fem': co-rotational linear
+    tetrahedra with the tissue's E, ν (up to 0.499) and Kelvin–Voigt η (physics.fem_kernels), the capsule staying
+    springs (implicit integrator and material constants only).
     `contact_model` 'probe' (default): Eq. 3 with one penalty `contact_stiffness_n_per_m` per contact probe;
     'surface': a ball tool (sphere, capsule) meets the skin as a surface, `contact_stiffness_per_area_n_per_m3` per
     unit area of every node and face it presses (contact.surface_contacts; implicit integrator only).
@@ -117,6 +124,7 @@ class ModelParams:
     """
 
     spring_constants: str = "material"
+    tissue_law: str = "springs"
     tissue: TissueProperties = TissueProperties()
     capsule: SpringLaw = SpringLaw(lambda1_n=1430.0, lambda2_n=10.0, mu_ns_per_m=0.02)
     parenchyma: SpringLaw = SpringLaw(lambda1_n=71.5, lambda2_n=0.5, mu_ns_per_m=5.0)
@@ -187,6 +195,11 @@ class ModelParams:
             raise ValueError(f"parameter spring_constants must be one of {SPRING_CONSTANTS}, "
                              f"got {self.spring_constants!r}")
         self.tissue.validate()
+        if self.tissue_law not in TISSUE_LAWS:
+            raise ValueError(f"parameter tissue_law must be one of {TISSUE_LAWS}, got {self.tissue_law!r}")
+        if self.tissue_law == "fem" and (self.integrator != "implicit_euler" or self.spring_constants != "material"):
+            raise ValueError("parameter tissue_law 'fem' needs integrator 'implicit_euler' and spring_constants "
+                             f"'material', got {self.integrator!r} and {self.spring_constants!r}")
         if self.contact_model not in CONTACT_MODELS:
             raise ValueError(f"parameter contact_model must be one of {CONTACT_MODELS}, got {self.contact_model!r}")
         if self.contact_model == "surface" and self.integrator != "implicit_euler":

@@ -16,6 +16,7 @@ from liver_sim.physics.model_params import (
     INTEGRATORS,
     SPRING_CONSTANTS,
     SUPPORTS,
+    TISSUE_LAWS,
     ModelParams,
     SpringLaw,
     TissueProperties,
@@ -37,6 +38,10 @@ PARAMETERS = {
                         "explicit_euler (Eq. 2)", choices=INTEGRATORS),
     "substeps": Param(0, "integration steps per frame; 0: the integrator's own ("
                       + ", ".join(f"{k} {n}" for k, n in INTEGRATOR_SUBSTEPS.items()) + ")", 0, 10_000),
+    "tissue_law": Param(DEFAULTS.tissue_law, "the parenchyma: springs (Eq. 1 on the tet edges, the paper's) or fem "
+                        "(co-rotational linear tetrahedra with parenchyma E, ν and η; implicit_euler and material "
+                        "only)",
+                        choices=TISSUE_LAWS),
     "spring_constants": Param(DEFAULTS.spring_constants, "material: each spring's λ1, λ2, μ from the tissue "
                               "properties and the mesh; paper: the paper's per-spring constants below",
                               choices=SPRING_CONSTANTS),
@@ -136,7 +141,7 @@ def model_params(p: PhysicsParameters) -> ModelParams:
         raise ValueError(f"parameter support_regions must hold five numbers per region (x, y, z, radius m, "
                          f"stiffness N/m³), got {len(regions)} numbers")
     return ModelParams(
-        spring_constants=p.spring_constants,
+        spring_constants=p.spring_constants, tissue_law=p.tissue_law,
         tissue=TissueProperties(p.parenchyma_young_modulus_kpa, p.parenchyma_poisson_ratio,
                                 p.parenchyma_viscosity_pa_s, p.capsule_stiffness_n_per_m, p.capsule_viscosity_ns_per_m,
                                 p.cubic_ratio),
