@@ -57,7 +57,7 @@ def test_a_rotated_strained_block_feels_the_same_forces_rotated():
     rotation = rotation @ np.array([[1.0, 0.0, 0.0], [0.0, np.cos(1.0), -np.sin(1.0)], [0.0, np.sin(1.0), np.cos(1.0)]])
     f = element_forces(mesh, x)
     turned = element_forces(mesh, x @ rotation.T + 0.3)
-    np.testing.assert_allclose(turned, f @ rotation.T, atol=1e-9 * np.abs(f).max())
+    np.testing.assert_allclose(turned, f @ rotation.T, atol=1e-6 * np.abs(f).max())
     assert np.abs(element_forces(mesh, mesh.points @ rotation.T)).max() < 1e-9  # a rigid motion: no force
 
 

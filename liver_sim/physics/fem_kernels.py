@@ -26,14 +26,14 @@ from liver_sim.mesh.tetmesh import signed_volumes
 
 #: Iterations and tolerance (rad) of the rotation's extraction per step (warm-started: one or two suffice).
 ROTATION_ITERATIONS = 20
-ROTATION_TOLERANCE = 1e-10
+ROTATION_TOLERANCE = 1e-8
 
 
 class TetArrays(NamedTuple):
     """The tetrahedra of the 'fem' law for the kernels: `tets` (M, 4) int64, rest `volume_m3` (M,), shape-function
     `gradients` (M, 4, 3) 1/m, Lamé `lame_lambda_pa` and `lame_mu_pa`, Kelvin–Voigt `viscous_time_s` τ; and the
-    per-step `quaternion` (M, 4: x, y, z, w) and `rotation` (M, 3, 3) of each element (scratch the step
-    overwrites, warm start of the next)."""
+    per-step `quaternion` (M, 4: x, y, z, w), `rotation` (M, 3, 3) and `rotated_gradients` R·g_a (M, 4, 3) of each
+    element (scratch the step overwrites, the quaternion the warm start of the next)."""
 
     tets: np.ndarray
     volume_m3: np.ndarray
@@ -43,12 +43,13 @@ class TetArrays(NamedTuple):
     viscous_time_s: float
     quaternion: np.ndarray
     rotation: np.ndarray
+    rotated_gradients: np.ndarray
 
     @classmethod
     def none(cls) -> "TetArrays":
         """No element (the springs' law)."""
         return cls(np.zeros((0, 4), np.int64), np.zeros(0), np.zeros((0, 4, 3)), 0.0, 0.0, 0.0, np.zeros((0, 4)),
-                   np.zeros((0, 3, 3)))
+                   np.zeros((0, 3, 3)), np.zeros((0, 4, 3)))
 
 
 def build_tets(points: np.ndarray, tets: np.ndarray, young_pa: float, poisson: float,
@@ -66,7 +67,7 @@ def build_tets(points: np.ndarray, tets: np.ndarray, young_pa: float, poisson: f
     return TetArrays(tets, signed_volumes(points, tets), np.ascontiguousarray(gradients),
                      young_pa * poisson / ((1.0 + poisson) * (1.0 - 2.0 * poisson)), young_pa / (2.0 * (1.0 + poisson)),
                      viscosity_pa_s / young_pa if young_pa > 0.0 else 0.0, quaternion,
-                     np.broadcast_to(np.eye(3), (count, 3, 3)).copy())
+                     np.broadcast_to(np.eye(3), (count, 3, 3)).copy(), np.ascontiguousarray(gradients).copy())
 
 
 @numba.njit(cache=True, inline="always")
@@ -155,22 +156,22 @@ def tet_terms(x, v, y, inv_mass, h, law, f, ky, diagonal, assemble_matrix):
     grad = np.empty((3, 3))
     stress = np.empty((3, 3))
     rs = np.empty((3, 3))
-    identity_strain = np.empty((3, 3))
+    total = np.empty((3, 3))
     weight = h * h + h * tau
     for e in range(tets.shape[0]):
         tet, g, r = tets[e], gradients[e], rotation[e]
         _gradient(x, tet, g, grad)
         if assemble_matrix:
             _extract_rotation(grad, quaternion[e], r)
-        # elastic stress of ε = sym(Rᵀ·F) − I: σ(sym(Rᵀ·F)) − σ(I)
+            hg = law.rotated_gradients[e]
+            for a in range(4):
+                for i in range(3):
+                    hg[a, i] = r[i, 0] * g[a, 0] + r[i, 1] * g[a, 1] + r[i, 2] * g[a, 2]
+        # elastic stress of ε = sym(Rᵀ·F) − I: σ(sym(Rᵀ·F)) − σ(I), R·σ(I) = (3λ + 2μ)·R
         _rotated_stress(r, grad, lam, mu, stress, rs)
         for i in range(3):
             for j in range(3):
-                identity_strain[i, j] = (3.0 * lam + 2.0 * mu) * r[i, j]  # R·σ(I)
-        for i in range(3):
-            for j in range(3):
-                rs[i, j] -= identity_strain[i, j]
-        total = rs.copy()
+                total[i, j] = rs[i, j] - (3.0 * lam + 2.0 * mu) * r[i, j]
         _gradient(v, tet, g, grad)
         _rotated_stress(r, grad, lam, mu, stress, rs)
         for i in range(3):
@@ -197,9 +198,8 @@ def tet_terms(x, v, y, inv_mass, h, law, f, ky, diagonal, assemble_matrix):
             for i in range(3):
                 ky[n, i] -= vol * (rs[i, 0] * g[a, 0] + rs[i, 1] * g[a, 1] + rs[i, 2] * g[a, 2])
             if assemble_matrix and inv_mass[n] > 0.0:
-                gx = r[0, 0] * g[a, 0] + r[0, 1] * g[a, 1] + r[0, 2] * g[a, 2]
-                gy = r[1, 0] * g[a, 0] + r[1, 1] * g[a, 1] + r[1, 2] * g[a, 2]
-                gz = r[2, 0] * g[a, 0] + r[2, 1] * g[a, 1] + r[2, 2] * g[a, 2]
+                hg = law.rotated_gradients[e]
+                gx, gy, gz = hg[a, 0], hg[a, 1], hg[a, 2]
                 iso = weight * vol * mu * (gx * gx + gy * gy + gz * gz)
                 along = weight * vol * (lam + mu)
                 rg = (gx, gy, gz)
@@ -212,18 +212,33 @@ def tet_terms(x, v, y, inv_mass, h, law, f, ky, diagonal, assemble_matrix):
 @numba.njit(cache=True)
 def tet_apply(law, weight, p, out):
     """out += Σ elements weight·V·R·C·Rᵀ·p (`law` a TetArrays, weight = h² + h·τ; p zero on held nodes): the
-    elements' part of A·p."""
-    tets, volume, gradients, rotation = law.tets, law.volume_m3, law.gradients, law.rotation
+    elements' part of A·p.  With the rotated gradients h_a = R·g_a and G = Σ_b p_b ⊗ h_b, R·C·Rᵀ·p gives node a
+    (λ·tr(G)·I + μ·(G + Gᵀ))·h_a."""
+    tets, volume, rotated = law.tets, law.volume_m3, law.rotated_gradients
     lam, mu = law.lame_lambda_pa, law.lame_mu_pa
-    grad = np.empty((3, 3))
-    stress = np.empty((3, 3))
-    rs = np.empty((3, 3))
     for e in range(tets.shape[0]):
-        tet, g, r = tets[e], gradients[e], rotation[e]
-        _gradient(p, tet, g, grad)
-        _rotated_stress(r, grad, lam, mu, stress, rs)
+        tet, hg = tets[e], rotated[e]
+        g00 = g01 = g02 = g10 = g11 = g12 = g20 = g21 = g22 = 0.0
+        for b in range(4):
+            n = tet[b]
+            px, py, pz = p[n, 0], p[n, 1], p[n, 2]
+            hx, hy, hz = hg[b, 0], hg[b, 1], hg[b, 2]
+            g00 += px * hx
+            g01 += px * hy
+            g02 += px * hz
+            g10 += py * hx
+            g11 += py * hy
+            g12 += py * hz
+            g20 += pz * hx
+            g21 += pz * hy
+            g22 += pz * hz
         scale = weight * volume[e]
+        trace = lam * (g00 + g11 + g22)
+        s00, s11, s22 = trace + 2.0 * mu * g00, trace + 2.0 * mu * g11, trace + 2.0 * mu * g22
+        s01, s02, s12 = mu * (g01 + g10), mu * (g02 + g20), mu * (g12 + g21)
         for a in range(4):
             n = tet[a]
-            for i in range(3):
-                out[n, i] += scale * (rs[i, 0] * g[a, 0] + rs[i, 1] * g[a, 1] + rs[i, 2] * g[a, 2])
+            hx, hy, hz = hg[a, 0], hg[a, 1], hg[a, 2]
+            out[n, 0] += scale * (s00 * hx + s01 * hy + s02 * hz)
+            out[n, 1] += scale * (s01 * hx + s11 * hy + s12 * hz)
+            out[n, 2] += scale * (s02 * hx + s12 * hy + s22 * hz)

@@ -260,6 +260,7 @@ class ImplicitEuler:
                                  1.0, 0.0)
         probe = ImplicitEuler(springs, self.n_nodes, max_cg_iterations=1, max_newton=0, support=self.support,
                               tets=self.tets._replace(quaternion=self.tets.quaternion.copy(),
-                                                      rotation=self.tets.rotation.copy()))
+                                                      rotation=self.tets.rotation.copy(),
+                                                      rotated_gradients=self.tets.rotated_gradients.copy()))
         probe.step(StepHistory(self.n_nodes), x, v, np.ones(self.n_nodes), np.zeros_like(x), 1e-3, 0.0, np.zeros(3),
                    contacts)
