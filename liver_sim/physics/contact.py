@@ -187,7 +187,9 @@ def surface_contacts(x: np.ndarray, v: np.ndarray, tool: ToolState, shift: np.nd
     * every skin node inside a probe's ball (node_depths), pushed out along n = (x̂ − p)/|x̂ − p|,
       δ = r − |x̂ − p|, A its `node_area_m2`;
     * every face and edge the ball presses: the rows with a `surface_weight` (a face's interior, half an edge
-      for each of its two faces; a corner is its node's), A that weight × the triangle's area, the depth less
+      for each of its two faces; a corner is its node's), A that weight × the candidate triangles' mean area (one
+      area for all, so that a closest point passing from a face to its edge does not change its stiffness), the
+      depth less
       what the triangle's nodes carry, δ − Σ w_a·δ_a⁺ (a ball on a flat face sags into it between the nodes:
       that much only), so that where the mesh resolves the contact the nodes carry it, and a face where the
       contact is smaller than the face."""
@@ -204,7 +206,7 @@ def surface_contacts(x: np.ndarray, v: np.ndarray, tool: ToolState, shift: np.nd
     carried[probe, nodes] = depth
     rows = np.arange(len(tool.depth))
     residual = tool.depth - (tool.weights * carried[(rows // candidates)[:, None], tool.nodes]).sum(axis=1)
-    area = triangle_areas(ahead, tool.skin[tool.triangles[rows % candidates]]) if len(rows) else np.zeros(0)
+    area = np.full(len(rows), triangle_areas(ahead, tool.skin[tool.triangles]).mean() if len(rows) else 0.0)
     stiffness = np.where(residual > 0.0, stiffness_per_area_n_per_m3 * tool.surface_weight * area, 0.0)
     face_nodes, weights, face_normal, offset, speed, face_k, face_c = contact_elements(
         ahead, tool.nodes, tool.weights, tool.normal, residual, stiffness, stiffness * ratio, tool.velocity_m_s)
