@@ -31,8 +31,9 @@ from liver_sim.tool.scripts import ScriptSettings, make_script
 LARGER_LIVERS = (10_000, 30_000, 100_000)
 #: Fraction of the stability bound a benchmarked time step may use.
 STABILITY_MARGIN = 0.9
-#: The integrators timed frame by frame, side by side (the last is the reference's, at its stable step).
-FRAME_INTEGRATORS = ("implicit_euler", "symplectic_euler")
+#: The integrators and tissue laws timed frame by frame, side by side (the last is the reference's, at its stable
+#: step): the implicit step with the springs (the default) and with the co-rotational tetrahedra.
+FRAME_INTEGRATORS = (("implicit_euler", "springs"), ("implicit_euler", "fem"), ("symplectic_euler", "springs"))
 TARGETS = {"default_us_per_step_1thread_max": 50.0, "default_speedup_vs_numpy_min": 10.0,
            "spring_updates_per_s_min": 50e6, "default_implicit_ms_per_frame_1thread_max": 0.5,
            "liver_10k_implicit_realtime_factor_min": 1.0}
@@ -117,18 +118,20 @@ def _run_frames(model: LiverModel, poses, reference_positions=None) -> tuple[flo
 
 
 def frame_figures(name: str, mesh, integrators=FRAME_INTEGRATORS) -> list[dict]:
-    """Per integrator, the whole frame's cost (LiverModel.step_frame: contact, integration, local model,
-    Python) over `scripted_press`, on one thread and on all (the parallel spring kernel where it has one),
-    and its largest position error against symplectic Euler at its stable step over the same frames."""
+    """Per integrator and tissue law, the whole frame's cost (LiverModel.step_frame: contact, integration, local
+    model, Python) over `scripted_press`, on one thread and on all (the parallel spring kernel where it has one),
+    and its largest position error against symplectic Euler at its stable step over the same frames (for the
+    tetrahedra: how far the continuum law's press is from the springs')."""
     reference_params = stable_params(mesh, "symplectic_euler")
     poses = scripted_press(mesh, LiverModel(mesh, reference_params).tool.shape.radius_m)
     _, _, reference_positions = _run_frames(LiverModel(mesh, reference_params), poses)
     rows = []
-    for integrator in integrators:
+    for integrator, law in integrators:
         params = reference_params if integrator == "symplectic_euler" else stable_params(mesh, integrator)
+        params = params.with_changes(tissue_law=law)
         ms_serial, error, _ = _run_frames(LiverModel(mesh, params, parallel=False), poses, reference_positions)
         ms_parallel, _, _ = _run_frames(LiverModel(mesh, params, parallel=True), poses, reference_positions)
-        rows.append({"mesh": name, "tetrahedra": int(len(mesh.tets)), "integrator": integrator,
+        rows.append({"mesh": name, "tetrahedra": int(len(mesh.tets)), "integrator": integrator, "tissue_law": law,
                      "steps_per_frame": params.substeps, "ms_per_frame_1thread": round(ms_serial, 4),
                      "ms_per_frame_all_threads": round(ms_parallel, 4),
                      "realtime_factor_150hz": round(1e3 / params.frame_rate_hz / min(ms_serial, ms_parallel), 3),
@@ -215,11 +218,13 @@ def run_physics_bench(sizes=LARGER_LIVERS, min_seconds: float = 1.0, progress=No
         row = bench_mesh(name, mesh, min_seconds)
         results.append(row)
         if peers:
-            ours = next(r for r in row["integrators"] if r["integrator"] == ModelParams().integrator)
+            ours = next(r for r in row["integrators"] if r["integrator"] == ModelParams().integrator
+                        and r["tissue_law"] == ModelParams().tissue_law)
             row.update(peer_figures(mesh, ours["ms_per_frame_1thread"], force_check=len(results) == 1,
                                     progress=progress))
     default = results[0]
-    implicit = {r["mesh"]: row for r in results for row in r["integrators"] if row["integrator"] == "implicit_euler"}
+    implicit = {r["mesh"]: row for r in results for row in r["integrators"]
+                if row["integrator"] == "implicit_euler" and row["tissue_law"] == "springs"}
     near_10k = min(results[1:], key=lambda r: abs(r["tetrahedra"] - 10_000), default=None)
     met = {
         "default_us_per_step_1thread_max": default["us_per_step_1thread"] <= TARGETS["default_us_per_step_1thread_max"],

@@ -135,22 +135,38 @@ def mesh_build(args) -> int:
 
 
 def add_validate_command(commands) -> None:
-    """``liver-sim validate [--json] [--out DIR]``: behaviours B1–B4, traction with the liver's materials and the
-    local model's continuity, each figure beside its threshold."""
+    """``liver-sim validate [behaviour|indentation] [--sizes N …] [--json] [--out DIR]``: behaviours B1–B4, traction
+    with the liver's materials and the local model's continuity; or the sphere pressed into a block (indentation),
+    each figure beside its threshold."""
     parser = commands.add_parser("validate", help="the paper's behaviours (B1-B4), traction with the liver's "
-                                 "materials and the local model's continuity, as figures against thresholds")
+                                 "materials and the local model's continuity, or (indentation) a sphere pressed "
+                                 "into a block against Hertz, as figures against thresholds")
+    parser.add_argument("section", nargs="?", choices=("behaviour", "indentation"), default="behaviour",
+                        help="behaviour (default): B1-B4, R1 with the materials, continuity; indentation: the "
+                             "15 mm sphere pressed 1-5 mm into a bonded 12 x 12 x 6 cm block, per mesh size, "
+                             "against Hertz, and the held tool's settling")
+    parser.add_argument("--sizes", type=positive_int, nargs="+", default=None, metavar="TETS",
+                        help="indentation: the block's mesh sizes (tetrahedra; default 5000 20000 80000)")
     parser.add_argument("--json", action="store_true", help="print the figures as JSON on stdout (progress on stderr)")
     parser.add_argument("--out", type=Path, default=None, metavar="DIR",
-                        help="write a plot per behaviour and validate.json to DIR")
+                        help="write the plots and validate.json (indentation.json) to DIR")
     parser.set_defaults(handler=validate)
 
 
 def validate(args) -> int:
     # this command's own modules, loaded when it runs (module docstring)
-    from liver_sim.studies.validate import main_validate
-
     stream = sys.stderr if args.json else sys.stdout
-    return main_validate(args.json, args.out, progress=lambda text: print(text, file=stream, flush=True))
+
+    def progress(text):
+        print(text, file=stream, flush=True)
+
+    if args.section == "indentation":
+        from liver_sim.studies.indentation import DEFAULT_SIZES, main_indentation
+        return main_indentation(tuple(args.sizes or DEFAULT_SIZES), args.json, args.out, progress=progress)
+    if args.sizes:
+        raise SystemExit(f"{PROG}: error: --sizes is for validate indentation")
+    from liver_sim.studies.validate import main_validate
+    return main_validate(args.json, args.out, progress=progress)
 
 
 def add_warm_command(commands) -> None:

@@ -26,6 +26,7 @@ from liver_sim.physics.contact_kernels import (
     probe_geometry,
 )
 from liver_sim.physics.implicit import Contacts
+from liver_sim.physics.materials import triangle_areas
 from liver_sim.physics.model_params import ModelParams
 
 TOOL_KINDS = {"sphere": TOOL_SPHERE, "capsule": TOOL_CAPSULE, "box": TOOL_BOX}
@@ -163,25 +164,80 @@ def tool_state(shape: ToolShape, pose: ToolPose | None, previous: ToolPose | Non
     return ToolState(kind, np.ascontiguousarray(probes), radius, velocity, params.contact_stiffness_n_per_m,
                      params.contact_damping_ns_per_m, np.ascontiguousarray(skin, dtype=np.int64), triangles,
                      np.zeros((rows, 3), dtype=np.int64), np.zeros((rows, 3)), np.zeros((rows, 3)),
-                     np.full(rows, -np.inf), np.zeros(rows), np.zeros((rows, 3)))
+                     np.full(rows, -np.inf), np.zeros(rows), np.zeros((rows, 3)), np.zeros(rows))
 
 
 def probe_contacts(x: np.ndarray, v: np.ndarray, tool: ToolState, shift: np.ndarray, dt: float) -> None:
     """The tool's contact rows (contact_kernels.probe_geometry) with its probes moved by `shift`, in its arrays."""
     probe_geometry(x, v, tool.skin, tool.triangles, tool.probes, shift, tool.radius_m, tool.velocity_m_s, dt,
-                   tool.nodes, tool.weights, tool.normal, tool.depth, tool.share, tool.point)
+                   tool.nodes, tool.weights, tool.normal, tool.depth, tool.share, tool.point, tool.surface_weight)
 
 
-def surface_contacts(x: np.ndarray, v: np.ndarray, tool: ToolState, shift: np.ndarray, dt: float) -> Contacts:
-    """The tool's contacts with the skin triangles for implicit.ImplicitEuler, its probes moved by `shift`
-    (where they are at the end of the step): the rows of contact_kernels.probe_geometry with a share, λ and μ
-    scaled by it, linearised about the skin where its velocity takes it in `dt` (x̂ = x + dt·v, so the contacts that
-    touch at the end of the step are those that act): o = δ(x̂) + n·Σ w_a·x̂_a so that δ = o − n·Σ w_a·x_a,
-    s = n·v_tool (Eq. 3)."""
+def surface_contacts(x: np.ndarray, v: np.ndarray, tool: ToolState, shift: np.ndarray, dt: float,
+                     node_area_m2: np.ndarray | None = None, stiffness_per_area_n_per_m3: float = 0.0) -> Contacts:
+    """The tool's contacts with the skin for implicit.ImplicitEuler, its probes moved by `shift` (where they are at
+    the end of the step), linearised about the skin where its velocity takes it in `dt` (x̂ = x + dt·v, so the
+    contacts that touch at the end of the step are those that act): Eq. 3, F = max(0, k·δ + c·δ̇) per element,
+    o = δ(x̂) + n·Σ w_a·x̂_a so that δ = o − n·Σ w_a·x_a, s = n·v_tool.
+
+    Without `node_area_m2` (contact_model 'probe', and always for a box, whose probes are points): the rows of
+    contact_kernels.probe_geometry with a share, k = share·λ, c = share·μ: one penalty per probe.
+    With it (contact_model 'surface'), a ball meets the skin as a surface, k = k_A·A per element (k_A
+    `stiffness_per_area_n_per_m3`: a pressure per depth, the same on every mesh), c = k·μ/λ:
+    * every skin node inside a probe's ball (node_depths), pushed out along n = (x̂ − p)/|x̂ − p|,
+      δ = r − |x̂ − p|, A its `node_area_m2`;
+    * every face and edge the ball presses: the rows with a `surface_weight` (a face's interior, half an edge
+      for each of its two faces; a corner is its node's), A that weight × the candidate triangles' mean area (one
+      area for all, so that a closest point passing from a face to its edge does not change its stiffness), the
+      depth less
+      what the triangle's nodes carry, δ − Σ w_a·δ_a⁺ (a ball on a flat face sags into it between the nodes:
+      that much only), so that where the mesh resolves the contact the nodes carry it, and a face where the
+      contact is smaller than the face."""
     ahead = x + dt * v
     probe_contacts(ahead, v, tool, shift, 0.0)
-    return Contacts(*contact_elements(ahead, tool.nodes, tool.weights, tool.normal, tool.depth, tool.share,
-                                      tool.velocity_m_s, tool.stiffness_n_per_m, tool.damping_ns_per_m))
+    ratio = tool.damping_ns_per_m / tool.stiffness_n_per_m if tool.stiffness_n_per_m > 0.0 else 0.0
+    if node_area_m2 is None or tool.radius_m <= 0.0:
+        stiffness = tool.share * tool.stiffness_n_per_m
+        return Contacts(*contact_elements(ahead, tool.nodes, tool.weights, tool.normal, tool.depth, stiffness,
+                                          tool.share * tool.damping_ns_per_m, tool.velocity_m_s))
+    candidates = max(len(tool.triangles), 1)
+    nodes, normal, depth, probe = node_depths(ahead, tool, shift)
+    carried = np.zeros((tool.probes.shape[0], len(x)))
+    carried[probe, nodes] = depth
+    rows = np.arange(len(tool.depth))
+    residual = tool.depth - (tool.weights * carried[(rows // candidates)[:, None], tool.nodes]).sum(axis=1)
+    area = np.full(len(rows), triangle_areas(ahead, tool.skin[tool.triangles]).mean() if len(rows) else 0.0)
+    stiffness = np.where(residual > 0.0, stiffness_per_area_n_per_m3 * tool.surface_weight * area, 0.0)
+    face_nodes, weights, face_normal, offset, speed, face_k, face_c = contact_elements(
+        ahead, tool.nodes, tool.weights, tool.normal, residual, stiffness, stiffness * ratio, tool.velocity_m_s)
+    count = len(nodes)
+    padded = np.full((count, 3), -1, dtype=np.int64)
+    padded[:, 0] = nodes
+    node_weights = np.zeros((count, 3))
+    node_weights[:, 0] = 1.0
+    node_k = stiffness_per_area_n_per_m3 * node_area_m2[nodes]
+    return Contacts(np.concatenate([face_nodes, padded]), np.concatenate([weights, node_weights]),
+                    np.concatenate([face_normal, normal]),
+                    np.concatenate([offset, depth + np.einsum("ij,ij->i", normal, ahead[nodes])]),
+                    np.concatenate([speed, normal @ tool.velocity_m_s]), np.concatenate([face_k, node_k]),
+                    np.concatenate([face_c, node_k * ratio]))
+
+
+def node_depths(x: np.ndarray, tool: ToolState, shift: np.ndarray) -> tuple[np.ndarray, ...]:
+    """The nodes of the tool's candidate triangles inside a probe's ball (probes moved by `shift`): (nodes,
+    outward normals n = (x − p)/|x − p|, depths δ = r − |x − p| > 0, the probe of each), one row per node and
+    probe it is inside; none for a box (its probes are points)."""
+    empty = (np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros(0), np.zeros(0, np.int64))
+    if tool.radius_m <= 0.0 or not len(tool.triangles):
+        return empty
+    candidates = np.unique(tool.skin[tool.triangles])
+    offsets = x[candidates][None, :, :] - (tool.probes + shift)[:, None, :]
+    distance = np.linalg.norm(offsets, axis=2)
+    probe, index = np.nonzero((distance < tool.radius_m) & (distance > 1e-12))
+    if not len(probe):
+        return empty
+    return (candidates[index], offsets[probe, index] / distance[probe, index][:, None],
+            tool.radius_m - distance[probe, index], probe)
 
 
 def force_local_model(shape: ToolShape, pose: ToolPose, tool: ToolState, force_on_tool_n: np.ndarray,

@@ -37,7 +37,10 @@ class ToolState(NamedTuple):
     where the frame starts, each a ball of `radius_m` (0 for a box), moving at `velocity_m_s`; penalty λ
     (N/m) and μ (N·s/m); `skin` (T, 3) the skin triangles and `triangles` the candidates near the tool;
     per probe and candidate (probe_geometry's rows), the contact geometry the last step left: `nodes`,
-    `weights`, `normal`, `depth` (m), `share`, `point`.
+    `weights`, `normal`, `depth` (m), `share`, `point`, and `surface_weight`: the row's part of its triangle when a
+    ball meets the skin as a surface (contact.surface_contacts): γ where the closest point is the triangle's
+    interior, γ/2 on an edge (the two triangles sharing it), 0 at a corner (a node's own contact), γ the
+    local-minimum fade of probe_geometry.
     """
 
     kind: int
@@ -54,6 +57,7 @@ class ToolState(NamedTuple):
     depth: np.ndarray
     share: np.ndarray
     point: np.ndarray
+    surface_weight: np.ndarray
 
 
 @numba.njit(cache=True)
@@ -139,7 +143,7 @@ def _local_minimum(skin, triangles, feature, distance, t):
 
 @numba.njit(cache=True)
 def probe_geometry(x, v, skin, triangles, probes, shift, radius, tool_velocity, dt, nodes, weights, normal, depth,
-                   share, point):
+                   share, point, surface_weight):
     """The contacts of the probes p (+ `shift`, balls of `radius` moving at `tool_velocity`) with the
     candidate skin `triangles`: row c·T + t for probe c and candidate t (T candidates).  Each row is the
     triangle's `nodes`, the barycentric `weights` of its closest point q to p (Ericson), the unit `normal`
@@ -148,9 +152,9 @@ def probe_geometry(x, v, skin, triangles, probes, shift, radius, tool_velocity, 
     the row's `share` of its probe's contact: s_t/Σ s, s_t = γ_t·max(δ_t, 0)² (when no row of the probe
     touches, max(δ_t + dt·δ̇_t, 0)²: touching after `dt` at the nodes' and the tool's velocity), γ_t: 1 where q is
     a local minimum of the distance to the skin, fading to 0 where a triangle sharing q's edge or corner is nearer
-    (_local_minimum).  A probe inside the liver
-    (behind the outward face of its nearest triangle, at d_min) leaves through q: normals from q to p and
-    δ = radius + 2·d_min − |p − q|, radius + d_min on the nearest row, continuous with the outside form at
+    (_local_minimum); `surface_weight`: γ_t on a triangle's interior, γ_t/2 on an edge, 0 at a corner.  A probe
+    inside the liver (behind the outward face of its nearest triangle, at d_min) leaves through q: normals from q to
+    p and δ = radius + 2·d_min − |p − q|, radius + d_min on the nearest row, continuous with the outside form at
     d_min = 0 and negative on far triangles.
 
     The shares of a probe sum to 1 (or all vanish), so a probe is never counted twice where triangles share
@@ -211,6 +215,7 @@ def probe_geometry(x, v, skin, triangles, probes, shift, radius, tool_velocity, 
                 rate -= weights[row, k] * (nx * v[n, 0] + ny * v[n, 1] + nz * v[n, 2])
             ahead[t] = max(depth[row] + dt * rate, 0.0)
             fade[t] = _local_minimum(skin, triangles, feature, distance, t)
+            surface_weight[row] = fade[t] if feature[t] == 6 else (0.5 * fade[t] if feature[t] >= 3 else 0.0)
             touching = touching or depth[row] > 0.0
         total = 0.0
         for t in range(count):  # shared by the rows touching now; by those touching after dt when none does
@@ -231,7 +236,7 @@ def surface_contacts(x, v, tool, shift, dt, f):
     (the tool feels its opposite); the rows' geometry is left in the tool's arrays."""
     t = tool
     probe_geometry(x, v, t.skin, t.triangles, t.probes, shift, t.radius_m, t.velocity_m_s, dt, t.nodes, t.weights,
-                   t.normal, t.depth, t.share, t.point)
+                   t.normal, t.depth, t.share, t.point, t.surface_weight)
     tx, ty, tz = 0.0, 0.0, 0.0
     for c in range(t.depth.shape[0]):
         if not (t.share[c] > 0.0 and t.depth[c] > 0.0):
@@ -255,13 +260,13 @@ def surface_contacts(x, v, tool, shift, dt, f):
 
 
 @numba.njit(cache=True)
-def contact_elements(x, nodes, weights, normal, depth, share, tool_velocity, stiffness, damping):
-    """The contact rows with a share, as penalty elements linearised about the skin at x (implicit.Contacts'
-    fields): their nodes, weights and normal; offset o = δ + n·Σ w_a·x_a (so that δ = o − n·Σ w_a·x_a);
-    speed n·v_tool; stiffness share·λ and damping share·μ (Eq. 3)."""
+def contact_elements(x, nodes, weights, normal, depth, row_stiffness, row_damping, tool_velocity):
+    """The contact rows with a stiffness > 0, as penalty elements linearised about the skin at x (implicit.Contacts'
+    fields): their nodes, weights and normal; offset o = δ + n·Σ w_a·x_a (so that δ = o − n·Σ w_a·x_a); speed
+    n·v_tool; `row_stiffness` k and `row_damping` c (Eq. 3)."""
     count = 0
-    for r in range(share.shape[0]):
-        if share[r] > 0.0:
+    for r in range(row_stiffness.shape[0]):
+        if row_stiffness[r] > 0.0:
             count += 1
     nodes_out = np.empty((count, 3), dtype=np.int64)
     weights_out = np.empty((count, 3))
@@ -271,8 +276,8 @@ def contact_elements(x, nodes, weights, normal, depth, share, tool_velocity, sti
     k = np.empty(count)
     c = np.empty(count)
     e = 0
-    for r in range(share.shape[0]):
-        if not share[r] > 0.0:
+    for r in range(row_stiffness.shape[0]):
+        if not row_stiffness[r] > 0.0:
             continue
         along = 0.0
         for a in range(3):
@@ -284,7 +289,7 @@ def contact_elements(x, nodes, weights, normal, depth, share, tool_velocity, sti
                 along += weights[r, a] * (normal[r, 0] * x[n, 0] + normal[r, 1] * x[n, 1] + normal[r, 2] * x[n, 2])
         offset[e] = depth[r] + along
         speed[e] = normal[r, 0] * tool_velocity[0] + normal[r, 1] * tool_velocity[1] + normal[r, 2] * tool_velocity[2]
-        k[e] = share[r] * stiffness
-        c[e] = share[r] * damping
+        k[e] = row_stiffness[r]
+        c[e] = row_damping[r]
         e += 1
     return nodes_out, weights_out, normal_out, offset, speed, k, c

@@ -29,6 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse
 
+from liver_sim.physics.fem_kernels import TetArrays, tet_terms
 from liver_sim.physics.implicit_kernels import assemble, bdf2_start, implicit_step, support_terms
 from liver_sim.physics.pcg import block_jacobi, pcg
 from liver_sim.physics.springs import SpringNetwork
@@ -101,16 +102,17 @@ class StepHistory:
 
 
 class ImplicitEuler:
-    """Linearised backward Euler on one spring network and its support (none by default): its per-spring
-    matrix blocks and work arrays, which depend on the topology only; with `second_order`, BDF2 from the
-    second step on (see the module docstring), from the StepHistory each step is given.  Build a new one
-    after a topology change."""
+    """Linearised backward Euler on one spring network, its support (none by default) and the tetrahedra of the
+    'fem' law (physics.fem_kernels; none by default): its per-spring matrix blocks, element rotations and work
+    arrays, which depend on the topology only; with `second_order`, BDF2 from the second step on (see the module
+    docstring), from the StepHistory each step is given.  Build a new one after a topology change."""
 
     def __init__(self, springs: SpringNetwork, n_nodes: int, cg_tolerance: float = 1e-3,
                  max_cg_iterations: int = 500, newton_tolerance_n: float = 1e-2, max_newton: int = 2,
-                 second_order: bool = True, support: SupportArrays | None = None):
+                 second_order: bool = True, support: SupportArrays | None = None, tets: TetArrays | None = None):
         self.springs = springs
         self.support = support or SupportArrays.none()
+        self.tets = tets if tets is not None else TetArrays.none()
         self.n_nodes = int(n_nodes)
         self.cg_tolerance = float(cg_tolerance)
         self.max_cg_iterations = int(max_cg_iterations)
@@ -131,6 +133,7 @@ class ImplicitEuler:
         self._work = np.zeros((10, self.n_nodes, 3))
         self._coefficient = np.zeros(0)
         self._inv_mass = np.zeros(self.n_nodes)
+        self._tet_weight = 0.0
         #: CG iterations, Newton iterations and final residual (N) of the last step.
         self.last_cg_iterations = 0
         self.last_newton_iterations = 0
@@ -155,7 +158,7 @@ class ImplicitEuler:
         contact, self.last_cg_iterations, self.last_newton_iterations, self.last_residual_n = implicit_step(
             x, v, inv_mass, external_force, np.asarray(gravity, dtype=np.float64), float(environment_damping),
             h, self._node_i, self._node_j, self._inv_rest, s.lambda1_n, s.lambda2_n, s.mu_ns_per_m,
-            self._unit, self._iso, self._axial, self._shift, self._diagonal, *self.support, contacts.nodes,
+            self._unit, self._iso, self._axial, self._shift, self._diagonal, *self.support, self.tets, contacts.nodes,
             contacts.weights,
             contacts.normal, contacts.offset_m, contacts.normal_speed_m_s, contacts.stiffness_n_per_m,
             contacts.damping_ns_per_m, self._coefficient, self._preconditioner, history.warm, self.cg_tolerance,
@@ -167,7 +170,7 @@ class ImplicitEuler:
 
     def matrix(self) -> scipy.sparse.csr_matrix:
         """The spring, support, mass and damping part of the last assembled system matrix, (3N, 3N) sparse
-        (contacts excluded; held nodes' rows and columns are the identity)."""
+        (contacts and tetrahedra excluded; held nodes' rows and columns are the identity)."""
         springs = self.springs
         free = self._inv_mass > 0.0
         blocks = self._iso[:, None, None] * np.eye(3) + self._axial[:, None, None] * (
@@ -235,6 +238,8 @@ class ImplicitEuler:
                  self._node_j, self._inv_rest, s.lambda1_n, s.lambda2_n, s.mu_ns_per_m, self._unit, self._iso,
                  self._axial, self._shift, self._diagonal, f, ky, True)
         support_terms(x, zero, zero, inv_mass, h, *self.support, f, ky, self._shift, self._diagonal, True)
+        tet_terms(x, zero, zero, inv_mass, h, self.tets, f, ky, self._diagonal, True)
+        self._tet_weight = h * h + h * self.tets.viscous_time_s
         block_jacobi(self._diagonal, inv_mass, no.nodes, no.weights, no.normal, np.zeros(0), self._preconditioner)
         return f
 
@@ -243,8 +248,8 @@ class ImplicitEuler:
         r, z, p, q = (np.zeros_like(b) for _ in range(4))
         no = Contacts.none()
         pcg(self._node_i, self._node_j, self._unit, self._iso, self._axial, self._shift, inv_mass, no.nodes,
-            no.weights, no.normal, np.zeros(0), self._preconditioner, b, solution, tolerance,
-            self.max_cg_iterations, r, z, p, q)
+            no.weights, no.normal, np.zeros(0), self.tets, self._tet_weight, self._preconditioner, b, solution,
+            tolerance, self.max_cg_iterations, r, z, p, q)
 
     def warm_up(self) -> None:
         """Compile the kernels (numba, cached on disk) before a timed loop starts."""
@@ -253,6 +258,9 @@ class ImplicitEuler:
         v = np.zeros_like(x)
         contacts = node_contacts(np.array([0]), np.array([[0.0, 0.0, 1.0]]), np.array([0.0]), np.array([0.0]),
                                  1.0, 0.0)
-        probe = ImplicitEuler(springs, self.n_nodes, max_cg_iterations=1, max_newton=0, support=self.support)
+        probe = ImplicitEuler(springs, self.n_nodes, max_cg_iterations=1, max_newton=0, support=self.support,
+                              tets=self.tets._replace(quaternion=self.tets.quaternion.copy(),
+                                                      rotation=self.tets.rotation.copy(),
+                                                      rotated_gradients=self.tets.rotated_gradients.copy()))
         probe.step(StepHistory(self.n_nodes), x, v, np.ones(self.n_nodes), np.zeros_like(x), 1e-3, 0.0, np.zeros(3),
                    contacts)

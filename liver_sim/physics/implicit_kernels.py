@@ -29,6 +29,7 @@ import math
 import numba
 import numpy as np
 
+from liver_sim.physics.fem_kernels import tet_terms
 from liver_sim.physics.pairs import add_pair
 from liver_sim.physics.pcg import block_jacobi, pcg
 
@@ -233,12 +234,13 @@ def bdf2_start(x, v, x_last, v_last, x_prev, v_prev, inv_mass, second_order):
 @numba.njit(cache=True, nogil=True)
 def implicit_step(x, v, inv_mass, external, gravity, c_env, h, node_i, node_j, inv_rest, lambda1, lambda2, mu,
                   unit, iso, axial, shift, diagonal, support_nodes, support_rest, support_stiffness,
-                  support_damping, nodes, weights, normal, offset, speed, stiffness,
+                  support_damping, tet_law, nodes, weights, normal, offset, speed, stiffness,
                   damping, coefficient, preconditioner, warm, tolerance, max_iterations, newton_tolerance,
                   max_newton, work):
     """One linearised backward-Euler step of x, v in place (see the module docstring), then Newton
     iterations while the nonlinear residual exceeds `newton_tolerance` (N) on some node, up to
-    `max_newton`.  `warm` holds the previous Δv (start of the solve; overwritten).  `work` is
+    `max_newton`.  `tet_law`: the tetrahedra of the 'fem' law (physics.fem_kernels.TetArrays; none for the
+    springs').  `warm` holds the previous Δv (start of the solve; overwritten).  `work` is
     (10, N, 3) scratch.  Returns (contact force on the liver at the new state (3,), CG iterations,
     Newton iterations, final residual (N))."""
     f, ky, rhs, x0, v0, r, z, p, q, zero = work
@@ -253,6 +255,8 @@ def implicit_step(x, v, inv_mass, external, gravity, c_env, h, node_i, node_j, i
              unit, iso, axial, shift, diagonal, f, ky, True)
     support_terms(x, v, v, inv_mass, h, support_nodes, support_rest, support_stiffness, support_damping, f, ky,
                   shift, diagonal, True)
+    tet_terms(x, v, v, inv_mass, h, tet_law, f, ky, diagonal, True)
+    tet_weight = h * h + h * tet_law.viscous_time_s
     contact_forces(x, v, v, inv_mass, h, nodes, weights, normal, offset, speed, stiffness, damping, f, ky,
                    coefficient)
     for n in range(x.shape[0]):
@@ -264,12 +268,14 @@ def implicit_step(x, v, inv_mass, external, gravity, c_env, h, node_i, node_j, i
     while True:
         block_jacobi(diagonal, inv_mass, nodes, weights, normal, coefficient, preconditioner)
         total_iterations += pcg(node_i, node_j, unit, iso, axial, shift, inv_mass, nodes, weights, normal,
-                                coefficient, preconditioner, rhs, warm, tolerance, max_iterations, r, z, p, q)
+                                coefficient, tet_law, tet_weight, preconditioner, rhs, warm, tolerance,
+                                max_iterations, r, z, p, q)
         advance(x, x0, v, v0, warm, inv_mass, h)
         assemble(x, v, zero, inv_mass, external, gravity, c_env, h, node_i, node_j, inv_rest, lambda1, lambda2, mu,
                  unit, iso, axial, shift, diagonal, f, ky, False)
         support_terms(x, v, zero, inv_mass, h, support_nodes, support_rest, support_stiffness, support_damping, f,
                       ky, shift, diagonal, False)
+        tet_terms(x, v, zero, inv_mass, h, tet_law, f, ky, diagonal, False)
         tx, ty, tz = contact_forces(x, v, zero, inv_mass, h, nodes, weights, normal, offset, speed, stiffness,
                                     damping, f, ky, coefficient)
         contact[0], contact[1], contact[2] = tx, ty, tz
@@ -281,6 +287,7 @@ def implicit_step(x, v, inv_mass, external, gravity, c_env, h, node_i, node_j, i
                  unit, iso, axial, shift, diagonal, f, ky, True)
         support_terms(x, v, zero, inv_mass, h, support_nodes, support_rest, support_stiffness, support_damping, f,
                       ky, shift, diagonal, True)
+        tet_terms(x, v, zero, inv_mass, h, tet_law, f, ky, diagonal, True)
         warm[:] = 0.0
     warm[:] = v - v0
     return contact, total_iterations, newton, residual

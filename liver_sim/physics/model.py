@@ -84,10 +84,11 @@ def implicit_frame(structure: Structure, state: State, tool: ToolState, substeps
     dt = params.dt_s
     gravity = np.asarray(params.gravity_m_s2, dtype=np.float64)
     x, v = state.positions, state.velocities
+    areas = structure.skin_node_area_m2 if params.contact_model == "surface" else None
     liver_force = np.zeros(3)
     for step in range(substeps):
         contacts = None if tool.kind == TOOL_NONE else surface_contacts(
-            x, v, tool, tool.velocity_m_s * ((step + 1) * dt), dt)
+            x, v, tool, tool.velocity_m_s * ((step + 1) * dt), dt, areas, params.contact_stiffness_per_area_n_per_m3)
         liver_force = structure.solver.step(state.history, x, v, state.inv_mass, state.external_forces_n, dt,
                                             params.environment_damping_per_s, gravity, contacts)
     if tool.kind != TOOL_NONE:  # the contact geometry the local model is fitted to

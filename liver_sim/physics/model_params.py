@@ -19,6 +19,14 @@ INTEGRATORS = tuple(INTEGRATOR_SUBSTEPS)
 #: Where the springs' λ1, λ2, μ come from: the tissue's properties and the mesh (physics.materials), or the
 #: paper's per-spring constants (`capsule`, `parenchyma`; its figures and the traction test R1).
 SPRING_CONSTANTS = ("material", "paper")
+#: The parenchyma's law: 'springs', the paper's Eq. 1 springs on the tet edges (physics.springs, physics.materials);
+#: 'fem', co-rotational linear tetrahedra with the tissue's E, ν and η (physics.fem_kernels; implicit integrator
+#: and material constants only).  The capsule is Eq. 1 springs on the skin edges with either.
+TISSUE_LAWS = ("springs", "fem")
+#: How the tool meets the skin (contact.surface_contacts): 'probe', Eq. 3 as the paper has it, one penalty λ per
+#: contact probe at its closest points; 'surface', a ball meets the skin as a surface, a penalty per unit area at
+#: every skin node and face it presses (implicit integrator only).
+CONTACT_MODELS = ("probe", "surface")
 #: How the liver is held (physics.support): 'organ' (anchored where a liver is held) or 'paper' (§3.1's scene).
 SUPPORTS = ("organ", "paper")
 #: The default liver's supports (physics.support), spheres (x, y, z, radius; m) with a stiffness per unit
@@ -106,11 +114,18 @@ class ModelParams:
     `support_damping_s` × stiffness (physics.support); no node is fixed unless `fixed_nodes` says so;
     'paper': §3.1's scene, `fixed_nodes` None fixes the central tet (as it does when the regions hold no
     capsule node).
+    `tissue_law` 'springs' (default): the parenchyma is Eq. 1 springs on the tet edges; 'fem': co-rotational linear
+    tetrahedra with the tissue's E, ν (up to 0.499) and Kelvin–Voigt η (physics.fem_kernels), the capsule staying
+    springs (implicit integrator and material constants only).
+    `contact_model` 'probe' (default): Eq. 3 with one penalty `contact_stiffness_n_per_m` per contact probe;
+    'surface': a ball tool (sphere, capsule) meets the skin as a surface, `contact_stiffness_per_area_n_per_m3` per
+    unit area of every node and face it presses (contact.surface_contacts; implicit integrator only).
     With `tearing`, an interior face whose stretch across it exceeds `tear_strain_parenchyma`
     (`tear_strain_capsule` for a face with an edge on the capsule) opens (P13, §2.6).
     """
 
     spring_constants: str = "material"
+    tissue_law: str = "springs"
     tissue: TissueProperties = TissueProperties()
     capsule: SpringLaw = SpringLaw(lambda1_n=1430.0, lambda2_n=10.0, mu_ns_per_m=0.02)
     parenchyma: SpringLaw = SpringLaw(lambda1_n=71.5, lambda2_n=0.5, mu_ns_per_m=5.0)
@@ -127,6 +142,8 @@ class ModelParams:
     support_damping_s: float = 0.01
     contact_stiffness_n_per_m: float = 300.0
     contact_damping_ns_per_m: float = 1.0
+    contact_model: str = "probe"
+    contact_stiffness_per_area_n_per_m3: float = 3.0e7
     max_node_speed_m_s: float = 20.0
     tearing: bool = False
     tear_strain_parenchyma: float = 0.4
@@ -169,6 +186,7 @@ class ModelParams:
             "environment_damping_per_s": self.environment_damping_per_s,
             "contact_stiffness_n_per_m": self.contact_stiffness_n_per_m,
             "contact_damping_ns_per_m": self.contact_damping_ns_per_m,
+            "contact_stiffness_per_area_n_per_m3": self.contact_stiffness_per_area_n_per_m3,
             "support_damping_s": self.support_damping_s,
         }
         for name, value in non_negative.items():
@@ -178,6 +196,16 @@ class ModelParams:
             raise ValueError(f"parameter spring_constants must be one of {SPRING_CONSTANTS}, "
                              f"got {self.spring_constants!r}")
         self.tissue.validate()
+        if self.tissue_law not in TISSUE_LAWS:
+            raise ValueError(f"parameter tissue_law must be one of {TISSUE_LAWS}, got {self.tissue_law!r}")
+        if self.tissue_law == "fem" and (self.integrator != "implicit_euler" or self.spring_constants != "material"):
+            raise ValueError("parameter tissue_law 'fem' needs integrator 'implicit_euler' and spring_constants "
+                             f"'material', got {self.integrator!r} and {self.spring_constants!r}")
+        if self.contact_model not in CONTACT_MODELS:
+            raise ValueError(f"parameter contact_model must be one of {CONTACT_MODELS}, got {self.contact_model!r}")
+        if self.contact_model == "surface" and self.integrator != "implicit_euler":
+            raise ValueError("parameter contact_model 'surface' needs integrator 'implicit_euler', "
+                             f"got {self.integrator!r}")
         if self.support not in SUPPORTS:
             raise ValueError(f"parameter support must be one of {SUPPORTS}, got {self.support!r}")
         regions = np.asarray(self.support_regions, dtype=np.float64)

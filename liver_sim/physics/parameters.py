@@ -11,10 +11,12 @@ from liver_sim.mesh.liver_shape import default_liver
 from liver_sim.physics.contact import ToolShape
 from liver_sim.physics.model import LiverModel
 from liver_sim.physics.model_params import (
+    CONTACT_MODELS,
     INTEGRATOR_SUBSTEPS,
     INTEGRATORS,
     SPRING_CONSTANTS,
     SUPPORTS,
+    TISSUE_LAWS,
     ModelParams,
     SpringLaw,
     TissueProperties,
@@ -36,6 +38,10 @@ PARAMETERS = {
                         "explicit_euler (Eq. 2)", choices=INTEGRATORS),
     "substeps": Param(0, "integration steps per frame; 0: the integrator's own ("
                       + ", ".join(f"{k} {n}" for k, n in INTEGRATOR_SUBSTEPS.items()) + ")", 0, 10_000),
+    "tissue_law": Param(DEFAULTS.tissue_law, "the parenchyma: springs (Eq. 1 on the tet edges, the paper's) or fem "
+                        "(co-rotational linear tetrahedra with parenchyma E, ν and η; implicit_euler and material "
+                        "only)",
+                        choices=TISSUE_LAWS),
     "spring_constants": Param(DEFAULTS.spring_constants, "material: each spring's λ1, λ2, μ from the tissue "
                               "properties and the mesh; paper: the paper's per-spring constants below",
                               choices=SPRING_CONSTANTS),
@@ -44,6 +50,8 @@ PARAMETERS = {
     "parenchyma_poisson_ratio": Param(TISSUE.parenchyma_poisson_ratio, "parenchyma Poisson's ratio (the network "
                                       "matches the indentation modulus E/(1-ν²))", 0.0, 0.499),
     "parenchyma_viscosity_pa_s": Param(TISSUE.parenchyma_viscosity_pa_s, "parenchyma viscosity η (Pa·s)", 0.0, 1e6),
+    "cubic_ratio": Param(TISSUE.cubic_ratio, "material: λ1/λ2 of Eq. 1 on every spring (dimensionless; Fig. 2's "
+                         "143 by default, 0: linear springs)", 0.0, 1e5),
     "capsule_stiffness_n_per_m": Param(TISSUE.capsule_stiffness_n_per_m, "capsule membrane stiffness E·t (N/m)",
                                        0.0, 1e6),
     "capsule_viscosity_ns_per_m": Param(TISSUE.capsule_viscosity_ns_per_m, "capsule membrane viscosity η·t (N·s/m)",
@@ -78,6 +86,12 @@ PARAMETERS = {
                                "(s, Kelvin-Voigt time constant)", 0.0, 10.0),
     "contact_stiffness_n_per_m": Param(DEFAULTS.contact_stiffness_n_per_m, "penalty λ of Eq. 3 (N/m)", 0.0, 1e6),
     "contact_damping_ns_per_m": Param(DEFAULTS.contact_damping_ns_per_m, "penalty μ of Eq. 3 (N·s/m)", 0.0, 1e4),
+    "contact_model": Param(DEFAULTS.contact_model, "probe: Eq. 3, one penalty per contact probe; surface: a sphere or "
+                           "capsule meets the skin as a surface, contact_stiffness_per_area_n_per_m3 at every node and "
+                           "face it presses (implicit_euler only)", choices=CONTACT_MODELS),
+    "contact_stiffness_per_area_n_per_m3": Param(DEFAULTS.contact_stiffness_per_area_n_per_m3,
+                                                 "contact_model surface: penalty per unit skin area (N/m³, a pressure "
+                                                 "per metre of depth)", 0.0, 1e10),
     "tool_shape": Param("sphere", "rigid tool: sphere, capsule or box", choices=("sphere", "capsule", "box")),
     "tool_radius_m": Param(ToolShape().radius_m, "sphere/capsule radius (m)", 1e-4, 0.2),
     "tool_length_m": Param(ToolShape().length_m, "capsule shaft length along the tool +z (m)", 0.0, 1.0),
@@ -127,9 +141,10 @@ def model_params(p: PhysicsParameters) -> ModelParams:
         raise ValueError(f"parameter support_regions must hold five numbers per region (x, y, z, radius m, "
                          f"stiffness N/m³), got {len(regions)} numbers")
     return ModelParams(
-        spring_constants=p.spring_constants,
+        spring_constants=p.spring_constants, tissue_law=p.tissue_law,
         tissue=TissueProperties(p.parenchyma_young_modulus_kpa, p.parenchyma_poisson_ratio,
-                                p.parenchyma_viscosity_pa_s, p.capsule_stiffness_n_per_m, p.capsule_viscosity_ns_per_m),
+                                p.parenchyma_viscosity_pa_s, p.capsule_stiffness_n_per_m, p.capsule_viscosity_ns_per_m,
+                                p.cubic_ratio),
         capsule=SpringLaw(p.capsule_lambda1_n, p.capsule_lambda2_n, p.capsule_mu_ns_per_m),
         parenchyma=SpringLaw(p.parenchyma_lambda1_n, p.parenchyma_lambda2_n, p.parenchyma_mu_ns_per_m),
         density_kg_m3=p.density_kg_m3, environment_damping_per_s=p.environment_damping_per_s,
@@ -138,7 +153,8 @@ def model_params(p: PhysicsParameters) -> ModelParams:
         support=p.support, support_regions=tuple(tuple(regions[i:i + 5]) for i in range(0, len(regions), 5)),
         support_damping_s=p.support_damping_s,
         contact_stiffness_n_per_m=p.contact_stiffness_n_per_m,
-        contact_damping_ns_per_m=p.contact_damping_ns_per_m, tearing=p.tearing,
+        contact_damping_ns_per_m=p.contact_damping_ns_per_m, contact_model=p.contact_model,
+        contact_stiffness_per_area_n_per_m3=p.contact_stiffness_per_area_n_per_m3, tearing=p.tearing,
         tear_strain_parenchyma=p.tear_strain_parenchyma,
         tear_strain_capsule=p.tear_strain_capsule).validate()
 

@@ -1,5 +1,7 @@
 """Block-Jacobi preconditioned conjugate gradients, matrix-free, on the implicit step's system
-A = M − h·D − h²·K (physics.implicit_kernels): A·p, the preconditioner, the solve.
+A = M − h·D − h²·K (physics.implicit_kernels): A·p, the preconditioner, the solve.  The operator's parts: the
+springs (u, iso, axial per spring), the tetrahedra of the 'fem' law (physics.fem_kernels, none with the springs'
+law), the contacts.
 
 Solver, chosen by measurement: preconditioned conjugate gradients, block-Jacobi (the 3×3 diagonal
 blocks, contacts included), matrix-free (per spring only u, and the scalars of B), started from the
@@ -23,13 +25,16 @@ from __future__ import annotations
 
 import numba
 
+from liver_sim.physics.fem_kernels import tet_apply
 from liver_sim.physics.pairs import add_pair
 
 
 @numba.njit(cache=True)
-def apply(node_i, node_j, unit, iso, axial, shift, inv_mass, nodes, weights, normal, coefficient, p, out):
-    """out = A·p, matrix-free: shift·p, each spring's B·(p_i − p_j) to i and its opposite to j, and the
-    active contacts' (h·c + h²·k)·w_a·w_b·nnᵀ.  p must vanish on held nodes; out does there too."""
+def apply(node_i, node_j, unit, iso, axial, shift, inv_mass, nodes, weights, normal, coefficient, tet_law, tet_weight,
+          p, out):
+    """out = A·p, matrix-free: shift·p, each spring's B·(p_i − p_j) to i and its opposite to j, the tetrahedra of
+    the 'fem' law (`tet_law`, a fem_kernels.TetArrays, scaled by `tet_weight` = h² + h·τ; fem_kernels.tet_apply) and
+    the active contacts' (h·c + h²·k)·w_a·w_b·nnᵀ.  p must vanish on held nodes; out does there too."""
     for n in range(p.shape[0]):
         for a in range(3):
             out[n, a] = shift[n] * p[n, a]
@@ -43,6 +48,7 @@ def apply(node_i, node_j, unit, iso, axial, shift, inv_mass, nodes, weights, nor
         t = axial[s] * (ux * dx + uy * dy + uz * dz)
         bx, by, bz = g * dx + t * ux, g * dy + t * uy, g * dz + t * uz
         add_pair(out, i, j, bx, by, bz)
+    tet_apply(tet_law, tet_weight, p, out)
     for e in range(nodes.shape[0]):
         if coefficient[e] == 0.0:
             continue
@@ -100,11 +106,12 @@ def _invert_symmetric(a):
 
 
 @numba.njit(cache=True)
-def pcg(node_i, node_j, unit, iso, axial, shift, inv_mass, nodes, weights, normal, coefficient, preconditioner,
-        b, z0, tolerance, max_iterations, r, z, p, q):
+def pcg(node_i, node_j, unit, iso, axial, shift, inv_mass, nodes, weights, normal, coefficient, tet_law, tet_weight,
+        preconditioner, b, z0, tolerance, max_iterations, r, z, p, q):
     """Solve A·z = b by block-Jacobi preconditioned conjugate gradients from z0 (overwritten by z);
     stops when ‖r‖ ≤ tolerance·‖b‖.  Returns the iterations used."""
-    apply(node_i, node_j, unit, iso, axial, shift, inv_mass, nodes, weights, normal, coefficient, z0, q)
+    apply(node_i, node_j, unit, iso, axial, shift, inv_mass, nodes, weights, normal, coefficient, tet_law, tet_weight,
+          z0, q)
     count = b.shape[0]
     b_norm2 = 0.0
     for n in range(count):
@@ -123,7 +130,8 @@ def pcg(node_i, node_j, unit, iso, axial, shift, inv_mass, nodes, weights, norma
             r_norm2 += r[n, a] * r[n, a]
     iterations = 0
     while r_norm2 > target and iterations < max_iterations:
-        apply(node_i, node_j, unit, iso, axial, shift, inv_mass, nodes, weights, normal, coefficient, p, q)
+        apply(node_i, node_j, unit, iso, axial, shift, inv_mass, nodes, weights, normal, coefficient, tet_law,
+              tet_weight, p, q)
         pq = 0.0
         for n in range(count):
             for a in range(3):

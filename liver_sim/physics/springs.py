@@ -8,7 +8,7 @@ kernels evaluate one connector per edge with the summed coefficients.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numba
 import numpy as np
@@ -52,7 +52,8 @@ def build_springs(mesh: TetMesh, params: ModelParams, rest_points: np.ndarray | 
     Capsule springs sit on the edges of `capsule_triangles` (default: the whole skin); skin opened
     by a tear or a cut is parenchyma surface and carries none.  Their coefficients: from
     `params.tissue` and the mesh (materials.material_coefficients) with spring_constants 'material',
-    else the paper's `params.parenchyma` on every edge plus `params.capsule` on capsule edges.
+    else the paper's `params.parenchyma` on every edge plus `params.capsule` on capsule edges.  With
+    `params.tissue_law` 'fem' the parenchyma is the elements' (physics.fem_kernels): capsule edges only.
     """
     points = mesh.points if rest_points is None else rest_points
     edges = mesh.edges
@@ -65,14 +66,23 @@ def build_springs(mesh: TetMesh, params: ModelParams, rest_points: np.ndarray | 
     node_j = np.ascontiguousarray(edges[:, 1])
     rest = np.linalg.norm(points[node_j] - points[node_i], axis=1)
     if params.spring_constants == "material":
-        lambda1, lambda2, mu = material_coefficients(mesh, params.tissue, rest_points, capsule_triangles)
+        tissue = params.tissue
+        if params.tissue_law == "fem":  # the parenchyma is the elements': the capsule's springs only
+            tissue = replace(tissue, parenchyma_young_modulus_kpa=0.0, parenchyma_viscosity_pa_s=0.0)
+        lambda1, lambda2, mu = material_coefficients(mesh, tissue, rest_points, capsule_triangles)
     else:
         par, cap = params.parenchyma, params.capsule
         lambda1 = par.lambda1_n + cap.lambda1_n * on_skin
         lambda2 = par.lambda2_n + cap.lambda2_n * on_skin
         mu = par.mu_ns_per_m + cap.mu_ns_per_m * on_skin
+    parenchyma = len(edges)
+    if params.tissue_law == "fem":
+        keep = on_skin
+        node_i, node_j, rest, lambda1, lambda2, mu = (np.ascontiguousarray(a[keep]) for a in
+                                                      (node_i, node_j, rest, lambda1, lambda2, mu))
+        parenchyma = 0
     return SpringNetwork(node_i=node_i, node_j=node_j, rest_length_m=rest, lambda1_n=lambda1, lambda2_n=lambda2,
-                         mu_ns_per_m=mu, capsule_springs=int(on_skin.sum()), parenchyma_springs=int(len(edges)))
+                         mu_ns_per_m=mu, capsule_springs=int(on_skin.sum()), parenchyma_springs=int(parenchyma))
 
 
 def _rows_in(rows: np.ndarray, table: np.ndarray) -> np.ndarray:

@@ -16,11 +16,12 @@ import numpy as np
 
 from liver_sim.mesh.tetmesh import TetMesh
 from liver_sim.physics.explicit_kernels import StepSettings, WorkArrays
+from liver_sim.physics.fem_kernels import build_tets
 from liver_sim.physics.implicit import ImplicitEuler
 from liver_sim.physics.model_params import ModelParams
 from liver_sim.physics.spring_kernels import SpringArrays
 from liver_sim.physics.springs import SpringNetwork, build_springs, estimate_stable_time_step, stable_time_step
-from liver_sim.physics.support import SupportArrays, build_support
+from liver_sim.physics.support import SupportArrays, build_support, node_areas_m2
 from liver_sim.physics.tearing import TearDetector
 
 #: Above this many springs the parallel kernel is used (below it thread start-up costs more).
@@ -94,6 +95,12 @@ class Structure:
         return np.ascontiguousarray(self.mesh.skin, dtype=np.int64)
 
     @cached_property
+    def skin_node_area_m2(self) -> np.ndarray:
+        """Per node, a third of the area of the skin triangles around it at rest (m², 0 off the skin): its share of
+        the tool's contact (contact.surface_contacts)."""
+        return node_areas_m2(self.mesh.points, self.mesh.skin)
+
+    @cached_property
     def step_settings(self) -> StepSettings:
         """The explicit kernels' settings of one frame."""
         p = self.params
@@ -133,12 +140,17 @@ def build_structure(mesh: TetMesh, params: ModelParams, capsule_triangles: np.nd
         params = params.with_changes(substeps=min(needed, MAX_SUBSTEPS))
     threads = numba.get_num_threads() if parallel else 1
     n = len(mesh.points)
+    tissue = params.tissue
+    tets = None
+    if params.tissue_law == "fem":
+        tets = build_tets(mesh.points, mesh.tets, tissue.parenchyma_young_modulus_kpa * 1e3,
+                          tissue.parenchyma_poisson_ratio, tissue.parenchyma_viscosity_pa_s)
     return Structure(mesh, params, capsule, masses_kg, fixed_nodes, springs,
                      SpringArrays(springs.node_i, springs.node_j, springs.rest_length_m, springs.lambda1_n,
                                   springs.lambda2_n, springs.mu_ns_per_m),
                      support, parallel, bound, version,
                      WorkArrays(np.zeros((n, 3)), np.zeros((threads, n, 3)), parallel),
-                     ImplicitEuler(springs, n, support=support))
+                     ImplicitEuler(springs, n, support=support, tets=tets))
 
 
 def initial_structure(mesh: TetMesh, params: ModelParams | None = None, parallel: bool | None = None) -> Structure:

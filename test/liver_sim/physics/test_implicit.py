@@ -7,6 +7,7 @@ from liver_sim.mesh.landmarks import press_anchor
 from liver_sim.mesh.liver_shape import default_liver
 from liver_sim.physics import explicit_kernels, implicit_kernels, pcg, reference
 from liver_sim.physics.contact import ToolPose, ToolShape, surface_contacts, tool_state
+from liver_sim.physics.fem_kernels import TetArrays
 from liver_sim.physics.implicit import Contacts, ImplicitEuler, StepHistory
 from liver_sim.physics.model import LiverModel
 from liver_sim.physics.model_params import ModelParams
@@ -204,7 +205,7 @@ def test_contact_jacobian_matches_finite_differences():
         out = np.zeros_like(p)
         none = np.zeros(0, np.int64)
         pcg.apply(none, none, np.zeros((0, 3)), np.zeros(0), np.zeros(0), np.zeros(len(p)), inv_mass,
-                  contacts.nodes, contacts.weights, contacts.normal, coefficient, p, out)
+                  contacts.nodes, contacts.weights, contacts.normal, coefficient, TetArrays.none(), 0.0, p, out)
         return out
 
     direction = np.random.default_rng(5).normal(size=x.shape)

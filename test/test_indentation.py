@@ -1,0 +1,47 @@
+"""The sphere pressed into a bonded block (`liver-sim validate indentation`): the expected force, the surface
+contact that does not sink, and the held tool settling."""
+import math
+
+import pytest
+
+from liver_sim.physics.model_params import ModelParams
+from liver_sim.studies.indentation import block_mesh, bonded_layer_factor, hertz_force_n, indent, variants
+
+
+def test_hertz_force_of_the_default_sphere_at_5_mm():
+    # 4/3 · 2 kPa/(1 − 0.45²) · √0.015 m · (5 mm)^1.5, worked out by hand
+    assert hertz_force_n(2000.0, 0.45, 0.015, 0.005) == pytest.approx(0.14479, rel=1e-4)
+
+
+def test_bonded_layer_factor_is_dimitriadis_series_for_an_incompressible_layer():
+    # ν = 0.5: 1 + 1.133χ + 1.283χ² + 0.769χ³ + 0.0975χ⁴ (Dimitriadis et al. 2002, bonded sample)
+    radius, thickness = 0.015, 0.06
+    for depth in (0.001, 0.005, 0.02):
+        chi = math.sqrt(radius * depth) / thickness
+        series = 1 + 1.133 * chi + 1.283 * chi ** 2 + 0.769 * chi ** 3 + 0.0975 * chi ** 4
+        assert bonded_layer_factor(0.5, radius, depth, thickness) == pytest.approx(series, rel=2e-3)
+    assert bonded_layer_factor(0.45, radius, 1e-12, thickness) == pytest.approx(1.0, abs=1e-5)
+    assert 1.0 < bonded_layer_factor(0.45, radius, 0.001, thickness) < bonded_layer_factor(0.45, radius, 0.005,
+                                                                                             thickness)
+
+
+def test_the_surface_contact_does_not_sink_where_the_probe_contact_does_and_both_settle():
+    mesh = block_mesh(3000)
+    runs = {name: indent(mesh, params, depths_m=(0.002, 0.004)) for name, params in variants(ModelParams()).items()}
+    surface = runs["springs default, surface contact"]["rows"]
+    probe = runs["springs default, probe contact"]["rows"]
+    assert all(row["sink_m"] < 1e-4 for row in surface)
+    assert all(row["sink_m"] > 2.0 * s["sink_m"] for row, s in zip(probe, surface))
+    for run in runs.values():  # static equilibrium found at every depth (the hold's figure: validate's)
+        rows = run["rows"]
+        assert rows[1]["force_n"] > rows[0]["force_n"] > 0.0
+        assert all(row["settled"] for row in rows)
+    linear = runs["springs linear, surface contact"]["rows"]
+    assert linear[1]["force_n"] < surface[1]["force_n"]  # the cubic term stiffens
+
+
+def test_the_surface_contact_needs_the_implicit_integrator_and_a_known_model():
+    with pytest.raises(ValueError, match="contact_model"):
+        ModelParams(contact_model="surface", integrator="symplectic_euler").validate()
+    with pytest.raises(ValueError, match="contact_model"):
+        ModelParams(contact_model="volume").validate()
