@@ -236,14 +236,14 @@ class BridgeTick:
             model, lambda m: penetration(m, tip, radius)[0] if tip is not None else 0.0,
             lambda m: rendered_stiffness(m, cap), self.passivity.episode_energy_j - self.passivity.energy_j)
 
-    def sample(self, stamp_s: float, arrival_s: float, position_m: np.ndarray) -> np.ndarray | None:
+    def sample(self, stamp_s: float, arrival_s: float, position_m: tuple) -> np.ndarray | None:
         """A new stylus sample: its stamp and arrival (s, the clock of the `sent_s` of :meth:`step`) and position (m,
-        device frame), for the passivity observer; returns the tool tip it places in the liver frame through the
-        device map (None before a map)."""
+        device frame, three floats), for the passivity observer; returns the tool tip it places in the liver frame
+        through the device map (None before a map)."""
         if self.device_map is None:
             return None
-        self.passivity.sample(stamp_s, arrival_s, position_m.tolist())
-        return self.device_map.device_to_liver(position_m)
+        self.passivity.sample(stamp_s, arrival_s, position_m)
+        return np.array(self.device_map.device_to_liver_floats(*position_m))
 
     def step(self, now_s: float, tip: np.ndarray | None, pose_age_s: float, source, source_age_s: float,
              sent_s: float | None = None) -> np.ndarray:

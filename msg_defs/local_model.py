@@ -5,16 +5,15 @@ from __future__ import annotations
 import re
 
 import numpy as np
-from geometry_msgs.msg import Vector3
+from rclpy.serialization import deserialize_message
 from visualization_msgs.msg import Marker
 
 from liver_sim.base.checks import positive
 from liver_sim.base.geometry.rotations import quaternion_from_z_axis, quaternion_to_matrix
 from liver_sim.base.local_model import LocalModel
 from msg_defs import cdr
-from msg_defs.finite import colour_msg, finite_floats, unit_quaternion
-from msg_defs.poses import pose_msg
-from msg_defs.stamps import duration_msg, header_msg, seconds_from_stamp, stamp_parts
+from msg_defs.finite import finite_floats, unit_quaternion
+from msg_defs.stamps import duration_parts, seconds_from_stamp, stamp_parts
 
 PLANE_COLOUR = (0.2, 0.8, 0.3, 0.5)
 SPHERE_COLOUR = (0.2, 0.5, 0.9, 0.3)
@@ -29,48 +28,28 @@ _STIFFNESS_ENTRY = re.compile(rf"(?:^|\s){STIFFNESS_KEY}=(\S*)")
 def local_model_marker(model: LocalModel, stamp, frame_id: str, lifetime_s: float,
                        patch_size_m: float = 0.04) -> Marker:
     """The physics' local model as the /liver/contact_plane Marker (ns "local_model", id 0), to be trusted
-    for `lifetime_s` seconds.
+    for `lifetime_s` seconds: :func:`local_model_marker_bytes` read back, one encoding for the wire and its readers.
 
     plane: CUBE at `point`, orientation's z axis = outward `normal`, scale (patch, patch, 1 mm);
     sphere: SPHERE at `centre`, scale = diameter (m) on all axes; not valid: action DELETE.  The model's
     stiffness K, when it has one, rides in `text` as "stiffness_n_per_m=<K>" (STIFFNESS_KEY).
     """
-    marker = Marker(header=header_msg(stamp, frame_id), ns="local_model", id=0,
-                    lifetime=duration_msg(lifetime_s, "lifetime_s"))
-    if not model.valid:
-        marker.action = Marker.DELETE
-        return marker
-    if model.kind == "plane":
-        patch = positive(patch_size_m, "patch_size_m")
-        marker.type = Marker.CUBE
-        marker.pose = pose_msg(model.point, quaternion_from_z_axis(model.normal), "LocalModel.point")
-        marker.scale = Vector3(x=patch, y=patch, z=PLANE_THICKNESS_M)
-        marker.color = colour_msg(PLANE_COLOUR)
-    else:
-        diameter = 2.0 * model.radius_m
-        marker.type = Marker.SPHERE
-        marker.pose = pose_msg(model.centre, (0.0, 0.0, 0.0, 1.0), "LocalModel.centre")
-        marker.scale = Vector3(x=diameter, y=diameter, z=diameter)
-        marker.color = colour_msg(SPHERE_COLOUR)
-    if model.stiffness_n_per_m is not None:
-        marker.text = f"{STIFFNESS_KEY}={model.stiffness_n_per_m!r}"
-    return marker
+    return deserialize_message(local_model_marker_bytes(model, stamp, frame_id, lifetime_s, patch_size_m), Marker)
 
 
 def local_model_marker_bytes(model: LocalModel, stamp, frame_id: str, lifetime_s: float,
                              patch_size_m: float = 0.04) -> bytes:
-    """The serialized :func:`local_model_marker` (for ``Publisher.publish(bytes)``), without a message object:
-    byte for byte what rmw_fastrtps writes for it."""
+    """The serialized local-model Marker (:func:`local_model_marker`, for ``Publisher.publish(bytes)``), without a
+    message object: what rmw_fastrtps writes for it, its padding zeroed."""
     sec, nanosec = stamp_parts(stamp)
-    lifetime = duration_msg(lifetime_s, "lifetime_s")
-    lifetime = (lifetime.sec, lifetime.nanosec)
+    lifetime = duration_parts(lifetime_s, "lifetime_s")
     if not model.valid:
         return cdr.marker_bytes((sec, nanosec), frame_id, "local_model", 0, Marker.ARROW, Marker.DELETE,
                                 (0.0,) * 6 + (1.0,), (0.0,) * 3, (0.0,) * 4, lifetime, "")
     if model.kind == "plane":
         patch = positive(patch_size_m, "patch_size_m")
         position = finite_floats(tuple(model.point.tolist()), (3,), "LocalModel.point")
-        orientation = tuple(unit_quaternion(quaternion_from_z_axis(model.normal), "orientation_xyzw").tolist())
+        orientation = quaternion_from_z_axis(model.normal.tolist())
         kind, scale, colour = Marker.CUBE, (patch, patch, PLANE_THICKNESS_M), PLANE_COLOUR
     else:
         diameter = 2.0 * model.radius_m

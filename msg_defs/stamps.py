@@ -40,9 +40,14 @@ def seconds_from_stamp(stamp) -> float:
     return stamp.sec + stamp.nanosec * 1e-9
 
 
+def duration_parts(seconds, name: str) -> tuple[int, int]:
+    """(sec, nanosec) of a duration of `seconds` (finite, ≥ 0), or ValueError naming `name`."""
+    return _time_parts(seconds, name)
+
+
 def duration_msg(seconds, name: str) -> Duration:
     """builtin_interfaces/Duration of `seconds` (finite, ≥ 0), or ValueError naming `name`."""
-    sec, nanosec = _time_parts(seconds, name)
+    sec, nanosec = duration_parts(seconds, name)
     return Duration(sec=sec, nanosec=nanosec)
 
 

@@ -218,7 +218,7 @@ class BridgeShell:
         stamp = pose[1] if pose is not None else None
         if pose is not None and pose is not self._sampled:  # a new stylus sample: its tool tip in the liver frame
             self._sampled = pose
-            tip = tick.sample(stamp[0] + stamp[1] * 1e-9, wall - (now - pose_received), np.array(pose[0]))
+            tip = tick.sample(stamp[0] + stamp[1] * 1e-9, wall - (now - pose_received), pose[0])
             problem = self._tip_check(tip) if tip is not None else None
             if problem:
                 self._bad["device_pose"] += 1

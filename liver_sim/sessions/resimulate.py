@@ -129,9 +129,9 @@ class _Session:
                     self.trace["wrench_n"].append(held)
             sample = self._receive(message, t)
             if sample is not None:
-                tip, tip_time = self.tick.sample(seconds_from_stamp(message.header.stamp), t, sample), t
+                tip, tip_time = self.tick.sample(seconds_from_stamp(message.header.stamp), t, tuple(sample.tolist())), t
                 if self.baseline is not None:
-                    self.baseline.sample(seconds_from_stamp(message.header.stamp), t, sample)
+                    self.baseline.sample(seconds_from_stamp(message.header.stamp), t, tuple(sample.tolist()))
             self.emit(input_topic, input_key, t, data)
             command = self.tick.step(t, tip, t - tip_time, held if self.b.local_model == "none" else local,
                                      t - source_time)

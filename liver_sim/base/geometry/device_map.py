@@ -66,6 +66,8 @@ class DeviceMap:
         object.__setattr__(self, "workspace_radius_m",
                            positive(self.workspace_radius_m, "DeviceMap.workspace_radius_m"))
         object.__setattr__(self, "_quaternion", tuple(matrix_to_quaternion(self.rotation).tolist()))
+        object.__setattr__(self, "_scaled_rows", tuple(tuple(row) for row in (self.scale * self.rotation).tolist()))
+        object.__setattr__(self, "_offset", tuple(self.translation.tolist()))
 
     def same_as(self, other: DeviceMap | None) -> bool:
         """Whether `other` maps every point and force as this map does (the workspace radius aside)."""
@@ -83,6 +85,12 @@ class DeviceMap:
     def device_to_liver(self, point: np.ndarray) -> np.ndarray:
         """Device point (m) → liver point (m): scale·R·p + translation."""
         return self.scale * (self.rotation @ point) + self.translation
+
+    def device_to_liver_floats(self, x: float, y: float, z: float) -> tuple[float, float, float]:
+        """:meth:`device_to_liver` of one point given as floats (a 1 kHz loop places each sample)."""
+        (a, b, c), (d, e, f), (g, h, i) = self._scaled_rows
+        tx, ty, tz = self._offset
+        return a * x + b * y + c * z + tx, d * x + e * y + f * z + ty, g * x + h * y + i * z + tz
 
     def liver_to_device(self, point: np.ndarray) -> np.ndarray:
         """Liver point (m) → device point (m): Rᵀ·(p − translation)/scale."""

@@ -3,8 +3,6 @@ import math
 
 import numpy as np
 
-from liver_sim.base.checks import vector3
-
 
 def quaternion_to_matrix(quaternion) -> np.ndarray:
     """3×3 rotation matrix of the quaternion (x, y, z, w); normalised first, refused if zero or non-finite."""
@@ -42,13 +40,14 @@ def matrix_to_quaternion(rotation: np.ndarray) -> np.ndarray:
 
 def quaternion_from_z_axis(normal) -> tuple[float, float, float, float]:
     """Unit quaternion (x, y, z, w) of the shortest rotation taking +z to the direction of `normal`
-    (half a turn about x when `normal` points along −z)."""
-    n = vector3(normal, "normal")
-    length = float(np.linalg.norm(n))
-    if not length > 0.0:
-        raise ValueError(f"normal must be non-zero, got {n.tolist()}")
-    nx, ny, nz = n / length
+    (half a turn about x when `normal` points along −z). Floats: it runs for every published local model."""
+    nx, ny, nz = (float(c) for c in normal)
+    length = math.sqrt(nx * nx + ny * ny + nz * nz)
+    if not (math.isfinite(length) and length > 0.0):
+        raise ValueError(f"normal must be non-zero and finite, got {[nx, ny, nz]}")
+    nx, ny, nz = nx / length, ny / length, nz / length
     if 1.0 + nz < 1e-12:
         return (1.0, 0.0, 0.0, 0.0)
-    q = np.array([-ny, nx, 0.0, 1.0 + nz])
-    return tuple((q / np.linalg.norm(q)).tolist())
+    qx, qy, qw = -ny, nx, 1.0 + nz
+    norm = math.sqrt(qx * qx + qy * qy + qw * qw)
+    return (qx / norm, qy / norm, 0.0, qw / norm)
