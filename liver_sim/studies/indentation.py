@@ -9,10 +9,11 @@ EQUILIBRIUM_RELATIVE of itself and no node moves faster than EQUILIBRIUM_SPEED_M
 Per depth δ: the equilibrium force F on the tool, Hertz's F_H = 4/3·E/(1 − ν²)·√R·δ^(3/2), the force expected of a
 bonded layer of thickness h, F_H·c(χ) with χ = √(R·δ)/h (Dimitriadis et al., Biophys. J. 82:2798–2810, 2002, the
 bonded series in χ with their α0(ν), β0(ν)), their ratio; the tool's sink into the skin (the deepest penetration
-of the sphere by a skin node or a contact point at equilibrium); whether the contact is resolved (its radius
-√(R·δ) against the mean skin edge under the tool); and the settling of the hold: the force's peak-to-peak over
-its mean from HOLD_SETTLE_S to HOLD_SETTLE_S + HOLD_WINDOW_S after the tool stopped.  Per mesh: the exponent n of
-F ∝ δ^n (least squares on log F against log δ).
+of the sphere by a skin node or a contact point at equilibrium); the reference force on the same tets
+(studies.indentation_reference: linear P1 elasticity, an ideal frictionless sphere) and whether the mesh resolves
+the contact (that reference within HERTZ_TOLERANCE of the expected force); and the settling of the hold: the
+force's peak-to-peak over its mean from HOLD_SETTLE_S to HOLD_SETTLE_S + HOLD_WINDOW_S after the tool stopped.
+Per mesh: the exponent n of F ∝ δ^n (least squares on log F against log δ).
 """
 from __future__ import annotations
 
@@ -25,9 +26,10 @@ import numpy as np
 
 from liver_sim.mesh.stuffing import tetrahedralize_to_target
 from liver_sim.mesh.tetmesh import TetMesh
-from liver_sim.physics.contact import ToolPose
+from liver_sim.physics.contact import ToolPose, ToolShape
 from liver_sim.physics.model import LiverModel
 from liver_sim.physics.model_params import ModelParams
+from liver_sim.studies.indentation_reference import sphere_indentation
 
 #: The block (m): 12 × 12 cm wide, 6 cm thick, its bottom at z = 0.
 BLOCK_SIZE_M = (0.12, 0.12, 0.06)
@@ -103,6 +105,7 @@ class DepthRow:
     ratio_to_expected: float
     sink_m: float
     contact_radius_m: float
+    reference_n: float
     resolved: bool
     hold_peak_to_peak: float
     hold_s: float
@@ -135,9 +138,22 @@ def _sink_m(model: LiverModel) -> float:
     return max(deepest, 0.0)
 
 
-def indent(mesh: TetMesh, params: ModelParams, depths_m=DEPTHS_M, progress=None) -> dict:
+def reference_forces_n(mesh: TetMesh, params: ModelParams, depths_m=DEPTHS_M) -> list[float]:
+    """The reference force (N) at each depth on `mesh`: studies.indentation_reference with the parenchyma's E and ν
+    and the default tool's radius, the bottom bonded."""
+    tissue = params.tissue
+    return [row["force_n"] for row in sphere_indentation(
+        mesh, tissue.parenchyma_young_modulus_kpa * 1e3, tissue.parenchyma_poisson_ratio,
+        ToolShape().radius_m, depths_m, bottom_nodes(mesh))]
+
+
+def indent(mesh: TetMesh, params: ModelParams, depths_m=DEPTHS_M, progress=None,
+           reference_n=None) -> dict:
     """The block test on `mesh` with `params` (block_params applied): a DepthRow per depth, the exponent and the
-    force trace (time s, depth m, force N per frame)."""
+    force trace (time s, depth m, force N per frame); `reference_n` the reference force per depth
+    (reference_forces_n, computed when not given)."""
+    if reference_n is None:
+        reference_n = reference_forces_n(mesh, params, depths_m)
     fixed = bottom_nodes(mesh)
     model = LiverModel(mesh, block_params(params).with_changes(fixed_nodes=fixed))
     p = model.structure.params
@@ -168,7 +184,7 @@ def indent(mesh: TetMesh, params: ModelParams, depths_m=DEPTHS_M, progress=None)
         trace_f.append(force)
         return force
 
-    for depth in depths_m:
+    for depth, reference in zip(depths_m, reference_n):
         steps = max(1, int(round(STEP_S / frame_s)))
         for k in range(1, steps + 1):
             s = k / steps
@@ -194,7 +210,8 @@ def indent(mesh: TetMesh, params: ModelParams, depths_m=DEPTHS_M, progress=None)
         expected = hertz * bonded_layer_factor(nu, radius, depth, thickness)
         contact_radius = math.sqrt(radius * depth)
         rows.append(DepthRow(depth, force, hertz, expected, force / expected, _sink_m(model), contact_radius,
-                             bool(contact_radius >= edge_m), float(np.ptp(held) / abs(held.mean())),
+                             reference, bool(abs(reference / expected - 1.0) <= HERTZ_TOLERANCE),
+                             float(np.ptp(held) / abs(held.mean())),
                              len(forces) * frame_s, settled))
         if progress:
             r = rows[-1]
@@ -221,14 +238,17 @@ def variants(base: ModelParams) -> dict:
 
 
 def run_indentation(sizes=DEFAULT_SIZES, params: ModelParams | None = None, progress=None) -> dict:
-    """Every variant on the block of every size: {variant: [indent(...) per mesh]} (meshed once each)."""
-    runs = {name: [] for name in variants(params or ModelParams())}
+    """Every variant on the block of every size: {variant: [indent(...) per mesh]} (meshed once each, its reference
+    forces solved once)."""
+    params = params or ModelParams()
+    runs = {name: [] for name in variants(params)}
     for size in sizes:
         mesh = block_mesh(size)
-        for name, variant in variants(params or ModelParams()).items():
+        reference = reference_forces_n(mesh, params)
+        for name, variant in variants(params).items():
             if progress:
                 progress(f"{name}: {mesh.source}, {len(mesh.tets)} tets")
-            runs[name].append(indent(mesh, variant, progress=progress))
+            runs[name].append(indent(mesh, variant, progress=progress, reference_n=reference))
     return runs
 
 
@@ -301,15 +321,29 @@ def indentation_figures(runs: dict, holds: dict) -> list:
 
 
 def unresolved_notes(runs: dict) -> list[str]:
-    """A line per mesh whose skin edge under the tool is longer than the contact radius at some depths."""
+    """A line per mesh that does not resolve the contact at some depths: there the reference (linear P1, an ideal
+    sphere, on the same tets) is itself more than HERTZ_TOLERANCE from the expected force."""
     notes = []
     first = next(iter(runs.values()))
     for run in first:
-        shallow = [r["depth_m"] for r in run["rows"] if not r["resolved"]]
+        shallow = [r for r in run["rows"] if not r["resolved"]]
         if shallow:
-            notes.append(f"{run['mesh']} ({run['tetrahedra']} tets): the contact radius sqrt(R*depth) is smaller "
-                         f"than its skin edge under the tool ({run['skin_edge_m'] * 1e3:.1f} mm) at "
-                         + ", ".join(f"{d * 1e3:.0f}" for d in shallow) + " mm: not resolved there")
+            notes.append(f"{run['mesh']} ({run['tetrahedra']} tets, skin edge under the tool "
+                         f"{run['skin_edge_m'] * 1e3:.1f} mm) does not resolve the contact at "
+                         + ", ".join(f"{r['depth_m'] * 1e3:.0f} mm (reference "
+                                     f"{r['reference_n'] / r['expected_n']:.2f} x expected)" for r in shallow))
+    return notes
+
+
+def reference_notes(runs: dict) -> list[str]:
+    """A line per run: its force over the reference's on the same tets at each depth (what the product's law and
+    contact add to the textbook model, the mesh's own error apart)."""
+    notes = []
+    for name, meshes in runs.items():
+        for run in meshes:
+            notes.append(f"{name}, {run['tetrahedra']} tets: F/reference "
+                         + ", ".join(f"{r['force_n'] / r['reference_n']:.2f}" for r in run["rows"])
+                         + " at " + ", ".join(f"{r['depth_m'] * 1e3:.0f}" for r in run["rows"]) + " mm")
     return notes
 
 
@@ -358,9 +392,10 @@ def main_indentation(sizes, json_output: bool, out_dir, progress=print) -> int:
     figures = indentation_figures(runs, holds)
     for figure in figures:
         progress("  " + figure.line())
-    for note in unresolved_notes(runs):
+    notes = unresolved_notes(runs) + reference_notes(runs)
+    for note in notes:
         progress("  note: " + note)
-    result = {**figures_json(figures), "notes": unresolved_notes(runs),
+    result = {**figures_json(figures), "notes": notes,
               "runs": {name: [{k: v for k, v in run.items() if k != "trace"} for run in meshes]
                        for name, meshes in runs.items()},
               "liver_holds": {name: {k: v for k, v in hold.items() if k != "force_trace_n"}
