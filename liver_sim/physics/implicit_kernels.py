@@ -235,12 +235,13 @@ def bdf2_start(x, v, x_last, v_last, x_prev, v_prev, inv_mass, second_order):
 def implicit_step(x, v, inv_mass, external, gravity, c_env, h, node_i, node_j, inv_rest, lambda1, lambda2, mu,
                   unit, iso, axial, shift, diagonal, support_nodes, support_rest, support_stiffness,
                   support_damping, tet_law, nodes, weights, normal, offset, speed, stiffness,
-                  damping, coefficient, preconditioner, warm, tolerance, max_iterations, newton_tolerance,
+                  damping, coefficient, preconditioner, coarse, warm, tolerance, max_iterations, newton_tolerance,
                   max_newton, work):
     """One linearised backward-Euler step of x, v in place (see the module docstring), then Newton
     iterations while the nonlinear residual exceeds `newton_tolerance` (N) on some node, up to
     `max_newton`.  `tet_law`: the tetrahedra of the 'fem' law (physics.fem_kernels.TetArrays; none for the
-    springs').  `warm` holds the previous Δv (start of the solve; overwritten).  `work` is
+    springs').  `coarse`: the preconditioner's coarse space (physics.coarse_space; none: block-Jacobi alone).
+    `warm` holds the previous Δv (start of the solve; overwritten).  `work` is
     (10, N, 3) scratch.  Returns (contact force on the liver at the new state (3,), CG iterations,
     Newton iterations, final residual (N))."""
     f, ky, rhs, x0, v0, r, z, p, q, zero = work
@@ -268,7 +269,7 @@ def implicit_step(x, v, inv_mass, external, gravity, c_env, h, node_i, node_j, i
     while True:
         block_jacobi(diagonal, inv_mass, nodes, weights, normal, coefficient, preconditioner)
         total_iterations += pcg(node_i, node_j, unit, iso, axial, shift, inv_mass, nodes, weights, normal,
-                                coefficient, tet_law, tet_weight, preconditioner, rhs, warm, tolerance,
+                                coefficient, tet_law, tet_weight, preconditioner, coarse, rhs, warm, tolerance,
                                 max_iterations, r, z, p, q)
         advance(x, x0, v, v0, warm, inv_mass, h)
         assemble(x, v, zero, inv_mass, external, gravity, c_env, h, node_i, node_j, inv_rest, lambda1, lambda2, mu,

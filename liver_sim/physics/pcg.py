@@ -1,30 +1,22 @@
-"""Block-Jacobi preconditioned conjugate gradients, matrix-free, on the implicit step's system
-A = M − h·D − h²·K (physics.implicit_kernels): A·p, the preconditioner, the solve.  The operator's parts: the
-springs (u, iso, axial per spring), the tetrahedra of the 'fem' law (physics.fem_kernels, none with the springs'
-law), the contacts.
+"""Preconditioned conjugate gradients, matrix-free, on the implicit step's system A = M − h·D − h²·K
+(physics.implicit_kernels): A·p, the preconditioners, the solve.  The operator's parts: the springs (u, iso, axial per
+spring), the tetrahedra of the 'fem' law (physics.fem_kernels, none with the springs' law), the contacts.
 
-Solver, chosen by measurement: preconditioned conjugate gradients, block-Jacobi (the 3×3 diagonal
-blocks, contacts included), matrix-free (per spring only u, and the scalars of B), started from the
-previous step's Δv, stopped at ‖r‖ ≤ cg_tolerance·‖b‖ (default 1e-3; the Newton residual check
-guards the result).  Milliseconds per step, assembly included, one thread, this 2-core machine
-while other jobs ran (median of 120 steps / 10th percentile), h = 1/150 s, default parameters,
-a loaded perturbed liver (20 and 48 CG iterations):
-
-    mesh                           unknowns   PCG matrix-free   PCG block CSR   SuperLU factor + solve
-    default liver (1155 tets)          1002   0.31 / 0.30       0.40 / 0.38     6.8–9.7  (solve 0.13)
-    liver ~10k tets (9991 tets)        6735   5.1  / 4.0        6.0  / 5.4      274–346  (solve 4.9–5.8)
-
-The values change at every step (the axes turn, the cubic law stiffens, contacts come and go), so
-a factorisation (scipy's SuperLU, COLAMD; L+U hold 0.16 M and 4.3 M entries) would be redone each
-step, 20–70× slower than PCG; on the 10k liver its triangular solves alone cost a whole PCG step.
-The matrix is dominated by M + h·C, whose block-Jacobi conditioning is fair, and consecutive
-steps differ little, so PCG needs few iterations.  Matrix-free beats a block CSR pattern (built
-once per topology, 9 stored values per block) because it reads 5 numbers per spring instead of 36.
+The solve starts from the previous step's Δv and stops at ‖r‖ ≤ cg_tolerance·‖b‖ (default 1e-3; the Newton residual
+check guards the result).  Preconditioner: block-Jacobi (the 3×3 diagonal blocks, contacts included), and on larger
+livers the additive two-level one, block-Jacobi plus a coarse correction on rigid aggregates of nodes
+(physics.coarse_space), which keeps the iterations nearly flat as the mesh is refined (README, "What to expect on a
+2-core machine", for the iterations and costs).  Why this solver: the values change at every step (the axes turn, the
+cubic law stiffens, contacts come and go), so a sparse factorisation would be redone each step (SuperLU: 20–70× the
+cost of the solve), and matrix-free beats a block CSR pattern because it reads 5 numbers per spring instead of 36.
+The coarse matrix, small and dense, is factored once per topology and step length: a preconditioner need not follow
+the values exactly to leave the answer unchanged.
 """
 from __future__ import annotations
 
 import numba
 
+from liver_sim.physics.coarse_space import coarse_correction
 from liver_sim.physics.fem_kernels import tet_apply
 from liver_sim.physics.pairs import add_pair
 
@@ -105,11 +97,34 @@ def _invert_symmetric(a):
     a[2, 0], a[2, 1], a[2, 2] = c02 * scale, c12 * scale, c22 * scale
 
 
+@numba.njit(cache=True, inline="always")
+def _block_jacobi_node(preconditioner, r, z, n, rz):
+    """z[n] ← D⁻¹_n·r[n]; returns rz + r[n]·z[n], added term by term."""
+    for a in range(3):
+        z[n, a] = (preconditioner[n, a, 0] * r[n, 0] + preconditioner[n, a, 1] * r[n, 1]
+                   + preconditioner[n, a, 2] * r[n, 2])
+        rz += r[n, a] * z[n, a]
+    return rz
+
+
+@numba.njit(cache=True)
+def _with_coarse(coarse, inv_mass, r, z):
+    """z ← z + the coarse correction (coarse_space.coarse_correction); returns r·z."""
+    coarse_correction(coarse, inv_mass, r, z)
+    rz = 0.0
+    for n in range(r.shape[0]):
+        for a in range(3):
+            rz += r[n, a] * z[n, a]
+    return rz
+
+
 @numba.njit(cache=True)
 def pcg(node_i, node_j, unit, iso, axial, shift, inv_mass, nodes, weights, normal, coefficient, tet_law, tet_weight,
-        preconditioner, b, z0, tolerance, max_iterations, r, z, p, q):
-    """Solve A·z = b by block-Jacobi preconditioned conjugate gradients from z0 (overwritten by z);
-    stops when ‖r‖ ≤ tolerance·‖b‖.  Returns the iterations used."""
+        preconditioner, coarse, b, z0, tolerance, max_iterations, r, z, p, q):
+    """Solve A·z = b by preconditioned conjugate gradients from z0 (overwritten by z): block-Jacobi, plus the
+    coarse correction of `coarse` (a coarse_space.CoarseSpace; none: block-Jacobi alone); stops when
+    ‖r‖ ≤ tolerance·‖b‖.  Returns the iterations used."""
+    two_level = coarse.factor.shape[0] > 0
     apply(node_i, node_j, unit, iso, axial, shift, inv_mass, nodes, weights, normal, coefficient, tet_law, tet_weight,
           z0, q)
     count = b.shape[0]
@@ -122,12 +137,12 @@ def pcg(node_i, node_j, unit, iso, axial, shift, inv_mass, nodes, weights, norma
     rz = 0.0
     r_norm2 = 0.0
     for n in range(count):
+        rz = _block_jacobi_node(preconditioner, r, z, n, rz)
         for a in range(3):
-            z[n, a] = (preconditioner[n, a, 0] * r[n, 0] + preconditioner[n, a, 1] * r[n, 1]
-                       + preconditioner[n, a, 2] * r[n, 2])
-            p[n, a] = z[n, a]
-            rz += r[n, a] * z[n, a]
             r_norm2 += r[n, a] * r[n, a]
+    if two_level:
+        rz = _with_coarse(coarse, inv_mass, r, z)
+    p[:] = z
     iterations = 0
     while r_norm2 > target and iterations < max_iterations:
         apply(node_i, node_j, unit, iso, axial, shift, inv_mass, nodes, weights, normal, coefficient, tet_law,
@@ -140,17 +155,15 @@ def pcg(node_i, node_j, unit, iso, axial, shift, inv_mass, nodes, weights, norma
             break
         alpha = rz / pq
         r_norm2 = 0.0
+        rz_new = 0.0
         for n in range(count):
             for a in range(3):
                 z0[n, a] += alpha * p[n, a]
                 r[n, a] -= alpha * q[n, a]
                 r_norm2 += r[n, a] * r[n, a]
-        rz_new = 0.0
-        for n in range(count):
-            for a in range(3):
-                z[n, a] = (preconditioner[n, a, 0] * r[n, 0] + preconditioner[n, a, 1] * r[n, 1]
-                           + preconditioner[n, a, 2] * r[n, 2])
-                rz_new += r[n, a] * z[n, a]
+            rz_new = _block_jacobi_node(preconditioner, r, z, n, rz_new)
+        if two_level:
+            rz_new = _with_coarse(coarse, inv_mass, r, z)
         beta = rz_new / rz
         rz = rz_new
         for n in range(count):

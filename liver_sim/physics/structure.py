@@ -150,7 +150,7 @@ def build_structure(mesh: TetMesh, params: ModelParams, capsule_triangles: np.nd
                                   springs.lambda2_n, springs.mu_ns_per_m),
                      support, parallel, bound, version,
                      WorkArrays(np.zeros((n, 3)), np.zeros((threads, n, 3)), parallel),
-                     ImplicitEuler(springs, n, support=support, tets=tets))
+                     ImplicitEuler(springs, n, support=support, tets=tets, preconditioner=params.preconditioner))
 
 
 def initial_structure(mesh: TetMesh, params: ModelParams | None = None, parallel: bool | None = None) -> Structure:

@@ -1,7 +1,9 @@
 """The solver's regression scenes on the default liver (press, grasp and pull, tear, cut) and their figures: what a
 change of the implicit solver must reproduce within its tolerance (test/liver_sim/physics/test_solver_regression.py;
 the stored figures come from `python test/support/regression_scenes.py OUT.npz`, run before the solver changed)."""
+import contextlib
 import sys
+from unittest import mock
 
 import numpy as np
 
@@ -85,19 +87,21 @@ def flatten(figures: dict) -> dict:
     return {f"{scene}/{key}": value for scene, values in figures.items() for key, value in values.items()}
 
 
+@contextlib.contextmanager
 def tight_solves(tolerance: float = 1e-9):
-    """A context in which every ImplicitEuler solves its steps to `tolerance` (the scenes' exact answer)."""
-    from unittest import mock
+    """A context in which every ImplicitEuler solves its steps, and the tool's compliance, to `tolerance`: the
+    scenes' exact answer (the compliance's path into the physics: a cut follows the local model's contact)."""
+    from liver_sim.physics import implicit
 
-    from liver_sim.physics.implicit import ImplicitEuler
-
-    init = ImplicitEuler.__init__
+    init = implicit.ImplicitEuler.__init__
 
     def tight(self, *args, **kwargs):
         init(self, *args, **kwargs)
         self.cg_tolerance = tolerance
 
-    return mock.patch.object(ImplicitEuler, "__init__", tight)
+    with mock.patch.object(implicit.ImplicitEuler, "__init__", tight), \
+            mock.patch.object(implicit, "COMPLIANCE_TOLERANCE", tolerance):
+        yield
 
 
 if __name__ == "__main__":  # today's figures, and the same solved to 1e-9 under "tight/"
