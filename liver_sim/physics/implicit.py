@@ -33,7 +33,7 @@ from liver_sim.physics.coarse_space import CoarseSpace, aggregates, build_coarse
 from liver_sim.physics.fem_kernels import TetArrays, tet_terms
 from liver_sim.physics.implicit_kernels import assemble, bdf2_start, implicit_step, support_terms
 from liver_sim.physics.model_params import PRECONDITIONERS
-from liver_sim.physics.pcg import block_jacobi, pcg
+from liver_sim.physics.pcg import SERIAL, block_jacobi, pcg, pcg_parallel
 from liver_sim.physics.springs import SpringNetwork
 from liver_sim.physics.support import SupportArrays
 
@@ -78,9 +78,9 @@ def node_contacts(nodes, normal, offset_m, normal_speed_m_s, stiffness_n_per_m, 
                     np.broadcast_to(np.asarray(damping_ns_per_m, dtype=np.float64), (count,)).copy())
 
 
-#: From this many nodes on, 'auto' takes the two-level preconditioner (below it block-Jacobi's extra iterations
-#: cost less than the coarse solve: README, "What to expect on a 2-core machine").
-TWO_LEVEL_MIN_NODES = 1000
+#: From this many nodes on, 'auto' takes the two-level preconditioner.  It pays from about the default liver's size
+#: (334 nodes) on; the default liver keeps block-Jacobi, so that its steps stay those of before it, bit for bit.
+TWO_LEVEL_MIN_NODES = 500
 
 #: The step length (s) of the quasi-static solve in ImplicitEuler.compliance, and its CG tolerance (README, "A
 #: physics frame": what it costs in accuracy and iterations against a tighter one).
@@ -122,7 +122,7 @@ class ImplicitEuler:
     def __init__(self, springs: SpringNetwork, n_nodes: int, cg_tolerance: float = 1e-3,
                  max_cg_iterations: int = 500, newton_tolerance_n: float = 1e-2, max_newton: int = 2,
                  second_order: bool = True, support: SupportArrays | None = None, tets: TetArrays | None = None,
-                 preconditioner: str = "auto"):
+                 preconditioner: str = "auto", threads: int = 1):
         if preconditioner not in PRECONDITIONERS:
             raise ValueError(f"parameter preconditioner must be one of {', '.join(PRECONDITIONERS)}, "
                              f"got {preconditioner!r}")
@@ -138,6 +138,9 @@ class ImplicitEuler:
         #: Whether the PCG adds the coarse correction to block-Jacobi.
         self.two_level = preconditioner == "two_level" or (preconditioner == "auto"
                                                            and self.n_nodes >= TWO_LEVEL_MIN_NODES)
+        #: Threads of the PCG (pcg.pcg_parallel above one).
+        self.threads = max(1, int(threads))
+        self._partial = SERIAL if self.threads == 1 else np.zeros((self.threads, self.n_nodes, 3))
         self._aggregate: np.ndarray | None = None
         self._coarse: dict[float, CoarseSpace] = {}
         edges = len(springs.node_i)
@@ -186,7 +189,7 @@ class ImplicitEuler:
             contacts.weights,
             contacts.normal, contacts.offset_m, contacts.normal_speed_m_s, contacts.stiffness_n_per_m,
             contacts.damping_ns_per_m, self._coefficient, self._preconditioner, coarse, history.warm, self.cg_tolerance,
-            self.max_cg_iterations, self.newton_tolerance_n, self.max_newton, self._work)
+            self.max_cg_iterations, self.newton_tolerance_n, self.max_newton, self._work, self._partial)
         x_last[:], v_last[:] = x, v
         history.dt_s = float(dt)
         self.last_second_order = second
@@ -194,11 +197,13 @@ class ImplicitEuler:
 
     @property
     def solver(self) -> str:
-        """Which solver the steps take: 'pcg block-jacobi' or 'pcg two-level' with its aggregates once built."""
+        """Which solver the steps take: 'pcg block-jacobi' or 'pcg two-level' (with its aggregates once built), and
+        its threads when more than one (their count sets the order of the sums)."""
+        threads = f", {self.threads} threads" if self.threads > 1 else ""
         if not self.two_level:
-            return "pcg block-jacobi"
+            return f"pcg block-jacobi{threads}"
         built = {c.aggregates for c in self._coarse.values()}
-        return "pcg two-level" + (f" ({built.pop()} aggregates)" if len(built) == 1 else "")
+        return f"pcg two-level{threads}" + (f", {built.pop()} aggregates" if len(built) == 1 else "")
 
     def _coarse_space(self, h: float, x: np.ndarray, inv_mass: np.ndarray) -> CoarseSpace:
         """The coarse space of step length `h` (none without the two-level preconditioner); the first time, built
@@ -297,9 +302,10 @@ class ImplicitEuler:
         """solution ← A⁻¹·b by PCG from `solution` (the last assembled system, no contacts) with `coarse`."""
         r, z, p, q = (np.zeros_like(b) for _ in range(4))
         no = Contacts.none()
-        pcg(self._node_i, self._node_j, self._unit, self._iso, self._axial, self._shift, inv_mass, no.nodes,
-            no.weights, no.normal, np.zeros(0), self.tets, self._tet_weight, self._preconditioner, coarse, b, solution,
-            tolerance, self.max_cg_iterations, r, z, p, q)
+        solve = pcg_parallel if self.threads > 1 else pcg
+        solve(self._node_i, self._node_j, self._unit, self._iso, self._axial, self._shift, inv_mass, no.nodes,
+              no.weights, no.normal, np.zeros(0), self.tets, self._tet_weight, self._preconditioner, coarse, b,
+              solution, tolerance, self.max_cg_iterations, r, z, p, q, self._partial)
 
     def warm_up(self) -> None:
         """Compile the kernels (numba, cached on disk) before a timed loop starts."""

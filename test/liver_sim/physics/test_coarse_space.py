@@ -145,7 +145,7 @@ def test_two_levels_solve_the_same_system_in_fewer_iterations():
     def solve(space, tolerance):
         z = np.zeros_like(b)
         iterations = pcg.pcg(*operator[:7], no.nodes, no.weights, no.normal, np.zeros(0), *operator[7:], inverse,
-                             space, b, z, tolerance, 1000, *(np.zeros_like(b) for _ in range(4)))
+                             space, b, z, tolerance, 1000, *(np.zeros_like(b) for _ in range(4)), pcg.SERIAL)
         return z, iterations
 
     exact, _ = solve(CoarseSpace.none(), 1e-12)
