@@ -156,6 +156,7 @@ class PhysicsNode(Node):
                  "tool_mode": self.model.tool.use.mode, "topology_changes": self.model.structure.version,
                  "topology_failures": self._pipeline.topology_failures,
                  "nodes": len(self.model.state.positions), "substeps": self.model.structure.params.substeps,
+                 "solver": self.model.structure.step_solver,
                  "tool_pose_age_s": float(time.monotonic() - received), "simulated_s": self.model.state.time_s,
                  **link_report(self._link, self._inputs)}
         publish_diagnostics(self, self._diagnostics,

@@ -152,7 +152,8 @@ def probe_geometry(x, v, skin, triangles, probes, shift, radius, tool_velocity, 
     the row's `share` of its probe's contact: s_t/Σ s, s_t = γ_t·max(δ_t, 0)² (when no row of the probe
     touches, max(δ_t + dt·δ̇_t, 0)²: touching after `dt` at the nodes' and the tool's velocity), γ_t: 1 where q is
     a local minimum of the distance to the skin, fading to 0 where a triangle sharing q's edge or corner is nearer
-    (_local_minimum); `surface_weight`: γ_t on a triangle's interior, γ_t/2 on an edge, 0 at a corner.  A probe
+    (_local_minimum; 0 on a row touching neither now nor after `dt`, which then has no share); `surface_weight`: γ_t
+    on a triangle's interior, γ_t/2 on an edge, 0 at a corner.  A probe
     inside the liver (behind the outward face of its nearest triangle, at d_min) leaves through q: normals from q to
     p and δ = radius + 2·d_min − |p − q|, radius + d_min on the nearest row, continuous with the outside form at
     d_min = 0 and negative on far triangles.
@@ -214,7 +215,9 @@ def probe_geometry(x, v, skin, triangles, probes, shift, radius, tool_velocity, 
                 n = nodes[row, k]
                 rate -= weights[row, k] * (nx * v[n, 0] + ny * v[n, 1] + nz * v[n, 2])
             ahead[t] = max(depth[row] + dt * rate, 0.0)
-            fade[t] = _local_minimum(skin, triangles, feature, distance, t)
+            # γ_t weighs only rows that touch now or after dt (a share and a surface weight of 0 otherwise)
+            fade[t] = _local_minimum(skin, triangles, feature, distance, t) if depth[row] > 0.0 or ahead[t] > 0.0 \
+                else 0.0
             surface_weight[row] = fade[t] if feature[t] == 6 else (0.5 * fade[t] if feature[t] >= 3 else 0.0)
             touching = touching or depth[row] > 0.0
         total = 0.0

@@ -210,13 +210,13 @@ def tet_terms(x, v, y, inv_mass, h, law, f, ky, diagonal, assemble_matrix):
 
 
 @numba.njit(cache=True)
-def tet_apply(law, weight, p, out):
-    """out += Σ elements weight·V·R·C·Rᵀ·p (`law` a TetArrays, weight = h² + h·τ; p zero on held nodes): the
-    elements' part of A·p.  With the rotated gradients h_a = R·g_a and G = Σ_b p_b ⊗ h_b, R·C·Rᵀ·p gives node a
-    (λ·tr(G)·I + μ·(G + Gᵀ))·h_a."""
+def tet_apply(law, weight, p, first, last, out):
+    """out += Σ elements first..last−1 of weight·V·R·C·Rᵀ·p (`law` a TetArrays, weight = h² + h·τ; p zero on held
+    nodes): the elements' part of A·p.  With the rotated gradients h_a = R·g_a and G = Σ_b p_b ⊗ h_b, R·C·Rᵀ·p gives
+    node a (λ·tr(G)·I + μ·(G + Gᵀ))·h_a."""
     tets, volume, rotated = law.tets, law.volume_m3, law.rotated_gradients
     lam, mu = law.lame_lambda_pa, law.lame_mu_pa
-    for e in range(tets.shape[0]):
+    for e in range(first, last):
         tet, hg = tets[e], rotated[e]
         g00 = g01 = g02 = g10 = g11 = g12 = g20 = g21 = g22 = 0.0
         for b in range(4):

@@ -29,9 +29,11 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse
 
+from liver_sim.physics.coarse_space import CoarseSpace, aggregates, build_coarse_space, node_graph
 from liver_sim.physics.fem_kernels import TetArrays, tet_terms
 from liver_sim.physics.implicit_kernels import assemble, bdf2_start, implicit_step, support_terms
-from liver_sim.physics.pcg import block_jacobi, pcg
+from liver_sim.physics.model_params import PRECONDITIONERS
+from liver_sim.physics.pcg import SERIAL, block_jacobi, pcg, pcg_parallel
 from liver_sim.physics.springs import SpringNetwork
 from liver_sim.physics.support import SupportArrays
 
@@ -76,6 +78,10 @@ def node_contacts(nodes, normal, offset_m, normal_speed_m_s, stiffness_n_per_m, 
                     np.broadcast_to(np.asarray(damping_ns_per_m, dtype=np.float64), (count,)).copy())
 
 
+#: From this many nodes on, 'auto' takes the two-level preconditioner.  It pays from about the default liver's size
+#: (334 nodes) on; the default liver keeps block-Jacobi, so that its steps stay those of before it, bit for bit.
+TWO_LEVEL_MIN_NODES = 500
+
 #: The step length (s) of the quasi-static solve in ImplicitEuler.compliance, and its CG tolerance (README, "A
 #: physics frame": what it costs in accuracy and iterations against a tighter one).
 COMPLIANCE_HORIZON_S = 30.0
@@ -83,6 +89,9 @@ COMPLIANCE_TOLERANCE = 3e-2
 #: The step length (s) of ImplicitEuler.equilibrium's backward-Euler iterations and their CG tolerance.
 STATIC_HORIZON_S = 1e3
 STATIC_CG_TOLERANCE = 1e-6
+
+
+NO_COARSE_SPACE = CoarseSpace.none()
 
 
 class StepHistory:
@@ -105,11 +114,18 @@ class ImplicitEuler:
     """Linearised backward Euler on one spring network, its support (none by default) and the tetrahedra of the
     'fem' law (physics.fem_kernels; none by default): its per-spring matrix blocks, element rotations and work
     arrays, which depend on the topology only; with `second_order`, BDF2 from the second step on (see the module
-    docstring), from the StepHistory each step is given.  Build a new one after a topology change."""
+    docstring), from the StepHistory each step is given; its PCG's `preconditioner` (model_params.PRECONDITIONERS:
+    'auto' is two-level from TWO_LEVEL_MIN_NODES nodes on), with the
+    two-level one a coarse space per step length, built at its first step (physics.coarse_space).  Build a new one
+    after a topology change."""
 
     def __init__(self, springs: SpringNetwork, n_nodes: int, cg_tolerance: float = 1e-3,
                  max_cg_iterations: int = 500, newton_tolerance_n: float = 1e-2, max_newton: int = 2,
-                 second_order: bool = True, support: SupportArrays | None = None, tets: TetArrays | None = None):
+                 second_order: bool = True, support: SupportArrays | None = None, tets: TetArrays | None = None,
+                 preconditioner: str = "auto", threads: int = 1):
+        if preconditioner not in PRECONDITIONERS:
+            raise ValueError(f"parameter preconditioner must be one of {', '.join(PRECONDITIONERS)}, "
+                             f"got {preconditioner!r}")
         self.springs = springs
         self.support = support or SupportArrays.none()
         self.tets = tets if tets is not None else TetArrays.none()
@@ -119,6 +135,14 @@ class ImplicitEuler:
         self.newton_tolerance_n = float(newton_tolerance_n)
         self.max_newton = int(max_newton)
         self.second_order = bool(second_order)
+        #: Whether the PCG adds the coarse correction to block-Jacobi.
+        self.two_level = preconditioner == "two_level" or (preconditioner == "auto"
+                                                           and self.n_nodes >= TWO_LEVEL_MIN_NODES)
+        #: Threads of the PCG (pcg.pcg_parallel above one).
+        self.threads = max(1, int(threads))
+        self._partial = SERIAL if self.threads == 1 else np.zeros((self.threads, self.n_nodes, 3))
+        self._aggregate: np.ndarray | None = None
+        self._coarse: dict[float, CoarseSpace] = {}
         edges = len(springs.node_i)
         # unsigned indices spare numba's negative-index wraparound in the inner loops
         self._node_i = springs.node_i.astype(np.uint32)
@@ -154,6 +178,9 @@ class ImplicitEuler:
         second = bdf2_start(x, v, x_last, v_last, x_prev, v_prev, inv_mass,
                             self.second_order and history.dt_s == dt)
         h = 2.0 * dt / 3.0 if second else float(dt)
+        if self.two_level and h not in self._coarse:  # the system at x for the coarse space of this h
+            self._assemble_at_rest(x, inv_mass, np.zeros_like(x), environment_damping, h)
+        coarse = self._coarse_space(h, x, inv_mass)
         s = self.springs
         contact, self.last_cg_iterations, self.last_newton_iterations, self.last_residual_n = implicit_step(
             x, v, inv_mass, external_force, np.asarray(gravity, dtype=np.float64), float(environment_damping),
@@ -161,12 +188,38 @@ class ImplicitEuler:
             self._unit, self._iso, self._axial, self._shift, self._diagonal, *self.support, self.tets, contacts.nodes,
             contacts.weights,
             contacts.normal, contacts.offset_m, contacts.normal_speed_m_s, contacts.stiffness_n_per_m,
-            contacts.damping_ns_per_m, self._coefficient, self._preconditioner, history.warm, self.cg_tolerance,
-            self.max_cg_iterations, self.newton_tolerance_n, self.max_newton, self._work)
+            contacts.damping_ns_per_m, self._coefficient, self._preconditioner, coarse, history.warm, self.cg_tolerance,
+            self.max_cg_iterations, self.newton_tolerance_n, self.max_newton, self._work, self._partial)
         x_last[:], v_last[:] = x, v
         history.dt_s = float(dt)
         self.last_second_order = second
         return contact
+
+    @property
+    def solver(self) -> str:
+        """Which solver the steps take: 'pcg block-jacobi' or 'pcg two-level' (with its aggregates once built), and
+        its threads when more than one (their count sets the order of the sums)."""
+        threads = f", {self.threads} threads" if self.threads > 1 else ""
+        if not self.two_level:
+            return f"pcg block-jacobi{threads}"
+        built = {c.aggregates for c in self._coarse.values()}
+        return f"pcg two-level{threads}" + (f", {built.pop()} aggregates" if len(built) == 1 else "")
+
+    def _coarse_space(self, h: float, x: np.ndarray, inv_mass: np.ndarray) -> CoarseSpace:
+        """The coarse space of step length `h` (none without the two-level preconditioner); the first time, built
+        from the system last assembled, which must be the one of `h` at `x`."""
+        if not self.two_level:
+            return NO_COARSE_SPACE
+        coarse = self._coarse.get(h)
+        if coarse is None:
+            if self._aggregate is None:
+                self._aggregate = aggregates(*node_graph(self.n_nodes, np.stack([self._node_i, self._node_j], axis=1),
+                                                         self.tets.tets[:, [0, 1, 0, 2, 0, 3, 1, 2, 1, 3, 2, 3]]))
+            coarse = build_coarse_space(x, self._aggregate, (
+                self._node_i, self._node_j, self._unit, self._iso, self._axial, self._shift, inv_mass, self.tets,
+                self._tet_weight))
+            self._coarse[h] = coarse
+        return coarse
 
     def matrix(self) -> scipy.sparse.csr_matrix:
         """The spring, support, mass and damping part of the last assembled system matrix, (3N, 3N) sparse
@@ -199,7 +252,7 @@ class ImplicitEuler:
         self._assemble_at_rest(x, inv_mass, np.zeros_like(x), environment_damping, h)
         b = np.where((inv_mass > 0.0)[:, None], load, 0.0)
         solution = np.where((inv_mass > 0.0)[:, None], guess / (h * h), 0.0)
-        self._solve(inv_mass, b, solution, COMPLIANCE_TOLERANCE)
+        self._solve(inv_mass, b, solution, COMPLIANCE_TOLERANCE, self._coarse_space(h, x, inv_mass))
         guess[:] = solution * (h * h)
         return float(np.einsum("ij,ij->", b, guess))
 
@@ -221,7 +274,8 @@ class ImplicitEuler:
             if residual <= tolerance_n:
                 return f
             step = np.zeros_like(x)
-            self._solve(inv_mass, np.where(free, f * (h * h), 0.0), step, STATIC_CG_TOLERANCE)
+            self._solve(inv_mass, np.where(free, f * (h * h), 0.0), step, STATIC_CG_TOLERANCE,
+                        self._coarse_space(h, x, inv_mass))
             x += step
         raise RuntimeError(f"no static equilibrium within {max_iterations} Newton iterations "
                            f"(largest residual force {residual:.3g} N)")
@@ -243,13 +297,15 @@ class ImplicitEuler:
         block_jacobi(self._diagonal, inv_mass, no.nodes, no.weights, no.normal, np.zeros(0), self._preconditioner)
         return f
 
-    def _solve(self, inv_mass: np.ndarray, b: np.ndarray, solution: np.ndarray, tolerance: float) -> None:
-        """solution ← A⁻¹·b by PCG from `solution` (the last assembled system, no contacts)."""
+    def _solve(self, inv_mass: np.ndarray, b: np.ndarray, solution: np.ndarray, tolerance: float,
+               coarse: CoarseSpace) -> None:
+        """solution ← A⁻¹·b by PCG from `solution` (the last assembled system, no contacts) with `coarse`."""
         r, z, p, q = (np.zeros_like(b) for _ in range(4))
         no = Contacts.none()
-        pcg(self._node_i, self._node_j, self._unit, self._iso, self._axial, self._shift, inv_mass, no.nodes,
-            no.weights, no.normal, np.zeros(0), self.tets, self._tet_weight, self._preconditioner, b, solution,
-            tolerance, self.max_cg_iterations, r, z, p, q)
+        solve = pcg_parallel if self.threads > 1 else pcg
+        solve(self._node_i, self._node_j, self._unit, self._iso, self._axial, self._shift, inv_mass, no.nodes,
+              no.weights, no.normal, np.zeros(0), self.tets, self._tet_weight, self._preconditioner, coarse, b,
+              solution, tolerance, self.max_cg_iterations, r, z, p, q, self._partial)
 
     def warm_up(self) -> None:
         """Compile the kernels (numba, cached on disk) before a timed loop starts."""
@@ -259,6 +315,7 @@ class ImplicitEuler:
         contacts = node_contacts(np.array([0]), np.array([[0.0, 0.0, 1.0]]), np.array([0.0]), np.array([0.0]),
                                  1.0, 0.0)
         probe = ImplicitEuler(springs, self.n_nodes, max_cg_iterations=1, max_newton=0, support=self.support,
+                              preconditioner="two_level",
                               tets=self.tets._replace(quaternion=self.tets.quaternion.copy(),
                                                       rotation=self.tets.rotation.copy(),
                                                       rotated_gradients=self.tets.rotated_gradients.copy()))

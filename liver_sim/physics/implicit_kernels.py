@@ -31,7 +31,7 @@ import numpy as np
 
 from liver_sim.physics.fem_kernels import tet_terms
 from liver_sim.physics.pairs import add_pair
-from liver_sim.physics.pcg import block_jacobi, pcg
+from liver_sim.physics.pcg import block_jacobi, pcg, pcg_parallel
 
 
 @numba.njit(cache=True)
@@ -235,13 +235,15 @@ def bdf2_start(x, v, x_last, v_last, x_prev, v_prev, inv_mass, second_order):
 def implicit_step(x, v, inv_mass, external, gravity, c_env, h, node_i, node_j, inv_rest, lambda1, lambda2, mu,
                   unit, iso, axial, shift, diagonal, support_nodes, support_rest, support_stiffness,
                   support_damping, tet_law, nodes, weights, normal, offset, speed, stiffness,
-                  damping, coefficient, preconditioner, warm, tolerance, max_iterations, newton_tolerance,
-                  max_newton, work):
+                  damping, coefficient, preconditioner, coarse, warm, tolerance, max_iterations, newton_tolerance,
+                  max_newton, work, partial):
     """One linearised backward-Euler step of x, v in place (see the module docstring), then Newton
     iterations while the nonlinear residual exceeds `newton_tolerance` (N) on some node, up to
     `max_newton`.  `tet_law`: the tetrahedra of the 'fem' law (physics.fem_kernels.TetArrays; none for the
-    springs').  `warm` holds the previous Δv (start of the solve; overwritten).  `work` is
-    (10, N, 3) scratch.  Returns (contact force on the liver at the new state (3,), CG iterations,
+    springs').  `coarse`: the preconditioner's coarse space (physics.coarse_space; none: block-Jacobi alone).
+    `warm` holds the previous Δv (start of the solve; overwritten).  `work` is
+    (10, N, 3) scratch; `partial` pcg.SERIAL for one thread, else (threads, N, 3): the solve on the threads
+    (pcg.pcg_parallel).  Returns (contact force on the liver at the new state (3,), CG iterations,
     Newton iterations, final residual (N))."""
     f, ky, rhs, x0, v0, r, z, p, q, zero = work
     zero[:] = 0.0
@@ -267,9 +269,14 @@ def implicit_step(x, v, inv_mass, external, gravity, c_env, h, node_i, node_j, i
     contact = np.zeros(3)
     while True:
         block_jacobi(diagonal, inv_mass, nodes, weights, normal, coefficient, preconditioner)
-        total_iterations += pcg(node_i, node_j, unit, iso, axial, shift, inv_mass, nodes, weights, normal,
-                                coefficient, tet_law, tet_weight, preconditioner, rhs, warm, tolerance,
-                                max_iterations, r, z, p, q)
+        if partial.shape[0] > 1:
+            total_iterations += pcg_parallel(node_i, node_j, unit, iso, axial, shift, inv_mass, nodes, weights, normal,
+                                             coefficient, tet_law, tet_weight, preconditioner, coarse, rhs, warm,
+                                             tolerance, max_iterations, r, z, p, q, partial)
+        else:
+            total_iterations += pcg(node_i, node_j, unit, iso, axial, shift, inv_mass, nodes, weights, normal,
+                                    coefficient, tet_law, tet_weight, preconditioner, coarse, rhs, warm, tolerance,
+                                    max_iterations, r, z, p, q, partial)
         advance(x, x0, v, v0, warm, inv_mass, h)
         assemble(x, v, zero, inv_mass, external, gravity, c_env, h, node_i, node_j, inv_rest, lambda1, lambda2, mu,
                  unit, iso, axial, shift, diagonal, f, ky, False)

@@ -27,6 +27,10 @@ TISSUE_LAWS = ("springs", "fem")
 #: contact probe at its closest points; 'surface', a ball meets the skin as a surface, a penalty per unit area at
 #: every skin node and face it presses (implicit integrator only).
 CONTACT_MODELS = ("probe", "surface")
+#: The preconditioners of the implicit step's PCG (physics.pcg): 'block_jacobi', 'two_level' (block-Jacobi plus the
+#: coarse correction of physics.coarse_space), or 'auto': two-level on livers of implicit.TWO_LEVEL_MIN_NODES nodes
+#: and more.  Each keeps the answer within the solver's tolerance; they differ in iterations.
+PRECONDITIONERS = ("auto", "block_jacobi", "two_level")
 #: How the liver is held (physics.support): 'organ' (anchored where a liver is held) or 'paper' (§3.1's scene).
 SUPPORTS = ("organ", "paper")
 #: The default liver's supports (physics.support), spheres (x, y, z, radius; m) with a stiffness per unit
@@ -120,6 +124,7 @@ class ModelParams:
     `contact_model` 'probe' (default): Eq. 3 with one penalty `contact_stiffness_n_per_m` per contact probe;
     'surface': a ball tool (sphere, capsule) meets the skin as a surface, `contact_stiffness_per_area_n_per_m3` per
     unit area of every node and face it presses (contact.surface_contacts; implicit integrator only).
+    `preconditioner`: the implicit step's PCG preconditioner (PRECONDITIONERS; 'auto' by default).
     With `tearing`, an interior face whose stretch across it exceeds `tear_strain_parenchyma`
     (`tear_strain_capsule` for a face with an edge on the capsule) opens (P13, §2.6).
     """
@@ -148,6 +153,7 @@ class ModelParams:
     tearing: bool = False
     tear_strain_parenchyma: float = 0.4
     tear_strain_capsule: float = 0.5
+    preconditioner: str = "auto"
 
     def __post_init__(self):
         if self.substeps is None and self.integrator in INTEGRATOR_SUBSTEPS:
@@ -217,6 +223,8 @@ class ModelParams:
             raise ValueError(f"parameter integrator must be one of {INTEGRATORS}, got {self.integrator!r}")
         if not (isinstance(self.substeps, int) and 1 <= self.substeps <= 10_000):
             raise ValueError(f"parameter substeps must be an integer in 1..10000, got {self.substeps!r}")
+        if self.preconditioner not in PRECONDITIONERS:
+            raise ValueError(f"parameter preconditioner must be one of {PRECONDITIONERS}, got {self.preconditioner!r}")
         if not isinstance(self.tearing, bool):
             raise ValueError(f"parameter tearing must be True or False, got {self.tearing!r}")
         for name in ("tear_strain_parenchyma", "tear_strain_capsule"):

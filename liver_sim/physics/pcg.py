@@ -1,44 +1,40 @@
-"""Block-Jacobi preconditioned conjugate gradients, matrix-free, on the implicit step's system
-A = M − h·D − h²·K (physics.implicit_kernels): A·p, the preconditioner, the solve.  The operator's parts: the
-springs (u, iso, axial per spring), the tetrahedra of the 'fem' law (physics.fem_kernels, none with the springs'
-law), the contacts.
+"""Preconditioned conjugate gradients, matrix-free, on the implicit step's system A = M − h·D − h²·K
+(physics.implicit_kernels): A·p, the preconditioners, the solve.  The operator's parts: the springs (u, iso, axial per
+spring), the tetrahedra of the 'fem' law (physics.fem_kernels, none with the springs' law), the contacts.
 
-Solver, chosen by measurement: preconditioned conjugate gradients, block-Jacobi (the 3×3 diagonal
-blocks, contacts included), matrix-free (per spring only u, and the scalars of B), started from the
-previous step's Δv, stopped at ‖r‖ ≤ cg_tolerance·‖b‖ (default 1e-3; the Newton residual check
-guards the result).  Milliseconds per step, assembly included, one thread, this 2-core machine
-while other jobs ran (median of 120 steps / 10th percentile), h = 1/150 s, default parameters,
-a loaded perturbed liver (20 and 48 CG iterations):
-
-    mesh                           unknowns   PCG matrix-free   PCG block CSR   SuperLU factor + solve
-    default liver (1155 tets)          1002   0.31 / 0.30       0.40 / 0.38     6.8–9.7  (solve 0.13)
-    liver ~10k tets (9991 tets)        6735   5.1  / 4.0        6.0  / 5.4      274–346  (solve 4.9–5.8)
-
-The values change at every step (the axes turn, the cubic law stiffens, contacts come and go), so
-a factorisation (scipy's SuperLU, COLAMD; L+U hold 0.16 M and 4.3 M entries) would be redone each
-step, 20–70× slower than PCG; on the 10k liver its triangular solves alone cost a whole PCG step.
-The matrix is dominated by M + h·C, whose block-Jacobi conditioning is fair, and consecutive
-steps differ little, so PCG needs few iterations.  Matrix-free beats a block CSR pattern (built
-once per topology, 9 stored values per block) because it reads 5 numbers per spring instead of 36.
+The solve starts from the previous step's Δv and stops at ‖r‖ ≤ cg_tolerance·‖b‖ (default 1e-3; the Newton residual
+check guards the result).  Preconditioner: block-Jacobi (the 3×3 diagonal blocks, contacts included), and on larger
+livers the additive two-level one, block-Jacobi plus a coarse correction on rigid aggregates of nodes
+(physics.coarse_space), which keeps the iterations nearly flat as the mesh is refined (README, "What to expect on a
+2-core machine", for the iterations and costs).  Why this solver: the values change at every step (the axes turn, the
+cubic law stiffens, contacts come and go), so a sparse factorisation would be redone each step (SuperLU: 20–70× the
+cost of the solve), and matrix-free beats a block CSR pattern because it reads 5 numbers per spring instead of 36.
+The coarse matrix, small and dense, is factored once per topology and step length: a preconditioner need not follow
+the values exactly to leave the answer unchanged.
 """
 from __future__ import annotations
 
 import numba
+import numpy as np
 
+from liver_sim.physics.coarse_space import coarse_correction
 from liver_sim.physics.fem_kernels import tet_apply
 from liver_sim.physics.pairs import add_pair
 
+#: The `partial` of a serial solve: no per-thread slices, one chunk.
+SERIAL = np.zeros((1, 0, 3))
 
-@numba.njit(cache=True)
-def apply(node_i, node_j, unit, iso, axial, shift, inv_mass, nodes, weights, normal, coefficient, tet_law, tet_weight,
-          p, out):
-    """out = A·p, matrix-free: shift·p, each spring's B·(p_i − p_j) to i and its opposite to j, the tetrahedra of
-    the 'fem' law (`tet_law`, a fem_kernels.TetArrays, scaled by `tet_weight` = h² + h·τ; fem_kernels.tet_apply) and
-    the active contacts' (h·c + h²·k)·w_a·w_b·nnᵀ.  p must vanish on held nodes; out does there too."""
-    for n in range(p.shape[0]):
-        for a in range(3):
-            out[n, a] = shift[n] * p[n, a]
-    for s in range(node_i.shape[0]):
+
+@numba.njit(cache=True, inline="always")
+def _chunk(c, chunks, count):
+    """The range (first, last) of chunk c of `count` items cut into `chunks`."""
+    return c * count // chunks, (c + 1) * count // chunks
+
+
+@numba.njit(cache=True, inline="always")
+def _springs_times(node_i, node_j, unit, iso, axial, p, first, last, out):
+    """out += each spring's B·(p_i − p_j) to i and its opposite to j, B = iso·I + axial·uuᵀ, springs first..last−1."""
+    for s in range(first, last):
         i, j = node_i[s], node_j[s]
         dx = p[i, 0] - p[j, 0]
         dy = p[i, 1] - p[j, 1]
@@ -48,7 +44,36 @@ def apply(node_i, node_j, unit, iso, axial, shift, inv_mass, nodes, weights, nor
         t = axial[s] * (ux * dx + uy * dy + uz * dz)
         bx, by, bz = g * dx + t * ux, g * dy + t * uy, g * dz + t * uz
         add_pair(out, i, j, bx, by, bz)
-    tet_apply(tet_law, tet_weight, p, out)
+
+
+@numba.njit(cache=True, inline="always")
+def _apply(node_i, node_j, unit, iso, axial, shift, inv_mass, nodes, weights, normal, coefficient, tet_law, tet_weight,
+           p, out, partial):
+    """out = A·p (see `apply`).  With `partial` of (chunks > 1, N, 3), the springs and tetrahedra in `chunks` chunks
+    on the threads, each into its own slice, summed per node after shift·p in chunk order (no atomics; the same
+    sums whatever thread runs a chunk)."""
+    chunks = partial.shape[0]
+    springs, elements = node_i.shape[0], tet_law.tets.shape[0]
+    if chunks <= 1:
+        for n in range(p.shape[0]):
+            for a in range(3):
+                out[n, a] = shift[n] * p[n, a]
+        _springs_times(node_i, node_j, unit, iso, axial, p, 0, springs, out)
+        tet_apply(tet_law, tet_weight, p, 0, elements, out)
+    else:
+        for c in numba.prange(chunks):
+            own = partial[c]
+            own[:] = 0.0
+            first, last = _chunk(c, chunks, springs)
+            _springs_times(node_i, node_j, unit, iso, axial, p, first, last, own)
+            first, last = _chunk(c, chunks, elements)
+            tet_apply(tet_law, tet_weight, p, first, last, own)
+        for n in numba.prange(p.shape[0]):
+            for a in range(3):
+                total = shift[n] * p[n, a]
+                for c in range(chunks):
+                    total += partial[c, n, a]
+                out[n, a] = total
     for e in range(nodes.shape[0]):
         if coefficient[e] == 0.0:
             continue
@@ -70,6 +95,16 @@ def apply(node_i, node_j, unit, iso, axial, shift, inv_mass, nodes, weights, nor
         if inv_mass[n] == 0.0:
             for a in range(3):
                 out[n, a] = 0.0
+
+
+@numba.njit(cache=True)
+def apply(node_i, node_j, unit, iso, axial, shift, inv_mass, nodes, weights, normal, coefficient, tet_law, tet_weight,
+          p, out):
+    """out = A·p, matrix-free: shift·p, each spring's B·(p_i − p_j) to i and its opposite to j, the tetrahedra of
+    the 'fem' law (`tet_law`, a fem_kernels.TetArrays, scaled by `tet_weight` = h² + h·τ; fem_kernels.tet_apply) and
+    the active contacts' (h·c + h²·k)·w_a·w_b·nnᵀ.  p must vanish on held nodes; out does there too."""
+    _apply(node_i, node_j, unit, iso, axial, shift, inv_mass, nodes, weights, normal, coefficient, tet_law, tet_weight,
+           p, out, np.zeros((1, 0, 3)))
 
 
 @numba.njit(cache=True)
@@ -105,56 +140,114 @@ def _invert_symmetric(a):
     a[2, 0], a[2, 1], a[2, 2] = c02 * scale, c12 * scale, c22 * scale
 
 
-@numba.njit(cache=True)
-def pcg(node_i, node_j, unit, iso, axial, shift, inv_mass, nodes, weights, normal, coefficient, tet_law, tet_weight,
-        preconditioner, b, z0, tolerance, max_iterations, r, z, p, q):
-    """Solve A·z = b by block-Jacobi preconditioned conjugate gradients from z0 (overwritten by z);
-    stops when ‖r‖ ≤ tolerance·‖b‖.  Returns the iterations used."""
-    apply(node_i, node_j, unit, iso, axial, shift, inv_mass, nodes, weights, normal, coefficient, tet_law, tet_weight,
-          z0, q)
+@numba.njit(cache=True, inline="always")
+def _block_jacobi_node(preconditioner, r, z, n, rz):
+    """z[n] ← D⁻¹_n·r[n]; returns rz + r[n]·z[n], added term by term."""
+    for a in range(3):
+        z[n, a] = (preconditioner[n, a, 0] * r[n, 0] + preconditioner[n, a, 1] * r[n, 1]
+                   + preconditioner[n, a, 2] * r[n, 2])
+        rz += r[n, a] * z[n, a]
+    return rz
+
+
+@numba.njit(cache=True, inline="always")
+def _dot(u, w, chunks, sums):
+    """u·w over (N, 3) arrays, node chunk by node chunk (each chunk's sum in order, then the chunks' in order)."""
+    count = u.shape[0]
+    for c in numba.prange(chunks):
+        first, last = _chunk(c, chunks, count)
+        total = 0.0
+        for n in range(first, last):
+            for a in range(3):
+                total += u[n, a] * w[n, a]
+        sums[c, 0] = total
+    total = 0.0
+    for c in range(chunks):
+        total += sums[c, 0]
+    return total
+
+
+@numba.njit(cache=True, inline="always")
+def _pcg(node_i, node_j, unit, iso, axial, shift, inv_mass, nodes, weights, normal, coefficient, tet_law, tet_weight,
+         preconditioner, coarse, b, z0, tolerance, max_iterations, r, z, p, q, partial):
+    """`pcg`'s iterations; the products (`_apply`) and the vector updates in partial.shape[0] chunks of springs,
+    elements and nodes (prange: on the threads of a parallel dispatcher, in order in a serial one)."""
+    two_level = coarse.factor.shape[0] > 0
+    chunks = partial.shape[0]
     count = b.shape[0]
-    b_norm2 = 0.0
+    sums = np.zeros((chunks, 2))
+    _apply(node_i, node_j, unit, iso, axial, shift, inv_mass, nodes, weights, normal, coefficient, tet_law, tet_weight,
+           z0, q, partial)
     for n in range(count):
         for a in range(3):
             r[n, a] = b[n, a] - q[n, a]
-            b_norm2 += b[n, a] * b[n, a]
-    target = tolerance * tolerance * b_norm2
-    rz = 0.0
-    r_norm2 = 0.0
-    for n in range(count):
-        for a in range(3):
-            z[n, a] = (preconditioner[n, a, 0] * r[n, 0] + preconditioner[n, a, 1] * r[n, 1]
-                       + preconditioner[n, a, 2] * r[n, 2])
-            p[n, a] = z[n, a]
-            rz += r[n, a] * z[n, a]
-            r_norm2 += r[n, a] * r[n, a]
+    target = tolerance * tolerance * _dot(b, b, chunks, sums)
+    for c in numba.prange(chunks):
+        first, last = _chunk(c, chunks, count)
+        rz, r_norm2 = 0.0, 0.0
+        for n in range(first, last):
+            rz = _block_jacobi_node(preconditioner, r, z, n, rz)
+            for a in range(3):
+                r_norm2 += r[n, a] * r[n, a]
+        sums[c, 0], sums[c, 1] = rz, r_norm2
+    rz, r_norm2 = 0.0, 0.0
+    for c in range(chunks):
+        rz += sums[c, 0]
+        r_norm2 += sums[c, 1]
+    if two_level:
+        coarse_correction(coarse, inv_mass, r, z)
+        rz = _dot(r, z, chunks, sums)
+    p[:] = z
     iterations = 0
     while r_norm2 > target and iterations < max_iterations:
-        apply(node_i, node_j, unit, iso, axial, shift, inv_mass, nodes, weights, normal, coefficient, tet_law,
-              tet_weight, p, q)
-        pq = 0.0
-        for n in range(count):
-            for a in range(3):
-                pq += p[n, a] * q[n, a]
+        _apply(node_i, node_j, unit, iso, axial, shift, inv_mass, nodes, weights, normal, coefficient, tet_law,
+               tet_weight, p, q, partial)
+        pq = _dot(p, q, chunks, sums)
         if pq <= 0.0:
             break
         alpha = rz / pq
-        r_norm2 = 0.0
-        for n in range(count):
-            for a in range(3):
-                z0[n, a] += alpha * p[n, a]
-                r[n, a] -= alpha * q[n, a]
-                r_norm2 += r[n, a] * r[n, a]
-        rz_new = 0.0
-        for n in range(count):
-            for a in range(3):
-                z[n, a] = (preconditioner[n, a, 0] * r[n, 0] + preconditioner[n, a, 1] * r[n, 1]
-                           + preconditioner[n, a, 2] * r[n, 2])
-                rz_new += r[n, a] * z[n, a]
+        for c in numba.prange(chunks):
+            first, last = _chunk(c, chunks, count)
+            r_norm2, rz_new = 0.0, 0.0
+            for n in range(first, last):
+                for a in range(3):
+                    z0[n, a] += alpha * p[n, a]
+                    r[n, a] -= alpha * q[n, a]
+                    r_norm2 += r[n, a] * r[n, a]
+                rz_new = _block_jacobi_node(preconditioner, r, z, n, rz_new)
+            sums[c, 0], sums[c, 1] = r_norm2, rz_new
+        r_norm2, rz_new = 0.0, 0.0
+        for c in range(chunks):
+            r_norm2 += sums[c, 0]
+            rz_new += sums[c, 1]
+        if two_level:
+            coarse_correction(coarse, inv_mass, r, z)
+            rz_new = _dot(r, z, chunks, sums)
         beta = rz_new / rz
         rz = rz_new
-        for n in range(count):
+        for n in numba.prange(count):
             for a in range(3):
                 p[n, a] = z[n, a] + beta * p[n, a]
         iterations += 1
     return iterations
+
+
+@numba.njit(cache=True)
+def pcg(node_i, node_j, unit, iso, axial, shift, inv_mass, nodes, weights, normal, coefficient, tet_law, tet_weight,
+        preconditioner, coarse, b, z0, tolerance, max_iterations, r, z, p, q, partial):
+    """Solve A·z = b by preconditioned conjugate gradients from z0 (overwritten by z): block-Jacobi, plus the
+    coarse correction of `coarse` (a coarse_space.CoarseSpace; none: block-Jacobi alone); stops when
+    ‖r‖ ≤ tolerance·‖b‖.  Returns the iterations used.  One thread, `partial` SERIAL (`pcg_parallel`: on the
+    threads).  With SERIAL its sums run node by node in order."""
+    return _pcg(node_i, node_j, unit, iso, axial, shift, inv_mass, nodes, weights, normal, coefficient, tet_law,
+                tet_weight, preconditioner, coarse, b, z0, tolerance, max_iterations, r, z, p, q, partial)
+
+
+@numba.njit(cache=True, parallel=True)
+def pcg_parallel(node_i, node_j, unit, iso, axial, shift, inv_mass, nodes, weights, normal, coefficient, tet_law,
+                 tet_weight, preconditioner, coarse, b, z0, tolerance, max_iterations, r, z, p, q, partial):
+    """`pcg` on the threads: springs, elements and nodes in partial.shape[0] chunks, `partial` (chunks, N, 3) the
+    chunks' own sums of A·p.  The sums' order depends on the chunks alone, so a run repeats itself bit for bit with
+    the same thread count; against `pcg` it differs by rounding."""
+    return _pcg(node_i, node_j, unit, iso, axial, shift, inv_mass, nodes, weights, normal, coefficient, tet_law,
+                tet_weight, preconditioner, coarse, b, z0, tolerance, max_iterations, r, z, p, q, partial)

@@ -56,7 +56,8 @@ class Structure:
     `mesh` (its rest points, m), `capsule_triangles` (the skin triangles carrying capsule springs: the whole skin
     until a tear or a cut opens faces), lumped `masses_kg` (N,), sorted `fixed_nodes`, the Eq. 1 `springs` (and
     `spring_arrays`, their kernel form), the `support` ties (physics.support), the `params` (their `substeps`
-    raised after a change when an explicit integrator needs it), `parallel` (the explicit kernel on all threads),
+    raised after a change when an explicit integrator needs it), `parallel` (the explicit kernel and the implicit
+    step's PCG on all threads),
     `stable_dt_s` (the explicit step's bound; inf for the implicit integrator), `version` (0, then one more per
     change); the work arrays of the explicit kernels (`work`) and the implicit integrator (`solver`), whose
     contents are scratch, overwritten by every step.
@@ -80,6 +81,11 @@ class Structure:
     def implicit(self) -> bool:
         """True when the integrator is linearised backward Euler (no stability bound on the step)."""
         return self.params.integrator == "implicit_euler"
+
+    @property
+    def step_solver(self) -> str:
+        """What steps the liver: the implicit step's solver (ImplicitEuler.solver), else the explicit integrator."""
+        return self.solver.solver if self.implicit else self.params.integrator
 
     @property
     def frame_period_s(self) -> float:
@@ -150,7 +156,8 @@ def build_structure(mesh: TetMesh, params: ModelParams, capsule_triangles: np.nd
                                   springs.lambda2_n, springs.mu_ns_per_m),
                      support, parallel, bound, version,
                      WorkArrays(np.zeros((n, 3)), np.zeros((threads, n, 3)), parallel),
-                     ImplicitEuler(springs, n, support=support, tets=tets))
+                     ImplicitEuler(springs, n, support=support, tets=tets, preconditioner=params.preconditioner,
+                                   threads=threads))
 
 
 def initial_structure(mesh: TetMesh, params: ModelParams | None = None, parallel: bool | None = None) -> Structure:

@@ -221,6 +221,7 @@ def resimulate(bag: Path, out: Path, overrides=(), storage: str = "mcap", progre
 
         session.emit = emit
         session.run(poses, input_topic, input_key)
+        writer.set_custom_data("physics_solver", session.model.structure.step_solver)
         counts = dict(writer.counts)
     wall = time.perf_counter() - started
     simulated = poses[-1][0] - poses[0][0]
@@ -229,7 +230,8 @@ def resimulate(bag: Path, out: Path, overrides=(), storage: str = "mcap", progre
                "refused_poses": pipeline.refused_poses, "frames": pipeline.frames, "commands": session.commands,
                "divergences": session.model.divergences, "simulated_s": simulated, "wall_s": wall,
                "speed_vs_real_time": simulated / wall if wall > 0 else None,
-               "peak_command_n": session.peak_force_n, "counts": counts}
+               "peak_command_n": session.peak_force_n, "physics_solver": session.model.structure.step_solver,
+               "counts": counts}
     progress(f"wrote {out}: {pipeline.frames} physics frames, {session.commands} force commands "
              f"(peak {session.peak_force_n:.3f} N), {simulated:.2f} s simulated in {wall:.2f} s")
     return summary

@@ -35,8 +35,14 @@ def test_physics_bench_reports_the_default_liver_first_and_agrees_with_numpy():
         assert 0.0 < rows["implicit_euler"]["max_position_error_vs_reference_m"] < 1e-3
         for row in rows.values():
             assert row["ms_per_frame_1thread"] > 0 and row["ms_per_frame_all_threads"] > 0
-            assert row["realtime_factor_150hz"] > 0
+            assert row["realtime_factor_150hz"] > 0 and row["realtime_factor_all_threads"] > 0
+        assert rows["implicit_euler"]["cg_iterations_per_step"] > 0
+        assert rows["implicit_euler"]["solver"].startswith("pcg ")
+        assert 0 < result["model_rss_mb"] < result["peak_rss_mb"]
+        assert result["peak_rss_mb_per_100k_tets"] == pytest.approx(result["peak_rss_mb"] / result["tetrahedra"] * 1e5,
+                                                                    rel=0.01)
     assert "default_implicit_ms_per_frame_1thread_max" in report["met"]
+    assert rows["implicit_euler"]["solver"].startswith("pcg two-level")  # ~3000 tets: over TWO_LEVEL_MIN_NODES
     json.dumps(report)
 
 
