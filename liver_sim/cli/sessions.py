@@ -125,10 +125,13 @@ def fig8(args) -> int:
 
 
 def add_report_command(commands) -> None:
-    """``liver-sim report BAG [--out DIR]``."""
+    """``liver-sim report BAG [--out DIR] [--tool NAME]``."""
     parser = commands.add_parser("report", help="plots and summary of a recorded or re-simulated session")
     parser.add_argument("bag", type=Path, metavar="BAG", help="rosbag2 bag folder")
     parser.add_argument("--out", type=Path, default=None, help="output folder (default: BAG_report)")
+    parser.add_argument("--tool", default="", metavar="NAME",
+                        help="the tool of a session with several (its topics under /NAME); default: the root "
+                             "namespace's")
     parser.set_defaults(handler=report)
 
 
@@ -136,7 +139,7 @@ def report(args) -> int:
     # this command's own modules, loaded when it runs (module docstring)
     from liver_sim.sessions.report import write_report
 
-    write_report(args.bag, _output(args, "_report"), _progress)
+    write_report(args.bag, _output(args, "_report"), _progress, args.tool)
     return 0
 
 
