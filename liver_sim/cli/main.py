@@ -23,7 +23,7 @@ from pathlib import Path
 from liver_sim.base.link import LINK_PARAMETERS, LinkSettings
 from liver_sim.base.parameters import check_parameter
 from liver_sim.base.process_settings import DISCOVERY_RANGES, keep_dds_local, use_dds_profile
-from liver_sim.cli.arguments import positive_float, positive_int
+from liver_sim.cli.arguments import add_tools_argument, positive_float, positive_int
 from liver_sim.cli.bench import add_bench_command
 from liver_sim.cli.sessions import (
     add_bag_command,
@@ -284,7 +284,7 @@ def demo(args) -> int:
 
 def add_view_command(commands) -> None:
     """``liver-sim view [--host H] [--port P] [--rate HZ] [--allow-remote] [--picture PNG] [--duration S]
-    [--summary JSON]``."""
+    [--summary JSON] [--tools NAME …]``."""
     parser = commands.add_parser("view", help="serve the running network to the Foxglove app (a WebSocket on "
                                               f"{DEFAULT_HOST}:{DEFAULT_PORT}): the deforming liver, tool, local "
                                               "model, forces and diagnostics")
@@ -299,6 +299,7 @@ def add_view_command(commands) -> None:
     parser.add_argument("--summary", type=Path, default=None, metavar="JSON",
                         help="at exit, write what was served into this JSON file (scenes, seconds, scenes_per_s, "
                              "refused_messages, tick_errors)")
+    add_tools_argument(parser, "show")
     parser.set_defaults(handler=view)
 
 
@@ -311,7 +312,7 @@ def view(args) -> int:
     if not 0 <= args.port <= 65535:
         raise ValueError(f"--port must lie in [0, 65535], got {args.port}")
     serve(args.host, args.port, args.rate, args.allow_remote, args.picture, args.duration,
-          lambda line: print(line, flush=True), args.summary)
+          lambda line: print(line, flush=True), args.summary, args.tools)
     return 0
 
 

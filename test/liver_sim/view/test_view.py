@@ -21,6 +21,7 @@ from liver_sim.view.scene import (
     lip_edges,
     opened_triangles,
     plane_patch,
+    scene_tool,
 )
 
 LIVER = default_liver()
@@ -39,7 +40,7 @@ def test_the_scene_holds_every_skin_triangle_coloured_by_its_displacement():
     untouched = ~np.isin(LIVER.skin, LIVER.skin[0]).any(axis=1)
     assert np.allclose(scene.colours[LIVER.skin[untouched]], REST_COLOUR)
     assert len(scene.lips) == 0                                    # no topology change
-    start, end = force_arrow(scene)
+    start, end = force_arrow(scene.tools[0])
     assert end - start == pytest.approx([0.0, 0.0, 0.5 * scene_module.ARROW_M_PER_N])
 
 
@@ -128,6 +129,27 @@ def test_scene_updates_read_back_with_the_advertised_schema():
     assert skin_triangles(entities, bytes(schema.data)) == len(LIVER.skin)
     assert len(entities["tool"]["spheres"]) == 1 and len(entities["force"]["arrows"]) == 1
     assert len(entities["local_model"]["triangles"]) == 1 and "lines" not in entities["lips"]
+
+
+def test_two_tools_show_each_with_its_local_model_and_force(tmp_path):
+    """Two hands: each tool's sphere, local model and force arrow, under its name; the picture draws both."""
+    from foxglove.messages import SceneUpdate
+
+    from liver_sim.view.foxglove_scene import scene_update
+    from liver_sim.view.picture import draw_scene
+
+    tools = (scene_tool(np.array([-0.04, 0.0, 0.08]), local_model=PLANE, force_n=np.array([0.0, 0.0, -1.5]),
+                        name="left"),
+             scene_tool(np.array([0.03, 0.0, 0.06]), force_n=np.array([0.0, 0.0, 0.7]), name="right"))
+    scene = build_scene(LIVER.points, LIVER.points, LIVER.skin, None, tools=tools)
+    assert scene.largest_force_n == pytest.approx(1.5) and scene.tools[0].tool_tip_m[0] == pytest.approx(-0.04)
+    schema = SceneUpdate.get_schema()
+    entities = decode_scene(scene_update(scene, 1_500_000_000).encode(), bytes(schema.data))
+    assert {"left/tool", "left/local_model", "left/force", "right/tool", "right/local_model", "right/force"} <= set(
+        entities)
+    assert len(entities["left/local_model"]["triangles"]) == 1 and "triangles" not in entities["right/local_model"]
+    assert len(entities["right/force"]["arrows"]) == 1 and len(entities["left/tool"]["spheres"]) == 1
+    assert draw_scene(scene, tmp_path / "two.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
 def wait_for(condition, timeout_s: float, what: str, every=None) -> None:
