@@ -28,7 +28,7 @@ from liver_sim.view.scene import build_scene, lip_edges, scene_tool
 
 #: How far (m) the left hand's script raises the grasped edge (the tissue rises less: the pull holds the stylus
 #: back against the hand, and the tool first pushes the edge down a little as it closes on it).
-LIFT_M = 0.024
+LIFT_M = 0.018
 #: The hands: where each works on the default liver (x, y m of the upper skin), its tool's use (the physics' NAME.
 #: parameters) and its simulated hand's script (phantom_sim's parameters). After DEVICE_START_DELAY_S, the left
 #: closes on the edge and lifts it from 2 s to 4 s; the right touches at 1 s, is 8 mm deep when the lift starts,
@@ -48,8 +48,11 @@ HANDS = {
 #: The scene's length (s) from when every node runs: the right hand has left the surface (its cut) by then.
 DURATION_S = 15.0
 #: The left's lift runs from when its stylus has risen this share of its rise (from its lowest to its highest
-#: after that) to when it has risen all but this share.
+#: within LIFT_WITHIN_S after that) to when it has risen all but this share.
 LIFT_EDGE = 0.1
+#: Where the stylus's highest is looked for (s after its lowest): the hand's hold and lift (2.5 s) and a second more,
+#: well before the right's cut frees the tissue (8.3 s) and the held edge, pulling less, lets the stylus rise further.
+LIFT_WITHIN_S = 3.5
 #: What the right's force is taken over (s) before the lift starts and after it ends: its median.
 FORCE_WINDOW_S = 0.2
 #: The liver's edge the left lifts: the nodes at rest within this distance (m, in the xy plane) of the left's spot.
@@ -78,14 +81,15 @@ def resimulate_command(bag: Path) -> list[str]:
 
 
 def lift_window(arrival_s: np.ndarray, positions_m: np.ndarray) -> tuple[float, float, float] | None:
-    """(start s, end s, rise m) of the left stylus's lift (device frame z, rise from its lowest to its highest
-    after that): from when it has risen LIFT_EDGE of the rise to when it has risen all but LIFT_EDGE; None without a
-    rise."""
+    """(start s, end s, rise m) of the left stylus's lift (device frame z, rise from its lowest to its highest within
+    LIFT_WITHIN_S after that): from when it has risen LIFT_EDGE of the rise to when it has risen all but LIFT_EDGE;
+    None without a rise."""
     if len(arrival_s) < 2:
         return None
     z = positions_m[:, 2]
     low = int(np.argmin(z))
-    high = low + int(np.argmax(z[low:]))
+    within = int(np.searchsorted(arrival_s, arrival_s[low] + LIFT_WITHIN_S, side="right"))
+    high = low + int(np.argmax(z[low:within]))
     rise = float(z[high] - z[low])
     if rise <= 0.0:
         return None
