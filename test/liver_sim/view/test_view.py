@@ -242,6 +242,20 @@ def test_the_live_view_serves_the_running_network_to_a_foxglove_client(recorded_
     assert (recorded_demo.out / "view.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
+def test_the_live_view_shows_both_tools_their_local_models_and_forces(two_hands_demo):
+    from liver_sim.studies.two_hands import HANDS
+
+    assert two_hands_demo.view is not None, "the Foxglove client never connected to the view"
+    _, channels, received = two_hands_demo.view
+    schema = schema_bytes(channels["/liver/scene"])
+    scenes = [decode_scene(data, schema) for _, _, data in received["/liver/scene"]]
+    for name in HANDS:
+        assert any(scene[f"{name}/tool"].get("spheres") for scene in scenes), name
+        assert any(scene[f"{name}/force"].get("arrows") for scene in scenes), name
+        assert any(scene[f"{name}/local_model"] for scene in scenes), name
+    assert any(f'"{name}"'.encode() in data for _, _, data in received["/liver/forces"] for name in HANDS)
+
+
 def mcap_schemas(path) -> dict[str, tuple[str, str, bytes]]:
     """{topic: (schema name, schema encoding, schema data)} of an MCAP file, from its uncompressed Schema (0x03)
     and Channel (0x04) records (MCAP repeats them in the summary section)."""
