@@ -105,7 +105,7 @@ def run_demo(out_dir: Path, duration_s: float | None = None, progress=print, rec
         plot_topology(run, spec.title, mesh, out_dir)
     progress(f"physics {summary['physics']['rate_hz']:.1f} Hz, haptic {summary['haptic']['rate_hz']:.1f} Hz "
              f"(period error p99 {1e3 * (summary['haptic']['period_error_p99_s'] or 0):.2f} ms; "
-             f"{_gaps_line(summary)}), "
+             f"{gaps_line(summary)}), "
              f"peak force "
              f"{summary['peak_haptic_force_n']:.2f} N"
              + (f", residual displacement {summary['final_displacement_m'] * 1e3:.2f} mm"
@@ -155,7 +155,7 @@ def network_summary(run: NetworkRun, mesh) -> dict:
     return summary
 
 
-def _gaps_line(summary: dict, stalls: dict | None = None) -> str:
+def gaps_line(summary: dict, stalls: dict | None = None) -> str:
     """How many command gaps over GAP_S there were (a device summary), how many held a stall of the machine itself,
     and those stalls (`stalls`: the run's, default the summary's own)."""
     gaps, stalls = summary["haptic_gaps_over_5ms"], stalls or summary["machine_stalls"]
@@ -179,7 +179,7 @@ def _network_markdown(summary: dict, title: str) -> str:
         f"- haptic commands: {haptic['rate_hz']:.1f} Hz ({haptic['samples']} commands), period error p50 "
         f"{ms(haptic['period_error_p50_s'])}, p99 {ms(haptic['period_error_p99_s'])}, largest gap "
         f"{ms(haptic['max_gap_s'])}",
-        f"- {_gaps_line(summary)}: the machine stalls when it runs none of its threads that are due (a virtual "
+        f"- {gaps_line(summary)}: the machine stalls when it runs none of its threads that are due (a virtual "
         f"CPU its host did not run), measured by a sentinel per CPU at SCHED_FIFO 99 "
         f"(liver_sim/running/machine_stalls.py)",
         f"- peak force sent to the device: {summary['peak_haptic_force_n']:.3f} N; physics contact force peak "

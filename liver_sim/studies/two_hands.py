@@ -22,7 +22,7 @@ from liver_sim.mesh.landmarks import upper_skin_point
 from liver_sim.mesh.liver_shape import default_liver
 from liver_sim.running.network import DEVICE_START_DELAY_S, NetworkRun, closed_loop_plan, run_network, wire_rates
 from liver_sim.sessions.record import recorder_command
-from liver_sim.studies.demo import _gaps_line, device_summary, network_summary
+from liver_sim.studies.demo import device_summary, gaps_line, network_summary
 from liver_sim.view.picture import draw_scene
 from liver_sim.view.scene import build_scene, lip_edges, scene_tool
 
@@ -158,7 +158,7 @@ def run_two_hands(out_dir: Path, duration_s: float | None = None, progress=print
     for name, device in summary["devices"].items():
         progress(f"{name}: haptic {device['haptic']['rate_hz']:.1f} Hz (period error p99 "
                  f"{1e3 * (device['haptic']['period_error_p99_s'] or 0):.2f} ms; "
-                 f"{_gaps_line(device, summary['machine_stalls'])}), peak force {device['peak_haptic_force_n']:.2f} N")
+                 f"{gaps_line(device, summary['machine_stalls'])}), peak force {device['peak_haptic_force_n']:.2f} N")
     progress(f"physics {summary['physics']['rate_hz']:.1f} Hz; {_coupling_line(summary['coupling'])}; "
              f"{summary['topology_changes']} topology change(s)")
     progress(f"wrote {out_dir}/summary.json, summary.md, force.png, liver_two_hands.png and logs/"
@@ -190,7 +190,7 @@ def _markdown(summary: dict) -> str:
                   f"- haptic commands on {device['force_topic']}: {haptic['rate_hz']:.1f} Hz ({haptic['samples']} "
                   f"commands), period error p50 {ms(haptic['period_error_p50_s'])}, p99 "
                   f"{ms(haptic['period_error_p99_s'])}, largest gap {ms(haptic['max_gap_s'])}",
-                  f"- {_gaps_line(device, summary['machine_stalls'])}",
+                  f"- {gaps_line(device, summary['machine_stalls'])}",
                   f"- peak force sent to the device {device['peak_haptic_force_n']:.3f} N; physics contact force peak "
                   f"{device['peak_physics_force_n']:.3f} N; largest change between consecutive 1 ms commands in "
                   f"contact {device['largest_force_jump_n']:.4f} N", ""]
