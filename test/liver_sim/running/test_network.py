@@ -390,6 +390,19 @@ def test_domain_occupants_name_product_nodes_devices_and_bridges_but_not_observe
                                        "node /omni_driver publishing /phantom/measured_cp", "node /phantom_sim"]
 
 
+def test_domain_occupants_are_found_in_every_namespace_of_the_graph():
+    """A device side of two hands in /left and a driver publishing /right/phantom/measured_cp occupy the domain as
+    much as those of the root namespace."""
+    publishers = {"/right/phantom/measured_cp": [SimpleNamespace(node_name="omni_driver", node_namespace="/right")]}
+    graph = SimpleNamespace(get_name=lambda: "liver_sim_listener",
+                            get_node_names_and_namespaces=lambda: [("haptic_bridge", "/left"),
+                                                                   ("_haptic_bridge_loop", "/left"),
+                                                                   ("omni_driver", "/right"), ("rviz", "/")],
+                            get_publishers_info_by_topic=lambda topic: publishers.get(topic, []))
+    assert domain_occupants(graph) == ["node /left/haptic_bridge",
+                                       "node /right/omni_driver publishing /right/phantom/measured_cp"]
+
+
 def test_floor_bench_runs_the_three_bare_hops_and_reports_their_cost(ros_domain_id, tmp_path):
     import json
 
