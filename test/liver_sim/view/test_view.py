@@ -1,5 +1,6 @@
 """The live view: its scene (no ROS), its Foxglove messages read back as the app reads them, its address check, the
 view of a running network through a real Foxglove WebSocket client, and recorded sessions Foxglove can open."""
+import json
 import struct
 import subprocess
 import sys
@@ -11,6 +12,7 @@ import pytest
 from foxglove_client import VIEW_TOPICS, field_numbers, fields, packed_count, schema_bytes
 
 from liver_sim.base.local_model import LocalModel
+from liver_sim.base.process_settings import config_dir
 from liver_sim.mesh.liver_shape import default_liver
 from liver_sim.view import scene as scene_module
 from liver_sim.view.scene import (
@@ -253,7 +255,13 @@ def test_the_live_view_shows_both_tools_their_local_models_and_forces(two_hands_
         assert any(scene[f"{name}/tool"].get("spheres") for scene in scenes), name
         assert any(scene[f"{name}/force"].get("arrows") for scene in scenes), name
         assert any(scene[f"{name}/local_model"] for scene in scenes), name
-    assert any(f'"{name}"'.encode() in data for _, _, data in received["/liver/forces"] for name in HANDS)
+    # each hand's forces, under its name, where the layout's plot reads them (config/foxglove_layout.json)
+    forces = json.loads(received["/liver/forces"][-1][2])
+    plot = json.loads((config_dir() / "foxglove_layout.json").read_text())["configById"]["Plot!forces"]
+    read = [path["value"].split(".")[1:] for path in plot["paths"] if path["value"].startswith("/liver/forces.")]
+    for name in HANDS:
+        assert [name, "device_command_norm_n"] in read and [name, "physics_force_norm_n"] in read
+        assert {"device_command_norm_n", "physics_force_norm_n"} <= set(forces[name])
 
 
 def mcap_schemas(path) -> dict[str, tuple[str, str, bytes]]:
