@@ -5,7 +5,9 @@ import time
 
 import numpy as np
 import pytest
+import rclpy
 
+from liver_sim.base.geometry.device_map import DeviceMap
 from liver_sim.bench.loop import HAND_SPOTS_XY
 from liver_sim.mesh.landmarks import upper_skin_point
 from liver_sim.mesh.liver_shape import default_liver
@@ -13,6 +15,8 @@ from liver_sim.running.network import closed_loop_plan, side_label
 from liver_sim.sessions.bag import read_messages
 from liver_sim.sessions.resimulate import resimulate
 from liver_sim.studies.two_hands import HANDS, hands_tools, lift_window, resimulate_command
+from msg_defs.device_map import device_map_message
+from msg_defs.topics import TOPICS
 
 from network_clients import Network
 
@@ -94,9 +98,10 @@ def test_a_two_hand_session_is_resimulated_byte_for_byte_with_both_force_streams
         assert any(m.topic == f"/{name}/phantom/servo_cf" for m in first)
 
 
-def test_stopping_one_side_zeroes_its_device_and_leaves_the_other_pressing(ros_domain_id, tmp_path):
-    """Both hands press and hold; the left's bridge is stopped: its last command is zero, no other node publishes on
-    its device's topic, and the right's device goes on feeling the liver."""
+def test_each_bridge_keeps_to_its_device_its_map_and_its_zero(ros_domain_id, tmp_path):
+    """Both hands press and hold. No node but a side's own bridge publishes on its device's topic; a map for the left
+    from a node named liver_tool outside /left (not the left's tool node) is refused and turns nothing; the left's
+    bridge is stopped: its last command is zero, and the right's device goes on feeling the liver."""
     mesh = default_liver()
     plan = closed_loop_plan(tools={name: {"phantom_sim": {
         "script": "press", "approach_s": 0.2, "press_s": 0.3,
@@ -114,6 +119,17 @@ def test_stopping_one_side_zeroes_its_device_and_leaves_the_other_pressing(ros_d
         for name in HAND_SPOTS_XY:  # each device's commands come from its own side's bridge only
             publishers = network.listener.get_publishers_info_by_topic(f"/{name}/phantom/servo_cf")
             assert publishers and {info.node_namespace for info in publishers} == {f"/{name}"}
+        intruder = rclpy.create_node("liver_tool", context=network.context)  # in the root namespace
+        try:
+            maps = intruder.create_publisher(TOPICS["device_map"].type, "/left/tool/device_map",
+                                             TOPICS["device_map"].qos)
+            published = time.monotonic()
+            maps.publish(device_map_message(DeviceMap((1.0, 0.0, 0.0, 0.0))))  # would turn the left's force 180°
+            network.wait_for(lambda: int(network.listener.diagnostics.get("left/haptic_bridge: loop", {}).get(
+                "bad_device_map", 0)) >= 1, 15.0, "the foreign map refused")
+            assert network.forces_since(published, "left")[:, 2].min() >= 0.0  # never turned against the press
+        finally:
+            intruder.destroy_node()
         assert network.processes.stop(side_label("haptic_bridge", "left")) == {"haptic_bridge_left": 0}
         stopped = time.monotonic()
         network.wait_for(lambda: len(forces("right", stopped + 0.5)) > 200, 10.0, "the right's commands after the stop")
