@@ -16,6 +16,7 @@ from liver_sim.sessions.bag import read_messages
 from liver_sim.sessions.resimulate import resimulate
 from liver_sim.studies.two_hands import HANDS, hands_tools, lift_window, resimulate_command
 from msg_defs.device_map import device_map_message
+from msg_defs.forces import force_message_type
 from msg_defs.topics import TOPICS
 
 from network_clients import Network
@@ -100,8 +101,9 @@ def test_a_two_hand_session_is_resimulated_byte_for_byte_with_both_force_streams
 
 def test_each_bridge_keeps_to_its_device_its_map_and_its_zero(ros_domain_id, tmp_path):
     """Both hands press and hold. No node but a side's own bridge publishes on its device's topic; a map for the left
-    from a node named liver_tool outside /left (not the left's tool node) is refused and turns nothing; the left's
-    bridge is stopped: its last command is zero, and the right's device goes on feeling the liver."""
+    from a node named liver_tool outside /left (not the left's tool node) is refused and turns nothing; a rival on the
+    left's force topic holds the left at zero, not the right; the left's bridge is stopped: its last command is zero,
+    and the right's device goes on feeling the liver."""
     mesh = default_liver()
     plan = closed_loop_plan(tools={name: {"phantom_sim": {
         "script": "press", "approach_s": 0.2, "press_s": 0.3,
@@ -128,6 +130,16 @@ def test_each_bridge_keeps_to_its_device_its_map_and_its_zero(ros_domain_id, tmp
             network.wait_for(lambda: int(network.listener.diagnostics.get("left/haptic_bridge: loop", {}).get(
                 "bad_device_map", 0)) >= 1, 15.0, "the foreign map refused")
             assert network.forces_since(published, "left")[:, 2].min() >= 0.0  # never turned against the press
+            # a rival on the left's device (another bridge, a driver's echo): the left holds zero, the right goes on
+            rival = intruder.create_publisher(force_message_type("wrench_stamped"), "/left/phantom/servo_cf",
+                                              TOPICS["servo_cf"].qos)
+            rivalled = time.monotonic()
+            network.wait_for(lambda: len(left := forces("left", rivalled)) > 20 and not left[-20:].any(), 15.0,
+                             "the left at zero beside its rival")
+            assert forces("right", rivalled).max() > 0.1
+            intruder.destroy_publisher(rival)
+            gone = time.monotonic()
+            network.wait_for(lambda: forces("left", gone).max(initial=0.0) > 0.1, 15.0, "the left driving again")
         finally:
             intruder.destroy_node()
         assert network.processes.stop(side_label("haptic_bridge", "left")) == {"haptic_bridge_left": 0}
