@@ -108,3 +108,16 @@ def test_tools_away_a_node_held_twice_and_the_explicit_integrators_are_refused_o
         LiverModel(liver, ModelParams(integrator="symplectic_euler"), [ToolContact(name="a"), ToolContact(name="b")])
     with pytest.raises(ValueError, match="each once"):
         LiverModel(liver, tool=[ToolContact(name="a"), ToolContact(name="a")])
+
+
+def test_two_tools_in_one_place_pass_through_each_other_and_both_press_the_tissue(liver):
+    """Tools touching each other are not solved: they do not collide, each meets only the tissue, so two pressing at
+    one place both feel it push back, and the frame stays finite."""
+    model = two_hands(liver, left_mode="press", right_mode="press")
+    spot = top(liver, 0.0, -0.035)
+    for k in range(60):
+        pose = ToolPose(spot + [0.0, 0.0, RADIUS_M - 0.006 * min(1.0, k / 30)])
+        result = model.step_frame(pose, pose)
+    assert result.divergence is None and np.isfinite(model.state.positions).all()
+    left, right = result.tool_forces_n
+    assert left[2] > 0.1 and right[2] > 0.1  # each pushed back by the tissue, neither by the other tool
