@@ -1,12 +1,13 @@
 """The haptic bridge's parameters (no ROS): declared by the `haptic_bridge` node, read by BridgeTick and by
-the offline sessions (liver_sim.sessions), so both refuse the same values.
+the offline sessions (liver_sim.sessions), so both refuse the same values. Topic names and the map's node are
+relative: a bridge started in a namespace (`__ns:=/left`) takes them there, one in the root namespace today's.
 
 The device map is not among them: the bridge takes the one `liver_tool` publishes on device_map_topic
 (latched), so the map that places the tool and the map that turns the force can never differ."""
 from haptic_bridge.safety import DEFAULT_MAX_FORCE_N, PHANTOM_MAX_FORCE_N
 from liver_sim.base.link import LINK_PARAMETERS
 from liver_sim.base.parameters import Param, parameter_record, realtime_priority_parameter
-from liver_sim.base.topic_names import FORCE_OUTPUT_FORMATS, TOPIC_NAMES
+from liver_sim.base.topic_names import FORCE_OUTPUT_FORMATS, tool_topic
 
 MODES = ("plane", "sphere", "none")
 PARAMETERS = {
@@ -69,17 +70,18 @@ PARAMETERS = {
                              "physics period, the T of its passivity check", 1.0, 5000.0),
     "drives_device": Param(True, "false: force_topic drives no device (a comparison bridge); a rendering that "
                            "is not passive is then reported, not refused"),
-    "device_map_topic": Param(TOPIC_NAMES["device_map"], "the device map liver_tool publishes (latched); no "
+    "device_map_topic": Param(tool_topic("device_map"), "the device map liver_tool publishes (latched); no "
                               "force is rendered before it arrives"),
-    "device_map_node": Param("/liver_tool", "the only node (fully qualified name) whose device map the bridge "
-                             "takes: maps on device_map_topic while any other node publishes there are refused"),
+    "device_map_node": Param("liver_tool", "the only node whose device map the bridge takes: maps on "
+                             "device_map_topic from any other node are refused; a relative name is the node of that "
+                             "name in the bridge's own namespace (/left/liver_tool for a bridge in /left)"),
     "force_output": Param("wrench_stamped", "message type of the force command", choices=FORCE_OUTPUT_FORMATS),
-    "force_topic": Param(TOPIC_NAMES["servo_cf"], "force command to the device driver"),
-    "measured_cp_topic": Param(TOPIC_NAMES["measured_cp"], "the device's stylus pose, device frame (PoseStamped, "
+    "force_topic": Param(tool_topic("servo_cf"), "force command to the device driver"),
+    "measured_cp_topic": Param(tool_topic("measured_cp"), "the device's stylus pose, device frame (PoseStamped, "
                                "CRTK measured_cp): the loop's 1 kHz input, placed in the liver frame with the device "
                                "map"),
-    "local_model_topic": Param(TOPIC_NAMES["contact_plane"], "local model from the physics (Marker)"),
-    "tool_wrench_topic": Param(TOPIC_NAMES["tool_wrench"], "physics contact force on the tool, liver frame "
+    "local_model_topic": Param(tool_topic("contact_plane"), "local model from the physics (Marker)"),
+    "tool_wrench_topic": Param(tool_topic("tool_wrench"), "physics contact force on the tool, liver frame "
                                "(WrenchStamped); rendered with local_model: none"),
     "device_frame_id": Param("phantom_base", "frame_id of the force command"),
     **LINK_PARAMETERS,  # on the inputs from the other side of a teleoperation link

@@ -36,6 +36,7 @@ rclpy or matplotlib.
 """
 import os
 import socket
+from contextlib import contextmanager
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
@@ -71,7 +72,7 @@ def pytest_unconfigure(config):
 
 
 #: Fixtures that give a test a ROS domain of its own: what starting ROS processes or contexts takes.
-ROS_FIXTURES = frozenset({"ros_domain_id", "ros_env", "recorded_demo"})
+ROS_FIXTURES = frozenset({"ros_domain_id", "ros_env", "recorded_demo", "two_hands_demo"})
 #: Tests (name prefixes, parameters included) that open an rclpy context in this process without those
 #: fixtures: `liver-sim replay` on a bag that is found damaged only once its publishers are up.
 ROS_WITHOUT_FIXTURE = ("test_a_damaged_bag_is_refused_with_a_clear_error[replay-",)
@@ -185,6 +186,19 @@ def free_port() -> int:
         return probe.getsockname()[1]
 
 
+@contextmanager
+def own_domain():
+    """A ROS domain of its own for a session fixture's run: locked (claim_domain_id) and set as ROS_DOMAIN_ID while
+    the block runs."""
+    domain_id, handle = claim_domain_id(exclude={SESSION_DOMAIN_ID})
+    try:
+        with pytest.MonkeyPatch.context() as patch:
+            patch.setenv("ROS_DOMAIN_ID", str(domain_id))
+            yield domain_id
+    finally:
+        handle.close()
+
+
 @pytest.fixture(scope="session")
 def recorded_demo(tmp_path_factory):
     """`liver-sim demo --record --view` (the press scenario, RECORDED_DEMO_S) run once per session in a ROS domain
@@ -200,23 +214,50 @@ def recorded_demo(tmp_path_factory):
     from network_clients import Tally
 
     out = tmp_path_factory.mktemp("recorded_demo")
-    domain_id, handle = claim_domain_id(exclude={SESSION_DOMAIN_ID})
-    try:
-        with pytest.MonkeyPatch.context() as patch:
-            patch.setenv("ROS_DOMAIN_ID", str(domain_id))
-            tally = Tally()
-            port = free_port()
-            watcher = Watcher(port, list(VIEW_TOPICS))
-            try:
-                summary = run_demo(out, duration_s=RECORDED_DEMO_S, progress=lambda line: None,
-                                   record_storage="mcap", view=["--port", str(port), "--rate", f"{VIEW_RATE_HZ:g}"],
-                                   extra_load=1, check_domain=False)  # the domain is the fixture's own
-            finally:
-                view = watcher.stop()
-                tally.close()
-    finally:
-        handle.close()
+    with own_domain():
+        tally = Tally()
+        port = free_port()
+        watcher = Watcher(port, list(VIEW_TOPICS))
+        try:
+            summary = run_demo(out, duration_s=RECORDED_DEMO_S, progress=lambda line: None,
+                               record_storage="mcap", view=["--port", str(port), "--rate", f"{VIEW_RATE_HZ:g}"],
+                               extra_load=1, check_domain=False)  # the domain is the fixture's own
+        finally:
+            view = watcher.stop()
+            tally.close()
     return RecordedDemo(out, summary, tally, view)
+
+
+@dataclass(frozen=True)
+class TwoHandsDemo:
+    """What the shared two-hand run left: `out` (summary.json/.md, force.png, liver_two_hands.png, view.png, logs/,
+    the bag in session/), the demo's `summary`, and `view`, what a Foxglove client received from its live view (as
+    RecordedDemo.view)."""
+
+    out: Path
+    summary: dict
+    view: tuple | None
+
+
+@pytest.fixture(scope="session")
+def two_hands_demo(tmp_path_factory):
+    """`liver-sim demo --tools 2 --record --view` (studies.two_hands: the left grasps and lifts the edge, the right
+    presses and cuts beside it) run once per session in a ROS domain of its own, with a Foxglove client of the view;
+    the tests of two hands share it."""
+    from foxglove_client import VIEW_TOPICS, Watcher
+
+    from liver_sim.studies.two_hands import run_two_hands
+
+    out = tmp_path_factory.mktemp("two_hands_demo")
+    with own_domain():
+        port = free_port()
+        watcher = Watcher(port, list(VIEW_TOPICS), enough=300, seconds=12.0)  # the lift and the cut
+        try:
+            summary = run_two_hands(out, progress=lambda line: None, record_storage="mcap",
+                                    view=["--port", str(port)], check_domain=False)  # the domain is the fixture's own
+        finally:
+            view = watcher.stop()
+    return TwoHandsDemo(out, summary, view)
 
 
 @pytest.fixture

@@ -103,11 +103,14 @@ def parameter_value(value) -> str:
     return str(value)
 
 
-def command_line(executable: str, overrides: dict | None = None, node_name: str | None = None) -> list[str]:
-    """The node's command line: its console script (or `python -m` when not installed) and its ROS args."""
+def command_line(executable: str, overrides: dict | None = None, node_name: str | None = None,
+                 namespace: str = "/") -> list[str]:
+    """The node's command line: its console script (or `python -m` when not installed) and its ROS args; in
+    `namespace` (`-r __ns:=`) unless the root."""
     script = Path(sys.executable).parent / executable
     program = [str(script)] if script.exists() else [sys.executable, "-m", NODE_MODULES[executable]]
-    args = program + ["--ros-args", "--params-file", str(config_dir() / f"{executable}.yaml")]
+    args = program + ["--ros-args"] + (["-r", f"__ns:={namespace}"] if namespace != "/" else [])
+    args += ["--params-file", str(config_dir() / f"{executable}.yaml")]
     if node_name:
         args += ["-r", f"__node:={node_name}"]
     for name, value in (overrides or {}).items():

@@ -1,6 +1,7 @@
-"""`liver-sim bench loop`: the four nodes in closed loop (R4 of docs/paper.md), watched from outside as a rig
-would: rates and period errors on the wire, pose-to-force latency, the Fig. 8 smoothness ratio, what each
-process cost, each against its target, beside the machine's own stalls."""
+"""`liver-sim bench loop`: the four nodes in closed loop (R4 of docs/paper.md), or the physics and two device sides
+(`--tools 2`), watched from outside as a rig would: rates and period errors on the wire, pose-to-force latency per
+device, the Fig. 8 smoothness ratio, the physics frame's compute, what each process cost, each against its target,
+beside the machine's own stalls."""
 from __future__ import annotations
 
 import json
@@ -13,8 +14,11 @@ import numpy as np
 from liver_sim.analysis import contact_fraction, fig8_figures, held_wrench_baseline
 from liver_sim.base.process_settings import cli_command_line
 from liver_sim.bench.machine import machine
+from liver_sim.bench.physics import contact_frame_times
+from liver_sim.mesh.landmarks import upper_skin_point
+from liver_sim.mesh.liver_shape import default_liver
 from liver_sim.running.machine_stalls import stall_summary
-from liver_sim.running.network import closed_loop_plan, run_network, wire_gaps, wire_rates
+from liver_sim.running.network import ROOT_LABEL, closed_loop_plan, run_network, wire_gaps, wire_rates
 from liver_sim.sessions.parameters import node_parameters
 
 LOOP_TARGETS = {"physics_rate_hz": (147.0, 153.0), "haptic_rate_hz_min": 995.0, "haptic_period_error_p99_s_max": 0.0005,
@@ -38,80 +42,70 @@ MACHINE_STALL_SETTLE_S = 0.02
 FIG8_MAX_PERIOD_S = 0.0015
 
 
+#: `bench loop --tools 2`: where each hand explores the default liver (x, y m of the upper skin): the dome and the
+#: left lobe, 7.6 cm apart.
+HAND_SPOTS_XY = {"left": (-0.046, 0.004), "right": (0.03, 0.0)}
+
+
 def run_loop_bench(duration_s: float = 30.0, log_dir=None, progress=None, observers: dict | None = None,
-                   extra_load: bool = False, view: bool = False, check_domain: bool = True) -> dict:
+                   extra_load: bool = False, view: bool = False, check_domain: bool = True, tools: int = 1) -> dict:
     """The loop benchmark's JSON object (:func:`loop_run`); with `extra_load`, the same run follows with one
     core-bound process at normal priority beside the network, reported under `with_extra_load`; with `view`, the
     live view (`liver-sim view`) runs beside the network, its figures under `results.view`. `check_domain`: before
-    each run (network.run_network)."""
+    each run (network.run_network). `tools` 2: two device sides, each exploring its own spot (HAND_SPOTS_XY)."""
 
     log_dir = Path(log_dir or "out/bench_loop/logs")
-    report = loop_run(duration_s, log_dir, progress, observers, view=view, check_domain=check_domain)
+    report = loop_run(duration_s, log_dir, progress, observers, view=view, check_domain=check_domain, tools=tools)
     if view:
         report["results"]["view"] = view_figures(report["processes"], log_dir / VIEW_SUMMARY)
     if extra_load:
         (progress or (lambda line: None))("the same run with one core-bound process at normal priority beside it:")
         loaded = loop_run(duration_s, log_dir.with_name(log_dir.name + "_extra_load"), progress, observers, 1,
-                          check_domain=check_domain)
+                          check_domain=check_domain, tools=tools)
         report["with_extra_load"] = {key: loaded[key] for key in ("results", "processes", "cores_used",
                                                                    "load_average", "met")}
     return report
 
 
-def loop_run(duration_s: float, log_dir, progress=None, observers: dict | None = None, extra_load: int = 0,
-             view: bool = False, check_domain: bool = True) -> dict:
-    """One run of the four nodes in closed loop for `duration_s` (R4), watched by a listener as a rig would.
+def bench_plan(tools: int):
+    """The closed loop of the benchmark: the simulated hand explores the dome, looped; with `tools` 2 one hand per
+    spot of HAND_SPOTS_XY, each in its namespace."""
+    explore = {"loop_script": True, "script": "explore"}
+    if tools == 1:
+        return closed_loop_plan(extra={"phantom_sim": explore})
+    if tools != 2:
+        raise ValueError(f"--tools must be 1 or 2, got {tools}")
+    mesh = default_liver()
+    return closed_loop_plan(extra={"phantom_sim": explore}, tools={
+        name: {"phantom_sim": {"anchor_m": [round(float(v), 6) for v in upper_skin_point(mesh, xy)]}}
+        for name, xy in HAND_SPOTS_XY.items()})
 
-    Rates and period errors are given twice: as each node's own loop measured them (diagnostics)
-    and as the messages went on the wire (DDS publication times), over the `duration_s` in which all
-    nodes ran.  The pose-to-force latency runs from the publication of a device sample on /phantom/measured_cp to
-    that of the force command computed from it.  The Fig. 8 baseline (local_model none) is the node's
-    BridgeTick run offline at the live bridge's tick times on the physics wrenches and device samples the
-    listener received (analysis.held_wrench_baseline): no second live bridge.  `processes` gives what
-    each process cost over the window (network.process_costs: share of one core, context switches per
-    second), `load_average` the machine's before and after.  `observers` (label -> argv) run beside the
-    network (NetworkPlan.observers), e.g. a recorder; `extra_load` core-bound processes at normal priority
-    beside it (network.run_network); `view`: the live view too (its cost in `processes`).
 
-    Sentinels (liver_sim.running.machine_stalls, started by run_network) note when the machine itself ran nothing that
-    was due; each command gap over the target is listed with the part of it the machine
-    stalled (`haptic_gaps_over_target`), and the largest gap without those parts is a figure of its own, as
-    are the latency and Fig. 8 over the commands away from the stalls (from a stall's start to
-    MACHINE_STALL_SETTLE_S after its end: the simulated hand moved on meanwhile).
-    """
-
-    plan = closed_loop_plan(extra={"phantom_sim": {"loop_script": True, "script": "explore"}})
-    plan.observers.update(observers or {})
-    if view:  # the live view joins as a viewer would, beside the four nodes
-        plan.commands[VIEW] = cli_command_line("view", "--port", "0", "--summary", str(log_dir / VIEW_SUMMARY))
-    load_before = os.getloadavg()
-    run = run_network(plan, duration_s, log_dir, progress or (lambda line: None), extra_load=extra_load,
-                      check_domain=check_domain)
-    load_after = os.getloadavg()
+def device_figures(run, label: str) -> tuple[dict, dict]:
+    """(figures, met) of one device side of the run: its commands' rates and gaps on the wire, the device sample →
+    command latency, the Fig. 8 smoothness ratio against its offline baseline, each also away from machine stalls,
+    and what the listener saw as a neighbour (:func:`neighbour_figures`)."""
     start, end = run.window_s
-    sent = run.force_published_s["local_model"]
+    sent = run.force_published_s[label]
     inside = (sent >= start) & (sent <= end)
     sent_local = sent[inside]
-    force = run.forces["local_model"][1][inside]
-    latency = run.pose_to_force_s["local_model"][inside]
+    force = run.forces[label][1][inside]
+    latency = run.pose_to_force_s[label][inside]
     stalls = run.machine_stalls
     calm = np.ones(sent_local.size, dtype=bool)  # commands away from every machine stall
     for stall_start, stall_end in stalls:
         calm &= (sent_local < stall_start) | (sent_local > stall_end + MACHINE_STALL_SETTLE_S)
     latency_calm = latency[calm & np.isfinite(latency)]
     latency = latency[np.isfinite(latency)]
-    baseline = held_wrench_baseline(sent_local, run.wrench_arrival_s, run.wrench_n,
-                                    run.device_arrival_s, node_parameters(())["haptic_bridge"])
+    baseline = held_wrench_baseline(sent_local, run.wrench_arrival_s[label], run.wrench_n[label],
+                                    run.device_arrival_s[label], node_parameters(())["haptic_bridge"])
     fig8 = fig8_figures(force, baseline, sent_local, FIG8_MAX_PERIOD_S)
     fig8_calm = fig8_figures(force[calm], baseline[calm], sent_local[calm], FIG8_MAX_PERIOD_S)
-    on_wire = wire_rates(run)
-    gaps = wire_gaps(run, LOOP_TARGETS["haptic_max_gap_s_max"])
+    gaps = wire_gaps(run, LOOP_TARGETS["haptic_max_gap_s_max"], label)
     short = np.diff(sent_local)
     short = short[short <= LOOP_TARGETS["haptic_max_gap_s_max"]]
     figures = {
-        "physics_on_wire": on_wire["physics"],
-        "haptic_on_wire": on_wire["haptic"],
-        "node_loops": run.diagnostics,
+        "haptic_on_wire": wire_rates(run, label)["haptic"],
         "pose_to_force_p50_s": float(np.percentile(latency, 50)) if latency.size else None,
         "pose_to_force_p99_s": float(np.percentile(latency, 99)) if latency.size else None,
         "pose_to_force_p99_outside_machine_stalls_s": (float(np.percentile(latency_calm, 99)) if latency_calm.size
@@ -124,15 +118,12 @@ def loop_run(duration_s: float, log_dir, progress=None, observers: dict | None =
         "fig8_smoothness_ratio_steady": fig8["smoothness_ratio_steady"],
         "fig8_smoothness_ratio_outside_machine_stalls": fig8_calm["smoothness_ratio"],
         "commands_outside_machine_stalls": float(calm.mean()) if calm.size else 1.0,
-        "machine_stalls": stall_summary(stalls),
         "haptic_gaps_over_target": gaps,
         "haptic_max_gap_outside_machine_stalls_s": max([float(short.max(initial=0.0))]
                                                        + [gap["product_s"] for gap in gaps]),
     }
-    physics, haptic = figures["physics_on_wire"], figures["haptic_on_wire"]
-    t = LOOP_TARGETS
+    haptic, t = figures["haptic_on_wire"], LOOP_TARGETS
     met = {
-        "physics_rate_hz": t["physics_rate_hz"][0] <= physics["rate_hz"] <= t["physics_rate_hz"][1],
         "haptic_rate_hz_min": haptic["rate_hz"] >= t["haptic_rate_hz_min"],
         "haptic_period_error_p99_s_max": (haptic["period_error_p99_s"] or 1.0) <= t["haptic_period_error_p99_s_max"],
         "haptic_max_gap_s_max": (haptic["max_gap_s"] or 1.0) <= t["haptic_max_gap_s_max"],
@@ -147,20 +138,77 @@ def loop_run(duration_s: float, log_dir, progress=None, observers: dict | None =
             (figures["fig8_smoothness_ratio_outside_machine_stalls"] or 0.0)
             >= t["fig8_smoothness_ratio_outside_machine_stalls_min"]),
     }
-    neighbour = neighbour_figures(run)
+    neighbour = neighbour_figures(run, label)
     met.update({f"neighbour_{key}": value for key, value in neighbour.pop("met").items()})
     figures["neighbour"] = neighbour
+    return figures, met
+
+
+def loop_run(duration_s: float, log_dir, progress=None, observers: dict | None = None, extra_load: int = 0,
+             view: bool = False, check_domain: bool = True, tools: int = 1) -> dict:
+    """One run of the physics and `tools` device sides in closed loop for `duration_s` (R4), watched by a listener
+    as a rig would.
+
+    Rates and period errors are given twice: as each node's own loop measured them (diagnostics)
+    and as the messages went on the wire (DDS publication times), over the `duration_s` in which all
+    nodes ran.  Per device side (:func:`device_figures`; with two tools under `devices`, by tool): the
+    pose-to-force latency, from the publication of a device sample on /phantom/measured_cp to that of the force
+    command computed from it, and the Fig. 8 baseline (local_model none), the node's BridgeTick run offline at the
+    live bridge's tick times on the physics wrenches and device samples the listener received
+    (analysis.held_wrench_baseline): no second live bridge.  `physics_frame_compute_p99_s` is the physics' own
+    measure of a frame's compute (diagnostics).  `processes` gives what each process cost over the window
+    (network.process_costs: share of one core, context switches per second), `load_average` the machine's before
+    and after.  `observers` (label -> argv) run beside the network (NetworkPlan.observers), e.g. a recorder;
+    `extra_load` core-bound processes at normal priority beside it (network.run_network); `view`: the live view too
+    (its cost in `processes`).
+
+    Sentinels (liver_sim.running.machine_stalls, started by run_network) note when the machine itself ran nothing that
+    was due; each command gap over the target is listed with the part of it the machine
+    stalled (`haptic_gaps_over_target`), and the largest gap without those parts is a figure of its own, as
+    are the latency and Fig. 8 over the commands away from the stalls (from a stall's start to
+    MACHINE_STALL_SETTLE_S after its end: the simulated hand moved on meanwhile).
+    """
+
+    plan = bench_plan(tools)
+    plan.observers.update(observers or {})
+    if view:  # the live view joins as a viewer would, beside the four nodes
+        names = [label for label in plan.namespaces if label != ROOT_LABEL]
+        plan.commands[VIEW] = cli_command_line("view", "--port", "0", "--summary", str(log_dir / VIEW_SUMMARY),
+                                               *(["--tools", *names] if names else []))
+    load_before = os.getloadavg()
+    run = run_network(plan, duration_s, log_dir, progress or (lambda line: None), extra_load=extra_load,
+                      check_domain=check_domain)
+    load_after = os.getloadavg()
+    physics = run.diagnostics.get("liver_physics: loop", {})
+    figures = {"physics_on_wire": wire_rates(run, next(iter(plan.namespaces)))["physics"],
+               "physics_frame_compute_p99_s": float(physics.get("frame_compute_p99_s", "nan")),
+               "node_loops": run.diagnostics, "machine_stalls": stall_summary(run.machine_stalls)}
+    met = {"physics_rate_hz": (LOOP_TARGETS["physics_rate_hz"][0] <= figures["physics_on_wire"]["rate_hz"]
+                               <= LOOP_TARGETS["physics_rate_hz"][1])}
+    if tools == 1:
+        device, device_met = device_figures(run, ROOT_LABEL)
+        figures.update(device)
+        met.update(device_met)
+    else:
+        figures["devices"] = {}
+        for label in plan.namespaces:
+            figures["devices"][label], device_met = device_figures(run, label)
+            met.update({f"{label}_{key}": value for key, value in device_met.items()})
+        figures["physics_frame_offline"] = contact_frame_times(
+            [upper_skin_point(default_liver(), xy) for xy in HAND_SPOTS_XY.values()])
     costs = run.process_costs
     share = {label: costs.get(label, {}).get("cpu_share_of_one_core", float("nan")) for label in costs}
-    figures["physics_bridge_tool_cores"] = sum(share.get(label, float("nan"))
-                                               for label in ("liver_physics", "haptic_bridge", "liver_tool"))
+    sides = [label for label in plan.commands if label.startswith(("haptic_bridge", "liver_tool"))]
+    figures["physics_bridge_tool_cores"] = sum(share.get(label, float("nan")) for label in ["liver_physics", *sides])
     met["physics_bridge_tool_cores_max"] = (figures["physics_bridge_tool_cores"]
-                                            <= COST_TARGETS["physics_bridge_tool_cores_max"])
-    met["phantom_sim_cores_max"] = share.get("phantom_sim", float("nan")) <= COST_TARGETS["phantom_sim_cores_max"]
-    return {"benchmark": "loop", "machine": machine(), "duration_s": duration_s, "results": figures,
-              "processes": costs, "cores_used": sum(c["cpu_share_of_one_core"] for c in costs.values()),
-              "load_average": {"before": list(load_before), "after": list(load_after)},
-              "targets": {**LOOP_TARGETS, **COST_TARGETS, "neighbour": NEIGHBOUR_TARGETS}, "met": met}
+                                            <= COST_TARGETS["physics_bridge_tool_cores_max"] * tools)
+    for label in plan.after_physics:
+        met[f"{label}_cores_max"] = share.get(label, float("nan")) <= COST_TARGETS["phantom_sim_cores_max"]
+    return {"benchmark": "loop", "machine": machine(), "duration_s": duration_s, "tools": tools,
+            "results": figures, "processes": costs,
+            "cores_used": sum(c["cpu_share_of_one_core"] for c in costs.values()),
+            "load_average": {"before": list(load_before), "after": list(load_after)},
+            "targets": {**LOOP_TARGETS, **COST_TARGETS, "neighbour": NEIGHBOUR_TARGETS}, "met": met}
 
 
 #: The live view's label among the processes of a run, and the file (in the run's log folder) of its summary.
@@ -178,18 +226,18 @@ def view_figures(costs: dict, summary: Path) -> dict:
     return {"cpu_share_of_one_core": costs.get(VIEW, {}).get("cpu_share_of_one_core"), "scenes_per_s": rate}
 
 
-def neighbour_figures(run) -> dict:
-    """What the listener, a client at normal priority beside the nodes, saw within the run's window: frames and
-    commands per second counted by their header stamps (ROS time), from each command's stamp (its device sample's)
-    to its reception here (p50, p99), and the longest wait between two commands' receptions; `met` against
-    NEIGHBOUR_TARGETS."""
+def neighbour_figures(run, label: str = ROOT_LABEL) -> dict:
+    """What the listener, a client at normal priority beside the nodes, saw within the run's window of device side
+    `label`: frames and commands per second counted by their header stamps (ROS time), from each command's stamp
+    (its device sample's) to its reception here (p50, p99), and the longest wait between two commands' receptions;
+    `met` against NEIGHBOUR_TARGETS."""
     wall_minus_monotonic = time.time() - time.monotonic()
     start, end = (t + wall_minus_monotonic for t in run.window_s)
     frames = run.nodes_stamp_s[(run.nodes_stamp_s >= start) & (run.nodes_stamp_s <= end)]
-    stamps = run.force_stamp_s["local_model"]
+    stamps = run.force_stamp_s[label]
     inside = (stamps >= start) & (stamps <= end)
-    latency = run.stamp_to_arrival_s["local_model"][inside]
-    arrivals = np.sort(run.forces["local_model"][0])
+    latency = run.stamp_to_arrival_s[label][inside]
+    arrivals = np.sort(run.forces[label][0])
     arrivals = arrivals[(arrivals >= run.window_s[0]) & (arrivals <= run.window_s[1])]
     figures = {"client": "the listener (this process, normal priority): /liver/nodes, /liver/surface, "
                          "/liver/tool_wrench, /phantom/measured_cp, /phantom/servo_cf, /diagnostics",

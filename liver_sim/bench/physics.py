@@ -28,6 +28,7 @@ from liver_sim.physics.contact import ToolPose
 from liver_sim.physics.model import LiverModel
 from liver_sim.physics.model_params import ModelParams
 from liver_sim.physics.structure import default_fixed_nodes
+from liver_sim.physics.tool_contact import ToolContact
 from liver_sim.studies.peers import NETWORK_POISSON_RATIO, liver_sim_press_force_n, time_mujoco_flex
 from liver_sim.tool.scripts import ScriptSettings, make_script
 
@@ -104,6 +105,30 @@ def scripted_press(mesh, tool_radius_m: float) -> list[ToolPose]:
                               clearance_m=0.002, approach_s=0.05, press_s=0.2, hold_s=0.05)
     script = make_script("press", settings)
     return [ToolPose(script.position_at((frame + 1) / 150.0)) for frame in range(int(round(script.duration_s * 150)))]
+
+
+def contact_frame_times(anchors, depth_m: float = 0.008, frames: int = 450, approach_frames: int = 60) -> dict:
+    """The physics frame's compute (LiverModel.step_frame, one thread) on the default liver with one tool pressing
+    `depth_m` into the skin at the first of `anchors` (m), and with a tool pressing into each of them at once:
+    {'one_contact': …, 'two_contacts': …} (two: as many as anchors), each the median and p99 (ms) of a frame over
+    `frames` frames, the first `approach_frames` (the tools going in) left out, and how many tools the last frame
+    found in contact."""
+    mesh, figures = default_liver(), {}
+    for label, count in (("one_contact", 1), ("two_contacts", len(anchors))):
+        model = LiverModel(mesh, tool=[ToolContact(name=f"tool{k}") for k in range(count)])
+        model.warm_up()
+        radius, elapsed = model.tool.shape.radius_m, []
+        for frame in range(frames):
+            depth = depth_m * min(1.0, frame / approach_frames)
+            poses = [ToolPose(np.asarray(anchor) + [0.0, 0.0, radius - depth]) for anchor in anchors[:count]]
+            start = time.perf_counter()
+            result = model.step_frame(*poses)
+            elapsed.append(time.perf_counter() - start)
+        ms = np.array(elapsed[approach_frames:]) * 1e3
+        touching = sum(bool(np.any(force)) for force in result.tool_forces_n)  # in the last frame
+        figures[label] = {"tools_in_contact": touching, "median_ms": float(np.median(ms)),
+                          "p99_ms": float(np.percentile(ms, 99)), "frames": int(ms.size)}
+    return figures
 
 
 def _run_frames(model: LiverModel, poses, reference_positions=None) -> tuple[float, float, list, float]:

@@ -165,9 +165,10 @@ def script_times(run) -> tuple[np.ndarray, np.ndarray]:
     published, force = run.force_published_s["local_model"], run.forces["local_model"][1]
     order = np.argsort(published, kind="stable")
     published, force = published[order], force[order]
-    positions = run.device_position_m
+    positions = run.device_position_m["local_model"]
     moved = np.linalg.norm(positions - positions[0], axis=1) > SCRIPT_START_MOTION_M if len(positions) else []
-    start = run.device_arrival_s[np.argmax(moved)] if np.any(moved) else published[0] if len(published) else 0.0
+    start = (run.device_arrival_s["local_model"][np.argmax(moved)] if np.any(moved)
+             else published[0] if len(published) else 0.0)
     keep = (published >= start) & (published <= run.window_s[1])
     return published[keep] - start, force[keep]
 
@@ -221,7 +222,8 @@ def teleop_row(variant: str, link: LinkSettings, run, reference, default_referen
     truth, generated = float(device.get("energy_to_hand_j", "nan")), float(device.get("energy_generated_max_j", "nan"))
     estimate = float(bridge.get("energy_to_hand_j", "nan"))
     stiffness = node_parameters(())["liver_physics"].contact_stiffness_n_per_m
-    wrench = np.linalg.norm(run.wrench_n, axis=1) if len(run.wrench_n) else np.zeros(1)
+    wrenches = run.wrench_n["local_model"]
+    wrench = np.linalg.norm(wrenches, axis=1) if len(wrenches) else np.zeros(1)
     oscillation = oscillating_s((times, force), script_times(reference))
     norm = np.linalg.norm(force, axis=1) if len(force) else np.zeros(1)
     return {"variant": variant, "passive_model_update": bridge.get("passive_model_update") == "True",

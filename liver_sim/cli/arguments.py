@@ -4,6 +4,8 @@ from __future__ import annotations
 import argparse
 import math
 
+from liver_sim.base.topic_names import TOOL_NAME
+
 
 def positive_int(text: str) -> int:
     """argparse type: an integer >= 1."""
@@ -25,3 +27,19 @@ def positive_float(text: str) -> float:
     if not (math.isfinite(value) and value > 0.0):
         raise argparse.ArgumentTypeError(f"{value} is not a finite number > 0")
     return value
+
+
+def tool_name(text: str) -> str:
+    """argparse type: a tool's name, its namespace under the root (letters, digits and _, starting with a letter)."""
+    if not TOOL_NAME.fullmatch(text):
+        raise argparse.ArgumentTypeError(f"{text!r} is not a tool name (letters, digits and _, starting with a "
+                                         "letter)")
+    return text
+
+
+def add_tools_argument(parser, what: str) -> None:
+    """--tools NAME …: the tools whose topics a command takes, each under /NAME (default: one in the root
+    namespace, `[""]`)."""
+    parser.add_argument("--tools", nargs="+", type=tool_name, default=[""], metavar="NAME",
+                        help=f"the tools whose topics to {what}, each under /NAME (default: one tool in the root "
+                             "namespace; `--tools left right` for two hands)")

@@ -23,7 +23,7 @@ from pathlib import Path
 from liver_sim.base.link import LINK_PARAMETERS, LinkSettings
 from liver_sim.base.parameters import check_parameter
 from liver_sim.base.process_settings import DISCOVERY_RANGES, keep_dds_local, use_dds_profile
-from liver_sim.cli.arguments import positive_float, positive_int
+from liver_sim.cli.arguments import add_tools_argument, positive_float, positive_int
 from liver_sim.cli.bench import add_bench_command
 from liver_sim.cli.sessions import (
     add_bag_command,
@@ -211,7 +211,8 @@ def traction(args) -> int:
 
 def add_demo_command(commands) -> None:
     """``liver-sim demo [--scenario press|tear|cut] [--mesh PATH [--scale F]] [--duration S] [--out DIR] [--offline]
-    [--record [--storage …]] [--link-delay S [--link-jitter S] [--link-loss F]]``: the closed-loop demo."""
+    [--record [--storage …]] [--link-delay S [--link-jitter S] [--link-loss F]] [--tools 1|2]``: the closed-loop
+    demo."""
     parser = commands.add_parser("demo", help="the four nodes in closed loop with a simulated PHANToM "
                                               "pressing the default liver or --mesh (--offline: the model alone, "
                                               "no ROS)")
@@ -234,6 +235,9 @@ def add_demo_command(commands) -> None:
                         "and draw OUT/view.png")
     parser.add_argument("--view-port", type=int, default=None, metavar="P", help="the live view's port (default "
                         "8765; 0: any free one)")
+    parser.add_argument("--tools", type=int, choices=(1, 2), default=1,
+                        help="2: two hands on the default liver, two simulated PHANToMs in /left and /right (the left "
+                             "grasps and lifts the edge, the right presses and cuts beside it)")
     parser.set_defaults(handler=demo)
 
 
@@ -264,27 +268,34 @@ def demo(args) -> int:
     from liver_sim.studies.demo import run_demo
     from liver_sim.studies.demo_liver import DemoMesh
     from liver_sim.studies.demo_offline import run_offline_demo
+    from liver_sim.studies.two_hands import run_two_hands
 
     progress = lambda line: print(line, flush=True)  # noqa: E731
     if args.mesh is None and args.scale != 1.0:
         raise ValueError("--scale applies to --mesh PATH; the default liver is in metres")
     link = link_settings(args)  # refused before the liver is built
-    if args.offline and (args.record or args.view or args.scenario != "press" or link.emulated):
-        raise ValueError("--record, --view, --scenario and --link-* run the node network; --offline is the "
+    if args.offline and (args.record or args.view or args.scenario != "press" or link.emulated or args.tools != 1):
+        raise ValueError("--record, --view, --scenario, --tools and --link-* run the node network; --offline is the "
                          "press without ROS")
+    if args.tools == 2 and (args.scenario != "press" or args.mesh is not None or link.emulated):
+        raise ValueError("--tools 2 runs its own scene (two hands) on the default liver, without a link: "
+                         "--scenario, --mesh and --link-* take one tool")
     liver = DemoMesh(args.mesh, args.scale)
+    view = (["--port", str(args.view_port)] if args.view_port is not None else []) if args.view else None
+    record_storage = args.storage if args.record else None
     if args.offline:
         run_offline_demo(args.out, args.duration, progress, liver)
+    elif args.tools == 2:
+        run_two_hands(args.out, args.duration, progress, record_storage, view)
     else:
-        run_demo(args.out, args.duration, progress, record_storage=args.storage if args.record else None,
-                 scenario=args.scenario, liver=liver, link=link,
-                 view=(["--port", str(args.view_port)] if args.view_port is not None else []) if args.view else None)
+        run_demo(args.out, args.duration, progress, record_storage=record_storage, scenario=args.scenario,
+                 liver=liver, link=link, view=view)
     return 0
 
 
 def add_view_command(commands) -> None:
     """``liver-sim view [--host H] [--port P] [--rate HZ] [--allow-remote] [--picture PNG] [--duration S]
-    [--summary JSON]``."""
+    [--summary JSON] [--tools NAME …]``."""
     parser = commands.add_parser("view", help="serve the running network to the Foxglove app (a WebSocket on "
                                               f"{DEFAULT_HOST}:{DEFAULT_PORT}): the deforming liver, tool, local "
                                               "model, forces and diagnostics")
@@ -299,6 +310,7 @@ def add_view_command(commands) -> None:
     parser.add_argument("--summary", type=Path, default=None, metavar="JSON",
                         help="at exit, write what was served into this JSON file (scenes, seconds, scenes_per_s, "
                              "refused_messages, tick_errors)")
+    add_tools_argument(parser, "show")
     parser.set_defaults(handler=view)
 
 
@@ -311,7 +323,7 @@ def view(args) -> int:
     if not 0 <= args.port <= 65535:
         raise ValueError(f"--port must lie in [0, 65535], got {args.port}")
     serve(args.host, args.port, args.rate, args.allow_remote, args.picture, args.duration,
-          lambda line: print(line, flush=True), args.summary)
+          lambda line: print(line, flush=True), args.summary, args.tools)
     return 0
 
 

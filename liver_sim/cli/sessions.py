@@ -7,6 +7,7 @@ import json
 import time
 from pathlib import Path
 
+from liver_sim.cli.arguments import add_tools_argument
 from liver_sim.sessions.bag import STORAGES
 
 
@@ -20,8 +21,8 @@ def _output(args, suffix: str) -> Path:
 
 
 def add_record_command(commands) -> None:
-    """``liver-sim record [--topics …] [--storage mcap|sqlite3] [--out DIR] [--duration S] [--marker]
-    [--realtime-priority N]``."""
+    """``liver-sim record [--topics …] [--tools NAME …] [--storage mcap|sqlite3] [--out DIR] [--duration S]
+    [--marker] [--realtime-priority N]``."""
     # this command's own modules, loaded when it runs (module docstring)
     from liver_sim.sessions.record import REALTIME_PRIORITY
 
@@ -30,6 +31,7 @@ def add_record_command(commands) -> None:
                         help="topics to record (default: every topic of docs/contract.md but /liver/marker, and the "
                              "Fig. 8 baseline force)")
     parser.add_argument("--marker", action="store_true", help="also record /liver/marker (30 Hz skin triangles)")
+    add_tools_argument(parser, "record")
     parser.add_argument("--storage", choices=STORAGES, default="mcap", help="bag storage (default: %(default)s)")
     parser.add_argument("--out", type=Path, default=None,
                         help="bag folder to create (default: out/sessions/session_<date>_<time>)")
@@ -46,7 +48,7 @@ def record(args) -> int:
     from liver_sim.sessions.record import EXIT_LOST, default_topics, run_record
 
     out = args.out or Path("out/sessions") / time.strftime("session_%Y%m%d_%H%M%S")
-    topics = args.topics or default_topics(marker=args.marker)
+    topics = args.topics or default_topics(args.marker, args.tools)
     if args.marker and args.topics and "/liver/marker" not in topics:
         topics.append("/liver/marker")
     _, failed = run_record(out, topics, args.storage, args.duration, _progress, args.realtime_priority)
@@ -125,10 +127,13 @@ def fig8(args) -> int:
 
 
 def add_report_command(commands) -> None:
-    """``liver-sim report BAG [--out DIR]``."""
+    """``liver-sim report BAG [--out DIR] [--tool NAME]``."""
     parser = commands.add_parser("report", help="plots and summary of a recorded or re-simulated session")
     parser.add_argument("bag", type=Path, metavar="BAG", help="rosbag2 bag folder")
     parser.add_argument("--out", type=Path, default=None, help="output folder (default: BAG_report)")
+    parser.add_argument("--tool", default="", metavar="NAME",
+                        help="the tool of a session with several (its topics under /NAME); default: the root "
+                             "namespace's")
     parser.set_defaults(handler=report)
 
 
@@ -136,7 +141,7 @@ def report(args) -> int:
     # this command's own modules, loaded when it runs (module docstring)
     from liver_sim.sessions.report import write_report
 
-    write_report(args.bag, _output(args, "_report"), _progress)
+    write_report(args.bag, _output(args, "_report"), _progress, args.tool)
     return 0
 
 

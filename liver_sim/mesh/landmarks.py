@@ -1,4 +1,4 @@
-"""Places on a mesh at rest where scripts and benchmarks put the tool: the top of the dome, a path along
+"""Places on a mesh at rest where scripts and benchmarks put the tool: the top of the dome, a point or a path on
 the upper skin."""
 from __future__ import annotations
 
@@ -11,6 +11,12 @@ def press_anchor(mesh: TetMesh) -> np.ndarray:
     """The topmost skin node (m): the diaphragmatic dome, where the scripts press."""
     nodes = mesh.skin_nodes
     return mesh.points[nodes[np.argmax(mesh.points[nodes, 2])]].copy()
+
+
+def upper_skin_point(mesh: TetMesh, xy) -> np.ndarray:
+    """(3,) m: the upper skin of `mesh` at rest above `xy` (m, in the xy plane; upper_skin_path); ValueError when
+    the mesh is not under it."""
+    return upper_skin_path(mesh, xy, xy, 1)[0]
 
 
 def upper_skin_path(mesh: TetMesh, start_xy, end_xy, points: int = 11) -> np.ndarray:

@@ -22,7 +22,7 @@ def wall_time(monotonic_s: float) -> str:
 class BridgeState:
     """What the bridge's status shows besides its loop's statistics and its supervisor's report: the input ages
     (s) and publishers, the bad messages per input, the device map's problem (None once a map is in), the other
-    publishers on the force topic, the last command's norm (N)."""
+    publishers on the force topic (its resolved name), the last command's norm (N)."""
 
     ages_s: dict
     publishers: dict
@@ -30,12 +30,14 @@ class BridgeState:
     map_problem: str | None
     rivals: list
     last_force_n: float
+    force_topic: str
 
 
 def bridge_status(name: str, p: dict, tick: BridgeTick, stats: dict, report: dict, state: BridgeState,
                   extra: dict):
-    """(the bridge loop's DiagnosticStatus, the event lines for the log). The status is ERROR while the output is
-    held at zero or after a stall, error or stop since the last report (each listed with its UTC time and cause),
+    """(the bridge loop's DiagnosticStatus, named `name`, the event lines for the log). The status is ERROR while the
+    output is held at zero or after a stall, error or stop since the last report (each listed with its UTC time and
+    cause),
     or while a map was refused from its source or another node publishes on the force topic; WARN below rate, on
     stale inputs, while a map waits or none is in; else OK. `extra`: more key/values (the emulated link's)."""
     events = [f"{e.kind} at {wall_time(e.start_s)}: {e.cause}"
@@ -52,7 +54,7 @@ def bridge_status(name: str, p: dict, tick: BridgeTick, stats: dict, report: dic
     if tick.map_waiting is not None:
         problems.append("a new device map waits for the force to reach zero")
     if state.rivals:
-        problems.append(f"another publisher on {p.force_topic} ({', '.join(state.rivals)}): not driving")
+        problems.append(f"another publisher on {state.force_topic} ({', '.join(state.rivals)}): not driving")
     if not p.drives_device:
         problems += filter(None, [passivity_problem(p, tick.device_map.scale if tick.device_map else 1.0)])
     error = (report["error"] or (state.map_problem or "").startswith("device map refused") or bool(state.rivals))
@@ -69,5 +71,5 @@ def bridge_status(name: str, p: dict, tick: BridgeTick, stats: dict, report: dic
               **tick.passivity.report(), **extra,
               **{k: v for k, v in report.items() if k not in ("events", "error", "max_gap_1s_at_s", "max_gap_at_s")},
               "max_gap_1s_at": wall_time(report["max_gap_1s_at_s"]), "max_gap_at": wall_time(report["max_gap_at_s"])}
-    return diagnostic_status(f"{name}: loop", stats, not problems, "; ".join(events + problems) or "ok", values,
+    return diagnostic_status(name, stats, not problems, "; ".join(events + problems) or "ok", values,
                              error=error), events

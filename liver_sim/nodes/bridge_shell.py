@@ -17,7 +17,7 @@ from haptic_bridge.tick import BridgeTick, check_passivity, checked_change
 from liver_sim.base.link import link_text
 from liver_sim.nodes.bridge_diagnostics import BridgeState, bridge_status
 from liver_sim.nodes.device_map_source import DeviceMapSource
-from liver_sim.nodes.diagnostics import publish_diagnostics
+from liver_sim.nodes.diagnostics import loop_status_name, publish_diagnostics
 from liver_sim.nodes.inputs import Handoff, Latest, LoopInputs, RosTime, emulated_link, link_report
 from liver_sim.nodes.occupants import UNKNOWN_NODE_NAME, node_path
 from liver_sim.nodes.rcl_take import endpoint_gid, publisher_gid
@@ -60,7 +60,7 @@ class BridgeShell:
         self._latest = {"device_pose": Latest(), self.source: Latest()}
         self._bad = {kind: 0 for kind in (*INPUTS, "device_map")}
         self._bad_reason, self._bad_logged = {}, dict(self._bad)
-        self._map_problem = f"waiting for the device map on {p.device_map_topic}"
+        self._map_problem = f"waiting for the device map on {node.resolve_topic_name(p.device_map_topic)}"
         self._sampled = None  # the device sample last mapped to a tool tip
         self._tip = None      # the newest plausible tool tip (m, liver frame)
         self._last_force = np.zeros(3)
@@ -164,10 +164,11 @@ class BridgeShell:
                        for info in self.node.get_publishers_info_by_topic(self._publisher.topic_name)
                        if endpoint_gid(info) not in self._own_gids)
         if names and not self._rivals:
-            self.node.get_logger().error(f"another publisher on {self.p.force_topic} ({', '.join(names)}): "
+            self.node.get_logger().error(f"another publisher on {self._publisher.topic_name} ({', '.join(names)}): "
                                          "sending zero, not driving the device while it publishes there")
         elif self._rivals and not names:
-            self.node.get_logger().info(f"{self.p.force_topic} has no other publisher: driving again (soft start)")
+            self.node.get_logger().info(f"{self._publisher.topic_name} has no other publisher: driving again "
+                                        "(soft start)")
         self._rivals = names
 
     # -- the device map (executor thread): from device_map_node only, changed only through zero force
@@ -179,12 +180,12 @@ class BridgeShell:
             except ValueError as exc:
                 scale_problem = str(exc)
         if scale_problem:
-            self._on_refused_map(f"from {self.p.device_map_node}: {scale_problem}", True)
+            self._on_refused_map(f"from {self.map_source.source_node}: {scale_problem}", True)
             return
         self._map_problem = None
         self._maps.offer(device_map)
         self.node.get_logger().info(
-            f"device map from {self.p.device_map_node} on {self.p.device_map_topic}: "
+            f"device map from {self.map_source.source_node} on {self.map_source.topic}: "
             f"R {np.round(device_map.rotation, 6).tolist()}, t {device_map.translation.tolist()} m, "
             f"scale {device_map.scale:g} (a change applies once the force is zero, then a soft start)")
 
@@ -263,8 +264,9 @@ class BridgeShell:
             {"device_pose": now - self._latest["device_pose"].get()[1],
              "source": now - self._latest[self.source].get()[1]},
             {"device_pose": self._publishers_seen["device_pose"], "source": self._publishers_seen[self.source]},
-            self._bad, self._map_problem, self._rivals, float(np.linalg.norm(self._last_force)))
-        status, events = bridge_status(self.node.get_name(), self.p, self.tick, stats, report, state,
+            self._bad, self._map_problem, self._rivals, float(np.linalg.norm(self._last_force)),
+            self._publisher.topic_name)
+        status, events = bridge_status(loop_status_name(self.node), self.p, self.tick, stats, report, state,
                                        link_report(self.link, self._inputs))
         for line in events:
             logger.error(line)
@@ -273,14 +275,15 @@ class BridgeShell:
         publish_diagnostics(self.node, self._diagnostics, [status])
 
     def describe(self) -> str:
-        p = self.p
+        p, topic = self.p, self.node.resolve_topic_name
         rendering = ("physics wrench held between updates" if self.mode == "none" else
                      f"local model (K {p.stiffness_n_per_m:g} N/m, B {p.damping_ns_per_m:g} N·s/m, "
                      f"glide {p.model_glide_s:g} s, tool radius {p.tool_radius_m:g} m)")
         return (f"haptic_bridge: {p.rate_hz:g} Hz, local_model {self.mode}: {rendering}; passivity controller "
-                f"{'on' if self.tick.passivity.control else 'off'}; in: {p.measured_cp_topic}, "
-                f"{getattr(p, INPUTS[self.source][0])}{link_text(self.link)}, device map {p.device_map_topic} from "
-                f"{p.device_map_node}; out: {p.force_topic} ({p.force_output}, frame {p.device_frame_id}, "
+                f"{'on' if self.tick.passivity.control else 'off'}; in: {topic(p.measured_cp_topic)}, "
+                f"{topic(getattr(p, INPUTS[self.source][0]))}{link_text(self.link)}, device map "
+                f"{self.map_source.topic} from {self.map_source.source_node}; out: {self._publisher.topic_name} "
+                f"({p.force_output}, frame {p.device_frame_id}, "
                 f"max {p.max_force_n:g} N, {p.max_force_rate_n_per_s:g} N/s, soft start {p.soft_start_s:g} "
                 f"s); watchdog: lifetime {p.lifetime_s:g} s, ramp {p.ramp_time_s:g} s; supervisor: zero after "
                 f"{p.stall_bound_s * 1e3:g} ms without a tick")

@@ -1,9 +1,10 @@
 """Which device map a bridge may take: each map sample is judged by the writer that sent it.
 
 A bridge takes the device map only from one node, `source_node` (its parameter `device_map_node`, default
-`/liver_tool`). A DDS message carries no sender name, but each sample carries its writer's GID
-(liver_sim.nodes.rcl_take), and the ROS graph names the node behind every writer GID. So a map is bound to the
-node that wrote it, not to a snapshot of who publishes on the topic when it is looked at:
+`liver_tool`: a relative name is the node of that name in the bridge's own namespace). A DDS message carries no
+sender name, but each sample carries its writer's GID (liver_sim.nodes.rcl_take), and the ROS graph names the node
+behind every writer GID. So a map is bound to the node that wrote it, not to a snapshot of who publishes on the
+topic when it is looked at:
 
 - from `source_node`: decoded and handed on (`on_map`); one that does not decode is refused from the source
   (`on_refused(reason, True)`: the bridge then renders zero until the source sends a good one);
@@ -55,12 +56,13 @@ class DeviceMapSource:
                  writer_wait_s: float = MAP_WRITER_WAIT_S):
         self._owner = owner
         self.topic = owner.resolve_topic_name(topic)
-        self.source_node = source_node
+        self.source_node = source_node if source_node.startswith("/") else node_path(owner.get_namespace(),
+                                                                                      source_node)
         self._on_map, self._on_refused = on_map, on_refused
         self.writer_wait_s = writer_wait_s
-        self._node = rclpy.create_node(f"_{owner.get_name()}_device_map", context=owner.context,
-                                       use_global_arguments=False, start_parameter_services=False,
-                                       enable_rosout=False)
+        self._node = rclpy.create_node(f"_{owner.get_name()}_device_map", namespace=owner.get_namespace(),
+                                       context=owner.context, use_global_arguments=False,
+                                       start_parameter_services=False, enable_rosout=False)
         subscription = self._node.create_subscription(TOPICS["device_map"].type, self.topic, lambda _: None,
                                                       TOPICS["device_map"].qos, raw=True)
         self._take = SerializedTake(subscription)

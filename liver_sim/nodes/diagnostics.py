@@ -23,6 +23,12 @@ def diagnostic_status(name: str, stats: dict, level_ok: bool, message: str,
     return status
 
 
+def loop_status_name(node) -> str:
+    """The name of a node's loop status: '<node>: loop', after the node's namespace when it has one
+    ('left/haptic_bridge: loop' for /left/haptic_bridge)."""
+    return f"{node.get_fully_qualified_name().lstrip('/')}: loop"
+
+
 def on_rate(stats: dict, rate_hz: float) -> bool:
     """Whether a loop with LoopStats.summary() `stats` achieves ON_RATE_FRACTION of `rate_hz` (Hz)."""
     return stats["rate_hz"] >= ON_RATE_FRACTION * rate_hz

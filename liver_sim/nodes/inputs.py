@@ -77,7 +77,8 @@ class Handoff:
 class LoopInputs:
     """Subscriptions that a rate loop reads itself, bypassing the executor's per-message cost.
 
-    They belong to a hidden node (`_<node>_loop`, not spun by any executor); `poll()`, called from
+    They belong to a hidden node (`_<node>_loop` in the node's namespace, not spun by any executor); `poll()`, called
+    from
     the loop, takes every waiting message of each subscription and hands the newest to its callback
     (with `received=True`, as callback(message, monotonic s at which DDS received it), so that ages count
     from reception, not from the poll), or, for a subscription made with `every=True`, each message with its
@@ -92,9 +93,9 @@ class LoopInputs:
 
     def __init__(self, node):
         self._owner = node
-        self._node = rclpy.create_node(f"_{node.get_name()}_loop", context=node.context,
-                                       use_global_arguments=False, start_parameter_services=False,
-                                       enable_rosout=False)
+        self._node = rclpy.create_node(f"_{node.get_name()}_loop", namespace=node.get_namespace(),
+                                       context=node.context, use_global_arguments=False,
+                                       start_parameter_services=False, enable_rosout=False)
         self._inputs = []
         #: topic -> the newest (owner's ROS time − header stamp) (s) of a message its link released
         self.link_delay_s: dict[str, float] = {}

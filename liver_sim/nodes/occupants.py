@@ -10,7 +10,7 @@ from __future__ import annotations
 import os
 import time
 
-from liver_sim.base.topic_names import TOPIC_NAMES
+from liver_sim.base.topic_names import in_namespace, tool_topic
 
 #: The product's node names (each node's loop inputs live in a hidden node `_<name>_loop`).
 PRODUCT_NODES = ("liver_physics", "haptic_bridge", "liver_tool", "phantom_sim")
@@ -44,16 +44,19 @@ def _owner(name: str) -> str:
 
 
 def domain_occupants(node, ignore: tuple[str, ...] = ()) -> list[str]:
-    """What already runs on `node`'s domain: the product's nodes, and any node publishing the device's measured
-    pose (a device driver) or its force command (another bridge); `node` itself and the nodes named in `ignore`
-    aside (with their hidden loop-input nodes). Subscribers are observers (a viewer, a recorder) and welcome.
-    A node killed hard stays in the graph until its DDS lease ends (about 20 s)."""
+    """What already runs on `node`'s domain: the product's nodes, and any node publishing a device's measured
+    pose (a device driver) or its force command (another bridge), in the root namespace or a node's; `node` itself
+    and the nodes named in `ignore` aside (with their hidden loop-input nodes). Subscribers are observers (a viewer,
+    a recorder) and welcome. A node killed hard stays in the graph until its DDS lease ends (about 20 s)."""
     ignored = {node.get_name(), *ignore}
     found = []
-    for name, namespace in node.get_node_names_and_namespaces():
+    nodes = node.get_node_names_and_namespaces()
+    for name, namespace in nodes:
         if _owner(name) in PRODUCT_NODES and _owner(name) not in ignored:
             found.append(f"node {node_path(namespace, _owner(name))}")
-    for topic in (TOPIC_NAMES["measured_cp"], TOPIC_NAMES["servo_cf"]):
+    namespaces = sorted({"/", *(namespace for _, namespace in nodes)})
+    for topic in [in_namespace(tool_topic(key), namespace) for namespace in namespaces
+                  for key in ("measured_cp", "servo_cf")]:
         for info in node.get_publishers_info_by_topic(topic):
             if info.node_name == UNKNOWN_NODE_NAME:
                 found.append(f"a node (its name not discovered yet) publishing {topic}")

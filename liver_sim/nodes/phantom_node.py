@@ -20,7 +20,7 @@ from rclpy.node import Node
 
 from haptic_bridge.passivity import GenerationMonitor
 from liver_sim.base.geometry.device_map import DeviceMap
-from liver_sim.nodes.diagnostics import loop_status, publish_diagnostics
+from liver_sim.nodes.diagnostics import loop_status, loop_status_name, publish_diagnostics
 from liver_sim.nodes.inputs import Latest, LoopInputs, RosTime
 from liver_sim.nodes.parameters import declare_parameters, on_parameter_changes, read_at_start
 from liver_sim.nodes.run import run_node
@@ -110,7 +110,7 @@ class PhantomNode(Node):
                  "command_age_s": float(time.monotonic() - received), "bad_commands": self.bad_commands,
                  "script_time_s": self.sim.time_s, "energy_to_hand_j": self.sim.energy_to_hand_j,
                  "energy_generated_max_j": self._generation.update()}
-        status = loop_status(f"{self.get_name()}: loop", self._loop.report(), self.p.rate_hz, extra)
+        status = loop_status(loop_status_name(self), self._loop.report(), self.p.rate_hz, extra)
         publish_diagnostics(self, self._diagnostics, [status])
 
 

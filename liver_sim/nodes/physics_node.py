@@ -2,9 +2,10 @@
 
 Publishes /liver/nodes (PointCloud2), /liver/surface (shape_msgs/Mesh, transient local, on start and
 on every tear or cut, when /liver/nodes changes its node count too),
-/liver/marker (TRIANGLE_LIST at marker_rate_hz), /liver/contact_plane (the local model) and
-/liver/tool_wrench (force on the tool); takes the tool tip from /tool/pose.  Stamps are the
-simulation time of the state, counted from the node's start on the ROS clock.
+/liver/marker (TRIANGLE_LIST at marker_rate_hz), and for each tool (parameter `tools`; one by default, in the root
+namespace) its local model (/liver/contact_plane) and the force on it (/liver/tool_wrench), in the tool's namespace
+(/left/liver/contact_plane for tool `left`); takes each tool's tip from its /tool/pose.  Stamps are the ROS time
+at which each frame starts.
 """
 from __future__ import annotations
 
@@ -17,11 +18,17 @@ from rclpy.node import Node
 
 from liver_sim.base.link import link_text
 from liver_sim.base.parameters import check_parameter
-from liver_sim.nodes.diagnostics import loop_status, publish_diagnostics
+from liver_sim.nodes.diagnostics import loop_status, loop_status_name, publish_diagnostics
 from liver_sim.nodes.inputs import Latest, LoopInputs, emulated_link, link_report
 from liver_sim.nodes.parameters import declare_parameters
 from liver_sim.nodes.run import run_node
-from liver_sim.physics.parameters import PARAMETERS, PhysicsParameters, build_model
+from liver_sim.physics.parameters import (
+    PARAMETERS,
+    PhysicsParameters,
+    build_model,
+    physics_tools,
+    tool_declarations,
+)
 from liver_sim.physics.pipeline import Frame, FramePipeline
 from liver_sim.realtime.rate_loop import RateLoop, warn
 from msg_defs.forces import wrench_stamped_bytes
@@ -39,24 +46,30 @@ class PhysicsNode(Node):
         super().__init__("liver_physics")
         p = PhysicsParameters.from_values(declare_parameters(self, PARAMETERS))
         self.p = p
-        self.model = build_model(p)
+        self.tools = physics_tools(p, declare_parameters(self, tool_declarations(p)))
+        self.model = build_model(p, self.tools)
         self._pipeline = FramePipeline(self.model, p)
         structure = self.model.structure
         mesh = structure.mesh
-        self._pose = Latest()
         self._frame_seconds = []  # compute time of each frame since the last diagnostics (s)
         self._frame_seconds_lock = threading.Lock()
         self._outputs = {
             key: self.create_publisher(TOPICS[key].type, getattr(p, f"{key}_topic"), TOPICS[key].qos)
-            for key in ("nodes", "surface", "marker", "contact_plane", "tool_wrench")}
+            for key in ("nodes", "surface", "marker")}
+        self._tool_outputs = [{key: self.create_publisher(TOPICS[key].type, tool.topic(f"{key}_topic"),
+                                                          TOPICS[key].qos) for key in ("contact_plane", "tool_wrench")}
+                              for tool in self.tools]
         self._diagnostics = self.create_publisher(TOPICS["diagnostics"].type, TOPICS["diagnostics"].name,
                                                   TOPICS["diagnostics"].qos)
-        # 1 kHz of poses for a 150 Hz consumer: the loop takes the newest bytes each frame
+        # 1 kHz of poses for a 150 Hz consumer: the loop takes the newest bytes of each tool's each frame
         self._inputs = LoopInputs(self)
-        self._link = emulated_link(p)  # the teleoperation link from the operator's side, if emulated
-        self._inputs.subscribe(TOPICS["tool_pose"].type, p.tool_pose_topic, loop_input_qos(TOPICS["tool_pose"]),
-                               self._pose.set, raw=True, received=self._link is not None, link=self._link)
-        self._last_pose_bytes = None
+        self._links = [emulated_link(p) for _ in self.tools]  # the teleoperation link from each operator, if emulated
+        self._poses = [Latest() for _ in self.tools]
+        for tool, pose, link in zip(self.tools, self._poses, self._links):
+            self._inputs.subscribe(TOPICS["tool_pose"].type, tool.topic("tool_pose_topic"),
+                                   loop_input_qos(TOPICS["tool_pose"]), pose.set, raw=True, received=link is not None,
+                                   link=link)
+        self._last_pose_bytes = [None] * len(self.tools)
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.publish_surface()
         self.create_timer(1.0, self._publish_diagnostics)
@@ -67,10 +80,12 @@ class PhysicsNode(Node):
             f"{len(mesh.skin)} skin triangles), {p.rate_hz:g} Hz × {structure.params.substeps} "
             f"{structure.params.integrator} steps (dt {structure.params.dt_s * 1e6:.0f} us"
             f"{'' if structure.implicit else f', stable below {structure.stable_dt_s * 1e6:.0f} us'}); "
-            f"in: {p.tool_pose_topic}{link_text(self._link)}; "
-            f"out: {p.nodes_topic}, {p.surface_topic}, {p.marker_topic} "
-            f"({p.marker_rate_hz:g} Hz), {p.contact_plane_topic} ({p.local_model}), {p.tool_wrench_topic}; "
-            f"tool {p.tool_shape} in mode {p.tool_mode}, tearing {'on' if p.tearing else 'off'}")
+            f"out: {p.nodes_topic}, {p.surface_topic}, {p.marker_topic} ({p.marker_rate_hz:g} Hz); "
+            + "; ".join(f"{'tool ' + tool.name + ': ' if tool.name else ''}in: {tool.topic('tool_pose_topic')}"
+                        f"{link_text(link)}; out: {tool.topic('contact_plane_topic')} ({tool.settings.local_model}), "
+                        f"{tool.topic('tool_wrench_topic')}; tool {tool.settings.tool_shape} in mode "
+                        f"{tool.settings.tool_mode}" for tool, link in zip(self.tools, self._links))
+            + f"; tearing {'on' if p.tearing else 'off'}")
         self._loop.start()
 
     def close(self) -> None:
@@ -83,32 +98,35 @@ class PhysicsNode(Node):
         self._outputs["surface"].publish(skin_mesh_msg(mesh.skin, mesh.points))
 
     def _on_set_parameters(self, parameters) -> SetParametersResult:
-        """Accept a new tool_mode (press, grasp, cut) at run time; every other parameter is read at start."""
+        """Accept a new tool mode (press, grasp, cut) of a tool at run time (`tool_mode` of the tool '',
+        NAME.tool_mode of tool NAME); every other parameter is read at start."""
+        uses = {tool.parameter("tool_mode"): self.model.tools[k].use for k, tool in enumerate(self.tools)}
         for parameter in parameters:
-            if parameter.name != "tool_mode":
+            if parameter.name not in uses:
                 return SetParametersResult(successful=False, reason=f"{parameter.name} is read at start: restart "
-                                           "liver_physics to change it (only tool_mode changes at run time)")
+                                           f"liver_physics to change it (only {', '.join(uses)} change at run time)")
             try:
-                check_parameter("tool_mode", PARAMETERS["tool_mode"], parameter.value)
+                check_parameter(parameter.name, PARAMETERS["tool_mode"], parameter.value)
             except ValueError as exc:
                 return SetParametersResult(successful=False, reason=str(exc))
         for parameter in parameters:
-            self.model.tool.use.mode = parameter.value  # read by the loop at its next frame
-            self.get_logger().info(f"tool_mode: {parameter.value}")
+            uses[parameter.name].mode = parameter.value  # read by the loop at its next frame
+            self.get_logger().info(f"{parameter.name}: {parameter.value}")
         return SetParametersResult(successful=True)
 
-    def _receive_pose(self) -> None:
-        """Hand the pipeline the newest tool pose message, once (malformed bytes or a NaN pose: refused)."""
-        data, received = self._pose.get()
-        if data is None or data is self._last_pose_bytes:
-            return
-        self._last_pose_bytes = data
-        try:
-            position, orientation, _ = pose_from_bytes(data)
-        except ValueError as exc:
-            self._pipeline.refuse(str(exc), received)
-        else:
-            self._pipeline.receive(position, orientation, received)
+    def _receive_poses(self) -> None:
+        """Hand the pipeline each tool's newest pose message, once (malformed bytes or a NaN pose: refused)."""
+        for k, pose in enumerate(self._poses):
+            data, received = pose.get()
+            if data is None or data is self._last_pose_bytes[k]:
+                continue
+            self._last_pose_bytes[k] = data
+            try:
+                position, orientation, _ = pose_from_bytes(data)
+            except ValueError as exc:
+                self._pipeline.refuse(str(exc), received, k)
+            else:
+                self._pipeline.receive(position, orientation, received, k)
 
     def _log(self, frame: Frame) -> None:
         logger = self.get_logger()
@@ -128,7 +146,7 @@ class PhysicsNode(Node):
         started = time.perf_counter()
         stamp = self.get_clock().now().seconds_nanoseconds()  # ROS time at which this frame's state holds
         self._inputs.poll()
-        self._receive_pose()
+        self._receive_poses()
         frame = self._pipeline.step(now)
         self._log(frame)
         if frame.surface_changed:
@@ -137,9 +155,10 @@ class PhysicsNode(Node):
         frame_id = self.p.frame_id
         positions = self.model.state.positions
         self._outputs["nodes"].publish(nodes_pointcloud2_bytes(positions, stamp, frame_id))
-        self._outputs["contact_plane"].publish(local_model_marker_bytes(
-            result.local_model, stamp, frame_id, self.p.local_model_lifetime_s))
-        self._outputs["tool_wrench"].publish(wrench_stamped_bytes(result.tool_force_n, stamp, frame_id))
+        for outputs, local_model, force in zip(self._tool_outputs, result.local_models, result.tool_forces_n):
+            outputs["contact_plane"].publish(local_model_marker_bytes(local_model, stamp, frame_id,
+                                                                      self.p.local_model_lifetime_s))
+            outputs["tool_wrench"].publish(wrench_stamped_bytes(force, stamp, frame_id))
         if frame.marker_due:
             self._outputs["marker"].publish(skin_marker_serialized(
                 positions, self.model.structure.mesh.skin, stamp, frame_id))
@@ -150,17 +169,22 @@ class PhysicsNode(Node):
         stats = self._loop.report()
         with self._frame_seconds_lock:
             compute, self._frame_seconds = np.array(self._frame_seconds), []
-        _, received = self._pose.get()
+        now = time.monotonic()
+        tools = {key: value for tool, contact, pose, link in zip(self.tools, self.model.tools, self._poses,
+                                                                  self._links)
+                 for key, value in {tool.parameter("tool_mode"): contact.use.mode,
+                                    tool.parameter("tool_pose_age_s"): float(now - pose.get()[1]),
+                                    **{tool.parameter(k): v for k, v in link_report(link, self._inputs).items()}
+                                    }.items()}
         extra = {"frame_compute_p99_s": float(np.percentile(compute, 99)) if compute.size else 0.0,
                  "divergences": self.model.divergences, "bad_tool_poses": self._pipeline.refused_poses,
-                 "tool_mode": self.model.tool.use.mode, "topology_changes": self.model.structure.version,
+                 "topology_changes": self.model.structure.version,
                  "topology_failures": self._pipeline.topology_failures,
                  "nodes": len(self.model.state.positions), "substeps": self.model.structure.params.substeps,
                  "solver": self.model.structure.step_solver,
-                 "tool_pose_age_s": float(time.monotonic() - received), "simulated_s": self.model.state.time_s,
-                 **link_report(self._link, self._inputs)}
+                 "simulated_s": self.model.state.time_s, **tools}
         publish_diagnostics(self, self._diagnostics,
-                            [loop_status(f"{self.get_name()}: loop", stats, self.p.rate_hz, extra)])
+                            [loop_status(loop_status_name(self), stats, self.p.rate_hz, extra)])
 
 
 def main(args=None) -> int:

@@ -25,7 +25,7 @@ from rclpy.node import Node
 
 from liver_sim.base.geometry.device_map import DeviceMap
 from liver_sim.base.parameters import quaternion_parameter, vector_parameter
-from liver_sim.nodes.diagnostics import loop_status, publish_diagnostics
+from liver_sim.nodes.diagnostics import loop_status, loop_status_name, publish_diagnostics
 from liver_sim.nodes.inputs import Latest, LoopInputs
 from liver_sim.nodes.parameters import declare_parameters, on_parameter_changes, read_at_start
 from liver_sim.nodes.run import run_node
@@ -130,7 +130,7 @@ class ToolNode(Node):
             extra["rejected_samples"] = self.rejected
             extra["sample_age_s"] = float(time.monotonic() - self._device.get()[1])
         publish_diagnostics(self, self._diagnostics,
-                            [loop_status(f"{self.get_name()}: loop", self._loop.report(), self.p.rate_hz, extra)])
+                            [loop_status(loop_status_name(self), self._loop.report(), self.p.rate_hz, extra)])
 
 
 def main(args=None) -> int:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from liver_sim.base.geometry.device_map import DEVICE_MAP_PARAMETERS
 from liver_sim.base.parameters import Param, parameter_record, realtime_priority_parameter
-from liver_sim.base.topic_names import FORCE_OUTPUT_FORMATS, TOPIC_NAMES
+from liver_sim.base.topic_names import FORCE_OUTPUT_FORMATS, tool_topic
 from liver_sim.phantom.device import StylusParams
 from liver_sim.tool.scripts import SCRIPT_PARAMETERS
 
@@ -27,8 +27,8 @@ PARAMETERS = {
     "force_output": Param("wrench_stamped", f"format of the force commands: {', '.join(FORCE_FORMATS)}",
                           choices=FORCE_FORMATS),
     "frame_id": Param("phantom_base", "frame of the published stylus pose"),
-    "measured_cp_topic": Param(TOPIC_NAMES["measured_cp"], "stylus pose out, device frame (PoseStamped)"),
-    "servo_cf_topic": Param(TOPIC_NAMES["servo_cf"], "force command in, device frame"),
+    "measured_cp_topic": Param(tool_topic("measured_cp"), "stylus pose out, device frame (PoseStamped)"),
+    "servo_cf_topic": Param(tool_topic("servo_cf"), "force command in, device frame"),
     **SCRIPT_PARAMETERS,
     **DEVICE_MAP_PARAMETERS,
 }

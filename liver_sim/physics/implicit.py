@@ -241,18 +241,21 @@ class ImplicitEuler:
                                        shape=(size, size)).tocsr()
 
     def compliance(self, x: np.ndarray, inv_mass: np.ndarray, load: np.ndarray, environment_damping: float,
-                   guess: np.ndarray) -> float:
+                   guess: np.ndarray, contacts: Contacts | None = None) -> float:
         """Static compliance bᵀ·K⁻¹·b (m/N) of the network at x under the load pattern b = `load` (N, 3) N,
         held nodes (inv_mass 0) fixed: the tangent stiffness K of the springs (physics.implicit_kernels) and of the
-        organ's supports at x, solved
-        by the step's PCG as (M·(1 + H·c_env) + H·C + H²·K)·z = b with H = COMPLIANCE_HORIZON_S, so the mass
-        and damping terms weigh ≲ 1 % against K; `guess` (N, 3), the previous solution ·H², starts the
-        solve and is overwritten by this one."""
+        organ's supports at x, and of `contacts` (each row taken as active: another tool's penalty holding the
+        tissue), solved by the step's PCG as (M·(1 + H·c_env) + H·C + H²·K)·z = b with H = COMPLIANCE_HORIZON_S,
+        so the mass and damping terms weigh ≲ 1 % against K; `guess` (N, 3), the previous solution ·H², starts
+        the solve and is overwritten by this one."""
         h = COMPLIANCE_HORIZON_S
-        self._assemble_at_rest(x, inv_mass, np.zeros_like(x), environment_damping, h)
+        contacts = contacts or Contacts.none()
+        coefficient = h * contacts.damping_ns_per_m + h * h * contacts.stiffness_n_per_m
+        self._assemble_at_rest(x, inv_mass, np.zeros_like(x), environment_damping, h, contacts, coefficient)
         b = np.where((inv_mass > 0.0)[:, None], load, 0.0)
         solution = np.where((inv_mass > 0.0)[:, None], guess / (h * h), 0.0)
-        self._solve(inv_mass, b, solution, COMPLIANCE_TOLERANCE, self._coarse_space(h, x, inv_mass))
+        self._solve(inv_mass, b, solution, COMPLIANCE_TOLERANCE, self._coarse_space(h, x, inv_mass), contacts,
+                    coefficient)
         guess[:] = solution * (h * h)
         return float(np.einsum("ij,ij->", b, guess))
 
@@ -281,31 +284,34 @@ class ImplicitEuler:
                            f"(largest residual force {residual:.3g} N)")
 
     def _assemble_at_rest(self, x: np.ndarray, inv_mass: np.ndarray, external_force: np.ndarray,
-                          environment_damping: float, h: float) -> np.ndarray:
-        """Assemble the step's system at x, v = 0 (springs and support) and its preconditioner; returns the
-        forces f(x) (N, 3)."""
+                          environment_damping: float, h: float, contacts: Contacts | None = None,
+                          coefficient: np.ndarray | None = None) -> np.ndarray:
+        """Assemble the step's system at x, v = 0 (springs and support; `contacts` with their `coefficient`,
+        h·c + h²·k each, in the preconditioner) and its preconditioner; returns the forces f(x) (N, 3)."""
         zero = np.zeros_like(x)
         f, ky = np.zeros_like(x), np.zeros_like(x)
         s = self.springs
-        no = Contacts.none()
+        no = contacts or Contacts.none()
         assemble(x, zero, zero, inv_mass, external_force, np.zeros(3), float(environment_damping), h, self._node_i,
                  self._node_j, self._inv_rest, s.lambda1_n, s.lambda2_n, s.mu_ns_per_m, self._unit, self._iso,
                  self._axial, self._shift, self._diagonal, f, ky, True)
         support_terms(x, zero, zero, inv_mass, h, *self.support, f, ky, self._shift, self._diagonal, True)
         tet_terms(x, zero, zero, inv_mass, h, self.tets, f, ky, self._diagonal, True)
         self._tet_weight = h * h + h * self.tets.viscous_time_s
-        block_jacobi(self._diagonal, inv_mass, no.nodes, no.weights, no.normal, np.zeros(0), self._preconditioner)
+        block_jacobi(self._diagonal, inv_mass, no.nodes, no.weights, no.normal,
+                     np.zeros(0) if coefficient is None else coefficient, self._preconditioner)
         return f
 
     def _solve(self, inv_mass: np.ndarray, b: np.ndarray, solution: np.ndarray, tolerance: float,
-               coarse: CoarseSpace) -> None:
-        """solution ← A⁻¹·b by PCG from `solution` (the last assembled system, no contacts) with `coarse`."""
+               coarse: CoarseSpace, contacts: Contacts | None = None, coefficient: np.ndarray | None = None) -> None:
+        """solution ← A⁻¹·b by PCG from `solution` (the last assembled system, with `contacts` and their
+        `coefficient` if given) with `coarse`."""
         r, z, p, q = (np.zeros_like(b) for _ in range(4))
-        no = Contacts.none()
+        no = contacts or Contacts.none()
         solve = pcg_parallel if self.threads > 1 else pcg
         solve(self._node_i, self._node_j, self._unit, self._iso, self._axial, self._shift, inv_mass, no.nodes,
-              no.weights, no.normal, np.zeros(0), self.tets, self._tet_weight, self._preconditioner, coarse, b,
-              solution, tolerance, self.max_cg_iterations, r, z, p, q, self._partial)
+              no.weights, no.normal, np.zeros(0) if coefficient is None else coefficient, self.tets, self._tet_weight,
+              self._preconditioner, coarse, b, solution, tolerance, self.max_cg_iterations, r, z, p, q, self._partial)
 
     def warm_up(self) -> None:
         """Compile the kernels (numba, cached on disk) before a timed loop starts."""

@@ -5,14 +5,16 @@ the two act in series, 1/K = 1/(probes·λ) + c, with c = bᵀ·K_t⁻¹·b the 
 spring network under the tool's unit load pattern b (implicit.ImplicitEuler.compliance).  The
 compliance changes slowly — with the tissue's strain and as the touched patch moves — so it is solved
 every `refresh_frames` frames (warm-started from the last solution) and reused in between, while the
-penalty part follows the probes touching at each frame.
+penalty part follows the probes touching at each frame.  Other tools on the liver hold the tissue while this
+one presses: their pushing contact rows enter the compliance solve as the penalty springs they are, and the nodes
+a tool grasps are held (contact_rows).
 """
 from __future__ import annotations
 
 import numpy as np
 
 from liver_sim.physics.contact_kernels import ToolState
-from liver_sim.physics.implicit import ImplicitEuler
+from liver_sim.physics.implicit import Contacts, ImplicitEuler
 
 #: Frames between two solves of the tissue's compliance under the tool (10: 15 Hz at 150 Hz; K then stays
 #: within 10 % of a solve at every frame over the demo's press and slide, a test).
@@ -77,17 +79,18 @@ class LocalStiffness:
         self._frames_since_solve = 0
 
     def stiffness_n_per_m(self, tool: ToolState, positions: np.ndarray, inv_mass: np.ndarray,
-                          penalty_n_per_m: float, environment_damping_per_s: float) -> float:
+                          penalty_n_per_m: float, environment_damping_per_s: float,
+                          others: Contacts | None = None) -> float:
         """K (N/m) for this frame's tool (its probes' contact geometry as the step left it): the penalty of
         the touching probes in series with the tissue's compliance under their push, from the tangent
-        stiffness at `positions` with the held nodes (inv_mass 0) fixed; the penalty alone when no probe
-        is within reach."""
+        stiffness at `positions` with the held nodes (inv_mass 0) fixed and the other tools' pushing rows
+        `others` holding the tissue; the penalty alone when no probe is within reach."""
         probes = touching_probes(tool)
         if probes == 0.0:
             return penalty_n_per_m
         self._frames_since_solve += 1
         if self._compliance_m_per_n is None or self._frames_since_solve >= self.refresh_frames:
             self._compliance_m_per_n = self._solver.compliance(positions, inv_mass, contact_load(tool, len(positions)),
-                                                               environment_damping_per_s, self._guess)
+                                                               environment_damping_per_s, self._guess, others)
             self._frames_since_solve = 0
         return local_stiffness(penalty_n_per_m, probes, self._compliance_m_per_n)

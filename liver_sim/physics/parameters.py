@@ -1,11 +1,15 @@
 """The physics node's parameter table (liver_sim.base.parameters.Param: default, unit, range) and its typed record
-(`PhysicsParameters`), the ModelParams a record names (`model_params`) and the model it builds (`build_model`):
-declared by `liver_physics`, read by the offline sessions, so both refuse the same values."""
+(`PhysicsParameters`), its tools (`physics_tools`: one by default, or several, each with parameters of its own),
+the ModelParams a record names (`model_params`) and the model it builds (`build_model`): declared by
+`liver_physics`, read by the offline sessions, so both refuse the same values."""
 from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, replace
 
 from liver_sim.base.link import LINK_PARAMETERS
 from liver_sim.base.parameters import Param, parameter_record, realtime_priority_parameter
-from liver_sim.base.topic_names import TOPIC_NAMES
+from liver_sim.base.topic_names import TOOL_NAME, TOPIC_NAMES, in_namespace, tool_namespace, tool_topic
 from liver_sim.mesh.io import load_mesh
 from liver_sim.mesh.liver_shape import default_liver
 from liver_sim.physics.contact import ToolShape
@@ -92,6 +96,12 @@ PARAMETERS = {
     "contact_stiffness_per_area_n_per_m3": Param(DEFAULTS.contact_stiffness_per_area_n_per_m3,
                                                  "contact_model surface: penalty per unit skin area (N/m³, a pressure "
                                                  "per metre of depth)", 0.0, 1e10),
+    "tools": Param([""], "the tools on the liver, one name each (e.g. [left, right]: two hands): tool NAME takes "
+                   "its pose on tool_pose_topic and publishes contact_plane_topic and tool_wrench_topic in the "
+                   "namespace /NAME (relative names go under it), with parameters NAME.<name> of its own for its "
+                   "shape, mode, local model and topics (tool_shape, tool_radius_m, tool_mode, …; default: the node's "
+                   "<name>); '' is a tool in the root namespace that has the node's own. Default: one tool, ['']; "
+                   "two need integrator implicit_euler"),
     "tool_shape": Param("sphere", "rigid tool: sphere, capsule or box", choices=("sphere", "capsule", "box")),
     "tool_radius_m": Param(ToolShape().radius_m, "sphere/capsule radius (m)", 1e-4, 0.2),
     "tool_length_m": Param(ToolShape().length_m, "capsule shaft length along the tool +z (m)", 0.0, 1.0),
@@ -122,15 +132,89 @@ PARAMETERS = {
     "nodes_topic": Param(TOPIC_NAMES["nodes"], "deformed node positions (PointCloud2)"),
     "surface_topic": Param(TOPIC_NAMES["surface"], "skin triangles (shape_msgs/Mesh)"),
     "marker_topic": Param(TOPIC_NAMES["marker"], "deformed skin for viewers (Marker)"),
-    "contact_plane_topic": Param(TOPIC_NAMES["contact_plane"], "local model for the haptic bridge (Marker)"),
-    "tool_wrench_topic": Param(TOPIC_NAMES["tool_wrench"], "contact force on the tool (WrenchStamped)"),
-    "tool_pose_topic": Param(TOPIC_NAMES["tool_pose"], "tool tip pose in the liver frame (PoseStamped)"),
+    "contact_plane_topic": Param(tool_topic("contact_plane"), "local model for the haptic bridge (Marker), in the "
+                                 "tool's namespace"),
+    "tool_wrench_topic": Param(tool_topic("tool_wrench"), "contact force on the tool (WrenchStamped), in the tool's "
+                               "namespace"),
+    "tool_pose_topic": Param(tool_topic("tool_pose"), "tool tip pose in the liver frame (PoseStamped), in the tool's "
+                             "namespace"),
     **LINK_PARAMETERS,  # on the inputs from the other side of a teleoperation link
 }
 
 
 #: The physics node's parameters as one typed record (liver_sim.base.parameters.parameter_record).
 PhysicsParameters = parameter_record("PhysicsParameters", PARAMETERS, "The parameters of liver_physics (PARAMETERS).")
+
+#: What each tool has of its own: tool NAME declares NAME.<name>, its default the node's <name>.
+TOOL_PARAMETERS = ("tool_shape", "tool_radius_m", "tool_length_m", "tool_half_extents_m", "tool_mode",
+                   "grasp_margin_m", "cut_depth_m", "local_model", "local_model_reach_m", "tool_pose_topic",
+                   "contact_plane_topic", "tool_wrench_topic")
+#: One tool's parameters (TOOL_PARAMETERS) as a typed record.
+ToolSettings = parameter_record("ToolSettings", {name: PARAMETERS[name] for name in TOOL_PARAMETERS},
+                                "One tool's parameters of liver_physics (TOOL_PARAMETERS).")
+#: The topic parameters of a tool, resolved in its namespace.
+TOOL_TOPIC_PARAMETERS = ("tool_pose_topic", "contact_plane_topic", "tool_wrench_topic")
+
+
+@dataclass(frozen=True)
+class PhysicsTool:
+    """A tool of the physics node: its `name` ('' in the root namespace) and `settings`."""
+
+    name: str
+    settings: ToolSettings
+
+    @property
+    def namespace(self) -> str:
+        return tool_namespace(self.name)
+
+    def topic(self, parameter: str) -> str:
+        """The absolute name of the topic parameter `parameter` (TOOL_TOPIC_PARAMETERS) in the tool's namespace."""
+        return in_namespace(getattr(self.settings, parameter), self.namespace)
+
+    def parameter(self, name: str) -> str:
+        """The node's name of the tool's parameter `name`: NAME.<name>, or <name> for the tool ''."""
+        return f"{self.name}.{name}" if self.name else name
+
+
+def tool_declarations(p: PhysicsParameters) -> dict[str, Param]:
+    """The parameters NAME.<name> (TOOL_PARAMETERS) of every named tool of `p.tools`, each defaulting to `p`'s <name>
+    with its range; ValueError naming `tools` when a name is not a ROS name token, or is given twice."""
+    names = list(p.tools)
+    bad = [name for name in names if name and not TOOL_NAME.fullmatch(name)]
+    if not names or bad or len(set(names)) != len(names):
+        raise ValueError(f"parameter tools={names!r} must name one tool or more, each once, each '' (the root "
+                         f"namespace) or a name of letters, digits and _ starting with a letter"
+                         + (f"; {bad!r} is not" if bad else ""))
+    own = {name: getattr(p, name) for name in TOOL_PARAMETERS}
+    return {f"{tool}.{name}": replace(PARAMETERS[name], default=list(value) if isinstance(value, tuple) else value)
+            for tool in names if tool for name, value in own.items()}
+
+
+def physics_tools(p: PhysicsParameters, values: Mapping[str, object] | None = None) -> tuple[PhysicsTool, ...]:
+    """The tools of `p.tools`, each with its parameters: `values`[NAME.<name>] where given, else `p`'s <name>;
+    ValueError naming the parameter when a value is refused, or when two tools would use one topic."""
+    values = values or {}
+    declared = tool_declarations(p)
+    unknown = sorted(name for name in values if "." in name and name not in declared)
+    if unknown:
+        raise ValueError(f"unknown parameter(s) {', '.join(unknown)}: tools are {list(p.tools)!r} (parameter tools)")
+    tools = []
+    for tool in p.tools:
+        own = {name: values.get(f"{tool}.{name}", getattr(p, name)) if tool else getattr(p, name)
+               for name in TOOL_PARAMETERS}
+        try:
+            tools.append(PhysicsTool(tool, ToolSettings.from_values(own)))
+        except ValueError as exc:
+            raise ValueError(str(exc).replace("parameter ", f"parameter {tool}.", 1) if tool else str(exc)) from None
+    users: dict[str, str] = {}
+    for tool in tools:
+        for parameter in TOOL_TOPIC_PARAMETERS:
+            topic = tool.topic(parameter)
+            if topic in users:
+                raise ValueError(f"parameter {tool.parameter(parameter)}: {topic} is already {users[topic]}; each tool "
+                                 "needs topics of its own (relative names go under its namespace)")
+            users[topic] = tool.parameter(parameter)
+    return tuple(tools)
 
 
 def model_params(p: PhysicsParameters) -> ModelParams:
@@ -159,11 +243,19 @@ def model_params(p: PhysicsParameters) -> ModelParams:
         tear_strain_capsule=p.tear_strain_capsule).validate()
 
 
-def build_model(p: PhysicsParameters) -> LiverModel:
-    """The LiverModel (mesh, parameters, its tool and the tool's use) named by the node's parameters, warmed up."""
+def tool_contact(tool: PhysicsTool) -> ToolContact:
+    """The model's ToolContact of a tool of the physics node: its shape, local model and use."""
+    s = tool.settings
+    return ToolContact(ToolShape(s.tool_shape, s.tool_radius_m, s.tool_length_m, tuple(s.tool_half_extents_m)),
+                       s.local_model, s.local_model_reach_m, ToolUse(s.tool_mode, s.grasp_margin_m, s.cut_depth_m),
+                       name=tool.name)
+
+
+def build_model(p: PhysicsParameters, tools: tuple[PhysicsTool, ...] | None = None) -> LiverModel:
+    """The LiverModel (mesh, parameters, its tools and their use) named by the node's parameters (`tools`: default
+    physics_tools(p)), warmed up."""
+    tools = physics_tools(p) if tools is None else tools
     mesh = load_mesh(p.mesh_path, p.target_tets, p.mesh_scale) if p.mesh_path else default_liver()
-    tool = ToolContact(ToolShape(p.tool_shape, p.tool_radius_m, p.tool_length_m, tuple(p.tool_half_extents_m)),
-                       p.local_model, p.local_model_reach_m, ToolUse(p.tool_mode, p.grasp_margin_m, p.cut_depth_m))
-    model = LiverModel(mesh, model_params(p), tool)
+    model = LiverModel(mesh, model_params(p), [tool_contact(tool) for tool in tools])
     model.warm_up()
     return model

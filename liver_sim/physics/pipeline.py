@@ -1,9 +1,9 @@
 """The physics frame pipeline, without ROS: from the tool poses received to one frame's outputs.
 
-`FramePipeline` is what the physics node and offline re-simulation both run.  A received pose is
-gated (outside the liver's bounds + `workspace_margin_m` it is refused and counted); a frame takes
-the newest pose unless it is older than `tool_pose_timeout_s` (then: no tool), steps the model
-(LiverModel.step_frame, the tool's use included: grasp, hold, cut), and says whether the surface must be
+`FramePipeline` is what the physics node and offline re-simulation both run.  A received pose (of one of the
+model's tools) is gated (outside the liver's bounds + `workspace_margin_m` it is refused and counted); a frame
+takes each tool's newest pose unless it is older than `tool_pose_timeout_s` (then: that tool is away), steps the
+model (LiverModel.step_frame, the tools' use included: grasp, hold, cut), and says whether the surface must be
 republished (a tear or a cut) and whether the skin marker is due (`marker_rate_hz`), with the
 events worth a log line.  The adapters add only their I/O and clock: ROS messages, parameters and
 publishers (liver_sim.nodes.physics_node), bag I/O and deterministic offline timing
@@ -47,9 +47,9 @@ class Frame:
 class FramePipeline:
     """The frame sequence of one model, configured by the physics node's parameters (PhysicsParameters).
 
-    `receive`/`refuse` take each tool pose message (time in the clock `step` is called with), `step`
-    runs a frame.  `model.tool.use.mode` may change between frames.  Counts: `frames`, `refused_poses`,
-    `topology_failures` (tears and cuts that failed and left the model as it was).
+    `receive`/`refuse` take each tool pose message of tool `tool` (its index in `model.tools`; time in the clock
+    `step` is called with), `step` runs a frame.  A tool's `use.mode` may change between frames.  Counts: `frames`,
+    `refused_poses` (every tool's), `topology_failures` (tears and cuts that failed and left the model as it was).
     """
 
     def __init__(self, model: LiverModel, parameters: PhysicsParameters):
@@ -61,29 +61,34 @@ class FramePipeline:
         self.frames = 0
         self.refused_poses = 0
         self.topology_failures = 0
-        self._pose: ToolPose | None = None
-        self._pose_time_s = -np.inf
+        tools = len(model.tools)
+        self._poses: list[ToolPose | None] = [None] * tools
+        self._pose_times_s = [-np.inf] * tools
         self._events: list[Event] = []
 
-    def receive(self, position: np.ndarray, orientation_xyzw, time_s: float) -> ToolPose | None:
-        """Take the tool pose received at `time_s`: the newest pose from then on; None when refused
+    def receive(self, position: np.ndarray, orientation_xyzw, time_s: float, tool: int = 0) -> ToolPose | None:
+        """Take tool `tool`'s pose received at `time_s`: its newest pose from then on; None when refused
         (outside the workspace)."""
         if np.any(position < self.workspace[0]) or np.any(position > self.workspace[1]):
-            self.refuse(f"tool position {np.round(position, 3).tolist()} m is outside the workspace", time_s)
+            self.refuse(f"tool position {np.round(position, 3).tolist()} m is outside the workspace", time_s, tool)
             return None
-        self._pose, self._pose_time_s = ToolPose(position, tuple(orientation_xyzw)), time_s
-        return self._pose
+        self._poses[tool], self._pose_times_s[tool] = ToolPose(position, tuple(orientation_xyzw)), time_s
+        return self._poses[tool]
 
-    def refuse(self, reason: str, time_s: float) -> None:
-        """Count a tool pose refused for `reason` (e.g. malformed); it stands for no tool from `time_s` on."""
+    def refuse(self, reason: str, time_s: float, tool: int = 0) -> None:
+        """Count a pose of tool `tool` refused for `reason` (e.g. malformed); it stands for that tool away from
+        `time_s` on."""
         self.refused_poses += 1
-        self._pose, self._pose_time_s = None, time_s
-        self._events.append(Event("refused", f"ignored tool pose: {reason}"))
+        self._poses[tool], self._pose_times_s[tool] = None, time_s
+        name = self.model.tools[tool].name
+        self._events.append(Event("refused", f"ignored {name + ' ' if name else ''}tool pose: {reason}"))
 
     def step(self, now_s: float) -> Frame:
-        """One frame at `now_s` with the newest pose unless older than tool_pose_timeout_s (then no tool)."""
-        pose = self._pose if now_s - self._pose_time_s <= self.pose_timeout_s else None
-        result = self.model.step_frame(pose)
+        """One frame at `now_s` with each tool's newest pose unless older than tool_pose_timeout_s (then that tool
+        is away)."""
+        poses = [pose if now_s - time_s <= self.pose_timeout_s else None
+                 for pose, time_s in zip(self._poses, self._pose_times_s)]
+        result = self.model.step_frame(*poses)
         events, self._events = self._events, []
         if result.divergence:
             events.append(Event("diverged", result.divergence))

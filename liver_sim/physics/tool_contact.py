@@ -3,7 +3,8 @@
 A ToolContact holds everything of one tool — its shape (physics.contact.ToolShape), the local model it
 publishes for the haptic loop and how far from the skin, the previous pose (the frame's motion runs from it), the
 frame's contact arrays (physics.contact_kernels.ToolState), the stiffness it meets (physics.local_stiffness) and
-its use (physics.tool_use.ToolUse: press, grasp or cut): a second tool is a second ToolContact.
+its use (physics.tool_use.ToolUse: press, grasp or cut): a second tool is a second ToolContact, with a `name` of
+its own (the ROS namespace of its topics; '' for a tool in the root namespace).
 """
 from __future__ import annotations
 
@@ -12,6 +13,7 @@ import numpy as np
 from liver_sim.base.local_model import LocalModel
 from liver_sim.physics.contact import ToolPose, ToolShape, force_local_model, pull_local_model, tool_state
 from liver_sim.physics.contact_kernels import ToolState
+from liver_sim.physics.implicit import Contacts
 from liver_sim.physics.local_stiffness import REFRESH_FRAMES, LocalStiffness
 from liver_sim.physics.state import State
 from liver_sim.physics.structure import Structure
@@ -23,13 +25,14 @@ LOCAL_MODELS = ("plane", "sphere")
 class ToolContact:
     """One tool: `shape`, `local_model_kind` ('plane' or 'sphere'), `local_model_reach_m` (a local model is
     published while the tool is this close to the skin, m), `use`, `stiffness_refresh_frames` (frames between two
-    solves of the tissue's compliance under it: LocalStiffness); `previous_pose` and `contact` (the ToolState of
-    the last frame: its probes, candidates and contact rows)."""
+    solves of the tissue's compliance under it: LocalStiffness), `name` (module docstring); `previous_pose` and
+    `contact` (the ToolState of the last frame: its probes, candidates and contact rows)."""
 
     def __init__(self, shape: ToolShape | None = None, local_model: str = "plane", local_model_reach_m: float = 0.02,
-                 use: ToolUse | None = None, stiffness_refresh_frames: int = REFRESH_FRAMES):
+                 use: ToolUse | None = None, stiffness_refresh_frames: int = REFRESH_FRAMES, name: str = ""):
         if local_model not in LOCAL_MODELS:
             raise ValueError(f"parameter local_model must be 'plane' or 'sphere', got {local_model!r}")
+        self.name = name
         self.shape = shape or ToolShape()
         self.local_model_kind = local_model
         self.local_model_reach_m = float(local_model_reach_m)
@@ -47,33 +50,35 @@ class ToolContact:
         self.previous_pose = pose
         return self.contact
 
-    def stiffness_n_per_m(self, structure: Structure, state: State) -> float:
+    def stiffness_n_per_m(self, structure: Structure, state: State, others: Contacts | None = None) -> float:
         """K of the local model under the tool at the end of the frame (physics.local_stiffness), the tissue's
-        compliance solved on `structure`'s network (anew after a change)."""
+        compliance solved on `structure`'s network (anew after a change), the other tools' pushing contact rows
+        `others` holding it."""
         if self._stiffness is None or self._stiffness[0] is not structure:
             self._stiffness = (structure, LocalStiffness(structure.solver, structure.node_count,
                                                          self.stiffness_refresh_frames))
         params = structure.params
         return self._stiffness[1].stiffness_n_per_m(self.contact, state.positions, state.inv_mass,
                                                     params.contact_stiffness_n_per_m,
-                                                    params.environment_damping_per_s)
+                                                    params.environment_damping_per_s, others)
 
     def local_model(self, structure: Structure, state: State, pose: ToolPose | None, force_on_tool_n: np.ndarray,
-                    holding: bool) -> LocalModel:
+                    holding: bool, others: Contacts | None = None) -> LocalModel:
         """The local model for the haptic loop at the end of the frame: none without a tool; holding nodes, the
         plane of their pull (contact.pull_local_model); else the one of the contact force
-        (contact.force_local_model)."""
+        (contact.force_local_model), its stiffness with the other tools' pushing rows `others` in place."""
         if pose is None:
             return LocalModel.invalid()
         if holding:
             return pull_local_model(pose, force_on_tool_n, structure.params.contact_stiffness_n_per_m,
                                     self.shape.radius_m)
         return force_local_model(self.shape, pose, self.contact, force_on_tool_n,
-                                 self.stiffness_n_per_m(structure, state), self.local_model_reach_m,
+                                 self.stiffness_n_per_m(structure, state, others), self.local_model_reach_m,
                                  self.local_model_kind, state.positions)
 
     def forget(self) -> None:
-        """No previous pose (the next frame's tool starts at rest) and no tissue compliance known."""
+        """No previous pose (the next frame's tool starts at rest), nothing held and no tissue compliance known."""
         self.previous_pose = None
+        self.use.release()
         if self._stiffness is not None:
             self._stiffness[1].reset()

@@ -21,9 +21,9 @@ class ToolUse:
     """A tool's mode: press (Eq. 3 only), grasp or cut; `mode` may change between frames.
 
     grasp: at the first frame in contact the skin nodes within the tool (+ `grasp_margin_m`) are held where they
-    are in the tool frame until the mode changes.  cut: the stroke's path is the local model's contact point,
-    frame by frame (a point CUT_PATH_STEP_M from the last); when the tool leaves the surface the model is cut along
-    it, `cut_depth_m` deep.
+    are in the tool frame until the mode changes (`held_nodes`: this tool's; the model holds every tool's).  cut:
+    the stroke's path is the local model's contact point, frame by frame (a point CUT_PATH_STEP_M from the last);
+    when the tool leaves the surface the model is cut along it, `cut_depth_m` deep.
     """
 
     def __init__(self, mode: str = "press", grasp_margin_m: float = 0.005, cut_depth_m: float = 0.005):
@@ -32,6 +32,7 @@ class ToolUse:
         self.cut_depth_m = cut_depth_m
         self._in_contact = False
         self._path: list[np.ndarray] = []
+        self.held_nodes = np.zeros(0, dtype=np.int64)
         self._grasp_offsets = np.zeros((0, 3))
 
     @property
@@ -44,19 +45,29 @@ class ToolUse:
             raise ValueError(f"parameter tool_mode must be one of {TOOL_MODES}, got {mode!r}")
         self._mode = mode
 
+    @property
+    def holding(self) -> bool:
+        """Whether the tool holds nodes."""
+        return self.held_nodes.size > 0
+
     def grasp(self, shape: ToolShape, pose: ToolPose, positions: np.ndarray, skin_nodes: np.ndarray) -> np.ndarray:
-        """The skin nodes within the tool's bounding ball (+ `grasp_margin_m`), to be held where they are now in
-        the tool frame (`held_positions`)."""
+        """Hold the skin nodes (of `skin_nodes`) within the tool's bounding ball (+ `grasp_margin_m`) where they are
+        now in the tool frame (`held_positions`); returns them (`held_nodes`)."""
         nodes = candidate_nodes(positions, skin_nodes, shape, pose, self.grasp_margin_m)
         self._grasp_offsets = (positions[nodes] - pose.position) @ pose.rotation
+        self.held_nodes = nodes
         return nodes
 
-    def before_frame(self, pose: ToolPose | None, grasping: bool) -> str | None:
+    def release(self) -> None:
+        """Hold nothing."""
+        self.held_nodes = np.zeros(0, dtype=np.int64)
+
+    def before_frame(self, pose: ToolPose | None) -> str | None:
         """'grasp' when in grasp mode the tool, at `pose`, touched the surface at the last frame and holds
         nothing; 'release' when it holds nodes in another mode; else None."""
-        if self._mode == "grasp" and not grasping and pose is not None and self._in_contact:
+        if self._mode == "grasp" and not self.holding and pose is not None and self._in_contact:
             return "grasp"
-        if self._mode != "grasp" and grasping:
+        if self._mode != "grasp" and self.holding:
             return "release"
         return None
 

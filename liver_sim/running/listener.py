@@ -10,6 +10,7 @@ import numpy as np
 from rclpy.node import Node
 from rclpy.serialization import deserialize_message
 
+from liver_sim.base.topic_names import in_namespace, tool_topic
 from liver_sim.nodes.inputs import LoopInputs
 from liver_sim.realtime.rate_loop import RateLoop
 from msg_defs.forces import force_from_bytes, force_message_type
@@ -33,7 +34,8 @@ MAX_KEPT_S = 600.0
 class NetworkSnapshot:
     """What a NetworkListener received so far. Times are seconds on the time.monotonic() scale: `*_arrival_s`
     when a message reached the listener, `*_published_s` when its publisher sent it (DDS source times, whatever
-    the listener's own scheduling). Forces in N, positions in m, in the frame of their topic."""
+    the listener's own scheduling). Forces in N, positions in m, in the frame of their topic. Each label is one device
+    side: its force commands, and the device samples and physics wrench of its namespace."""
 
     #: label -> (arrival_s (K,), force commands (K, 3) N), one label per force topic listened to
     forces: dict
@@ -48,12 +50,12 @@ class NetworkSnapshot:
     #: label -> for each force command, from its header stamp to its arrival here (K,) s: the device's sampling
     #: to the command reaching this client, as a neighbour on the rig sees it
     stamp_to_arrival_s: dict
-    #: arrival times (W,) and forces (W, 3) of the physics contact force on the tool (/liver/tool_wrench)
-    wrench_arrival_s: np.ndarray
-    wrench_n: np.ndarray
-    #: arrival times (P,) and stylus positions (P, 3) m, device frame, of /phantom/measured_cp
-    device_arrival_s: np.ndarray
-    device_position_m: np.ndarray
+    #: label -> arrival times (W,) and forces (W, 3) of the physics contact force on its tool (/liver/tool_wrench)
+    wrench_arrival_s: dict
+    wrench_n: dict
+    #: label -> arrival times (P,) and stylus positions (P, 3) m, device frame, of its device (/phantom/measured_cp)
+    device_arrival_s: dict
+    device_position_m: dict
     #: arrival, publication and header-stamp times (F,) of /liver/nodes
     nodes_arrival_s: np.ndarray
     nodes_published_s: np.ndarray
@@ -72,11 +74,13 @@ class NetworkSnapshot:
 
 
 class NetworkListener(Node):
-    """Listens to the force commands, the device's samples, the nodes, the physics wrench, /liver/surface and
+    """Listens to the force commands, the devices' samples, the nodes, the physics wrenches, /liver/surface and
     /diagnostics.
 
     `force_topics` maps a label to (topic, force_output format), e.g. {'local_model': ('/phantom/servo_cf',
-    'wrench_stamped')}. The force commands, device samples, nodes and physics wrenches are taken in batches by a
+    'wrench_stamped')}; `namespaces` a label to the namespace of its device side ('/' by default), where its
+    device samples (phantom/measured_cp) and physics wrench (liver/tool_wrench) are listened to, e.g. {'left':
+    '/left'}. The force commands, device samples, nodes and physics wrenches are taken in batches by a
     POLL_RATE_HZ loop (cheaper than a callback each) and timed by DDS: `*_arrival_s` is when the message reached
     this process (the rmw's receive time, on the time.monotonic() scale). Messages are decoded in
     `snapshot()`, only those not decoded by an earlier call. `peak_nodes` are the node positions
@@ -85,13 +89,17 @@ class NetworkListener(Node):
     cut changes it, and the node count with it).
     """
 
-    def __init__(self, force_topics: dict[str, tuple[str, str]], name: str = "liver_sim_listener", context=None):
+    def __init__(self, force_topics: dict[str, tuple[str, str]], name: str = "liver_sim_listener", context=None,
+                 namespaces: dict[str, str] | None = None):
         super().__init__(name, context=context)
         self._lock = threading.Lock()
         self._monotonic_minus_wall_s = time.monotonic() - time.time()
         self._force_formats = {label: fmt for label, (_, fmt) in force_topics.items()}
+        self._namespaces = {label: (namespaces or {}).get(label, "/") for label in force_topics}
         self._received = {("force", label): [] for label in force_topics}
-        self._received["device_pose"], self._received["nodes"], self._received["tool_wrench"] = [], [], []
+        for namespace in set(self._namespaces.values()):
+            self._received["device_pose", namespace], self._received["tool_wrench", namespace] = [], []
+        self._received["nodes"] = []
         self._decoded = {key: [] for key in self._received}
         self.diagnostics: dict[str, dict] = {}
         self.initial_surface = self.surface = None
@@ -101,9 +109,11 @@ class NetworkListener(Node):
         self._polled = LoopInputs(self)
         for label, (topic, fmt) in force_topics.items():
             self._take(("force", label), force_message_type(fmt), topic, TOPICS["servo_cf"])
-        self._take("device_pose", TOPICS["measured_cp"].type, TOPICS["measured_cp"].name, TOPICS["measured_cp"])
+        for namespace in sorted(set(self._namespaces.values())):
+            for key in ("measured_cp", "tool_wrench"):
+                self._take(("device_pose" if key == "measured_cp" else key, namespace), TOPICS[key].type,
+                           in_namespace(tool_topic(key), namespace), TOPICS[key])
         self._take("nodes", TOPICS["nodes"].type, TOPICS["nodes"].name, TOPICS["nodes"])
-        self._take("tool_wrench", TOPICS["tool_wrench"].type, TOPICS["tool_wrench"].name, TOPICS["tool_wrench"])
         self.create_subscription(TOPICS["surface"].type, TOPICS["surface"].name, self._on_surface,
                                  TOPICS["surface"].qos)
         self.create_subscription(TOPICS["diagnostics"].type, TOPICS["diagnostics"].name, self._on_diagnostics,
@@ -153,10 +163,11 @@ class NetworkListener(Node):
         return (np.array([d[0] for d in decoded]), np.array([d[1] for d in decoded]),
                 np.array([d[2] for d in decoded]).reshape(-1, 3), np.array([d[3] for d in decoded]))
 
-    def _decode_device_poses(self) -> tuple:
-        """(arrival_s, published_s, stamp_s, positions (K, 3) m, device frame) of the device's samples so far."""
-        decoded = self._decoded["device_pose"]
-        for arrival, published, data in self._new("device_pose"):
+    def _decode_device_poses(self, namespace: str) -> tuple:
+        """(arrival_s, published_s, stamp_s, positions (K, 3) m, device frame) of the samples so far of the device in
+        `namespace`."""
+        decoded = self._decoded["device_pose", namespace]
+        for arrival, published, data in self._new(("device_pose", namespace)):
             try:
                 position, _, (sec, nanosec) = pose_from_bytes(data)
             except ValueError:
@@ -186,10 +197,10 @@ class NetworkListener(Node):
                 self._peak_displacement, self.peak_nodes = displacement, positions
         return tuple(np.array([d[i] for d in decoded]) for i in range(3))
 
-    def _decode_wrenches(self) -> tuple:
-        """(arrival_s, forces (K, 3) N) of the physics wrenches so far."""
-        decoded = self._decoded["tool_wrench"]
-        for arrival, _, data in self._new("tool_wrench"):
+    def _decode_wrenches(self, namespace: str) -> tuple:
+        """(arrival_s, forces (K, 3) N) of the physics wrenches so far of the tool in `namespace`."""
+        decoded = self._decoded["tool_wrench", namespace]
+        for arrival, _, data in self._new(("tool_wrench", namespace)):
             try:
                 decoded.append((arrival, force_from_bytes("wrench_stamped", data)))
             except ValueError:
@@ -217,37 +228,41 @@ class NetworkListener(Node):
         run, so that the listener's memory stays bounded."""
         for label in self._force_formats:
             self._decode_forces(label)
-        self._decode_device_poses()
+        for namespace in set(self._namespaces.values()):
+            self._decode_device_poses(namespace)
+            self._decode_wrenches(namespace)
         self._decode_nodes()
-        self._decode_wrenches()
 
     def snapshot(self) -> NetworkSnapshot:
         """Copies of everything received so far, as numpy arrays where that fits.
 
         `*_arrival_s` are when messages reached this process, `*_published_s` when their publisher sent
         them (DDS times, independent of how promptly this process runs). `pose_to_force_s[label]`: for
-        each force command stamped with a device sample, the time from that sample's publication to the
-        command's (s; NaN when the sample was not seen).
+        each force command stamped with a device sample (of its own namespace's device), the time from that sample's
+        publication to the command's (s; NaN when the sample was not seen).
         """
         decoded = {label: self._decode_forces(label) for label in self._force_formats}
-        device_arrival, device_published, device_stamp, device_position = self._decode_device_poses()
+        namespaces = set(self._namespaces.values())
+        devices = {namespace: self._decode_device_poses(namespace) for namespace in namespaces}
+        wrenches = {namespace: self._decode_wrenches(namespace) for namespace in namespaces}
         nodes_arrival, nodes_published, nodes_stamp = self._decode_nodes()
-        wrench_arrival, wrench = self._decode_wrenches()
-        published_by_stamp = dict(zip(device_stamp.tolist(), device_published.tolist()))
+        published_by_stamp = {namespace: dict(zip(stamps.tolist(), published.tolist()))
+                              for namespace, (_, published, stamps, _) in devices.items()}
+        of = self._namespaces
         with self._lock:
             return NetworkSnapshot(
                 forces={label: (arrival, values) for label, (arrival, _, values, _) in decoded.items()},
                 force_published_s={label: published for label, (_, published, _, _) in decoded.items()},
-                pose_to_force_s={label: np.array([sent - published_by_stamp.get(stamp, np.nan)
+                pose_to_force_s={label: np.array([sent - published_by_stamp[of[label]].get(stamp, np.nan)
                                                   for sent, stamp in zip(sent_s, stamps)])
                                  for label, (_, sent_s, _, stamps) in decoded.items()},
                 force_stamp_s={label: stamps for label, (_, _, _, stamps) in decoded.items()},
                 stamp_to_arrival_s={label: arrival - self._monotonic_minus_wall_s - stamps
                                     for label, (arrival, _, _, stamps) in decoded.items()},
-                wrench_arrival_s=wrench_arrival,
-                wrench_n=wrench,
-                device_arrival_s=device_arrival,
-                device_position_m=device_position,
+                wrench_arrival_s={label: wrenches[of[label]][0] for label in of},
+                wrench_n={label: wrenches[of[label]][1] for label in of},
+                device_arrival_s={label: devices[of[label]][0] for label in of},
+                device_position_m={label: devices[of[label]][3] for label in of},
                 nodes_arrival_s=nodes_arrival,
                 nodes_published_s=nodes_published,
                 nodes_stamp_s=nodes_stamp,

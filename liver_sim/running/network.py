@@ -1,4 +1,5 @@
-"""Running the four-node network as separate processes, listening to it, and stopping it cleanly.
+"""Running the four-node network as separate processes, listening to it, and stopping it cleanly: one physics and,
+per tool, a device side (bridge, tool node, simulated PHANToM; in the tool's namespace when it has a name).
 
 Used by `liver-sim demo` and `liver-sim bench loop`.  Processes run in the ROS_DOMAIN_ID of the
 environment and on loopback unless the environment says otherwise.
@@ -19,6 +20,7 @@ from rclpy.experimental import EventsExecutor
 
 from liver_sim.analysis import rate_figures
 from liver_sim.base.process_settings import command_line, printable
+from liver_sim.base.topic_names import in_namespace, tool_namespace, tool_topic
 from liver_sim.mesh.landmarks import press_anchor
 from liver_sim.mesh.liver_shape import default_liver
 from liver_sim.nodes.occupants import refuse_occupied
@@ -26,8 +28,7 @@ from liver_sim.nodes.run import spin
 from liver_sim.running.launcher import NodeProcesses, log_tail
 from liver_sim.running.listener import NetworkListener, NetworkSnapshot
 from liver_sim.running.machine_stalls import Sentinels, gaps_with_stalls
-from liver_sim.sessions.record import READY, RECORDER_NODE
-from msg_defs.topics import TOPICS
+from liver_sim.sessions.record import READY, RECORDER_NODE, default_topics
 
 #: How often (s) the listener decodes what it received during a run (and lets the bytes go).
 DECODE_EVERY_S = 10.0
@@ -43,10 +44,12 @@ def default_anchor() -> list[float]:
 
 @dataclass
 class NetworkPlan:
-    """The command lines of one run: label -> argv."""
+    """The command lines of one run: label -> argv; the force topics listened to (label -> (topic, format)) and the
+    namespace of each label's device side (NetworkListener)."""
 
     commands: dict[str, list[str]] = field(default_factory=dict)
     force_topics: dict[str, tuple[str, str]] = field(default_factory=dict)
+    namespaces: dict[str, str] = field(default_factory=dict)
     #: started once the physics publishes, so that a scripted device does not press an absent liver
     after_physics: tuple = ("phantom_sim",)
     #: `liver-sim record` command lines: started before the nodes, which start once each has printed its
@@ -54,21 +57,45 @@ class NetworkPlan:
     observers: dict[str, list[str]] = field(default_factory=dict)
 
 
-def closed_loop_plan(extra: dict | None = None) -> NetworkPlan:
-    """The four nodes in closed loop with the simulated PHANToM pressing the top of the liver.
+#: The label of the one device side in the root namespace (a named tool's label is its name).
+ROOT_LABEL = "local_model"
+#: The executables of a device side.
+DEVICE_SIDE = ("haptic_bridge", "liver_tool", "phantom_sim")
 
-    `extra` maps an executable to more `-p` overrides.  (Fig. 8's baseline bridge without local model
-    runs offline on what the network sent: analysis.held_wrench_baseline, `liver-sim resimulate --compare`.)
+
+def side_label(executable: str, tool: str) -> str:
+    """The label of a device side's process: the executable, after an underscore its tool's name if it has one."""
+    return f"{executable}_{tool}" if tool else executable
+
+
+def closed_loop_plan(extra: dict | None = None, tools: dict[str, dict] | None = None) -> NetworkPlan:
+    """The physics and, per tool, a bridge, a tool node and the simulated PHANToM pressing the top of the liver, in
+    closed loop: one tool in the root namespace by default (the four nodes), or `tools`, {name: {executable: more
+    `-p` overrides of that tool's side; for liver_physics its NAME.<name> parameters}}, each side in /NAME.
+
+    `extra` maps an executable to more `-p` overrides (of every side).  (Fig. 8's baseline bridge without local
+    model runs offline on what the network sent: analysis.held_wrench_baseline, `liver-sim resimulate --compare`.)
     """
-    extra = extra or {}
+    extra, tools = extra or {}, tools or {"": {}}
     plan = NetworkPlan()
-    plan.commands["liver_physics"] = command_line("liver_physics", extra.get("liver_physics"))
-    plan.commands["haptic_bridge"] = command_line("haptic_bridge", extra.get("haptic_bridge"))
-    plan.commands["liver_tool"] = command_line("liver_tool", {"source": "device", **extra.get("liver_tool", {})})
-    plan.commands["phantom_sim"] = command_line("phantom_sim", {"anchor_m": default_anchor(),
-                                                                "start_delay_s": DEVICE_START_DELAY_S,
-                                                                **extra.get("phantom_sim", {})})
-    plan.force_topics["local_model"] = ("/phantom/servo_cf", "wrench_stamped")
+    physics = dict(extra.get("liver_physics", {}))
+    if list(tools) != [""]:
+        physics["tools"] = list(tools)
+        physics.update({f"{tool}.{name}": value for tool, own in tools.items()
+                        for name, value in own.get("liver_physics", {}).items()})
+    plan.commands["liver_physics"] = command_line("liver_physics", physics)
+    base = {"haptic_bridge": {}, "liver_tool": {"source": "device"},
+            "phantom_sim": {"anchor_m": default_anchor(), "start_delay_s": DEVICE_START_DELAY_S}}
+    for tool, own in tools.items():
+        namespace = tool_namespace(tool)
+        for executable in DEVICE_SIDE:
+            plan.commands[side_label(executable, tool)] = command_line(
+                executable, {**base[executable], **extra.get(executable, {}), **own.get(executable, {})},
+                namespace=namespace)
+        label = tool or ROOT_LABEL
+        plan.force_topics[label] = (in_namespace(tool_topic("servo_cf"), namespace), "wrench_stamped")
+        plan.namespaces[label] = namespace
+    plan.after_physics = tuple(side_label("phantom_sim", tool) for tool in tools)
     return plan
 
 
@@ -149,7 +176,7 @@ def run_network(plan: NetworkPlan, duration_s: float, log_dir: Path, progress=pr
         progress(f"  {label}: {printable(args)}")
     context = rclpy.Context()
     rclpy.init(context=context)
-    listener = NetworkListener(plan.force_topics, context=context)
+    listener = NetworkListener(plan.force_topics, context=context, namespaces=plan.namespaces)
     executor = EventsExecutor(context=context)
     executor.add_node(listener)
     spinner = threading.Thread(target=spin, args=(executor, context), daemon=True)
@@ -163,8 +190,10 @@ def run_network(plan: NetworkPlan, duration_s: float, log_dir: Path, progress=pr
             refuse_occupied(listener, "this run")
         for label, args in plan.observers.items():
             processes.start(label, args, patient=True)
+        recorded = default_topics(tools=[namespace.strip("/") for namespace in plan.namespaces.values()])
         _wait_until(listener, processes, f"the recorder(s) {', '.join(plan.observers)} (ready and subscribed)",
-                    lambda heard: all(_recorder_ready(heard, log_dir / f"{label}.log") for label in plan.observers))
+                    lambda heard: all(_recorder_ready(heard, log_dir / f"{label}.log", recorded)
+                                      for label in plan.observers))
         for label, args in plan.commands.items():
             if label not in plan.after_physics:
                 processes.start(label, args)
@@ -176,7 +205,7 @@ def run_network(plan: NetworkPlan, duration_s: float, log_dir: Path, progress=pr
             processes.start(label, plan.commands[label])
         if late:
             _wait_until(listener, processes, f"the device samples from {', '.join(late)}",
-                        lambda heard: len(heard.snapshot().device_arrival_s) > 0)
+                        lambda heard: all(len(a) for a in heard.snapshot().device_arrival_s.values()))
         for k in range(extra_load):
             loads.append(subprocess.Popen(CORE_BOUND_PROCESS))
             progress(f"  extra load {k + 1}: pid {loads[-1].pid}, one core busy at normal priority")
@@ -217,7 +246,7 @@ def run_network(plan: NetworkPlan, duration_s: float, log_dir: Path, progress=pr
                       process_costs=costs, machine_stalls=sentinels.stalls(window), stop_requested_ns=stop_requested_ns)
 
 
-def wire_rates(run: NetworkRun, label: str = "local_model") -> dict:
+def wire_rates(run: NetworkRun, label: str = ROOT_LABEL) -> dict:
     """The network's rates as its messages went on the wire (DDS publication times) within the run's
     `window_s`, the `duration_s` in which every node ran: {'physics': rate_figures of /liver/nodes at 150 Hz,
     'haptic': of the `label` force commands at 1 kHz}. Start-up, shutdown and a listener's batched arrivals
@@ -229,7 +258,7 @@ def wire_rates(run: NetworkRun, label: str = "local_model") -> dict:
             "haptic": rate_figures(forces[(forces >= start) & (forces <= end)], 1000.0)}
 
 
-def wire_gaps(run: NetworkRun, bound_s: float, label: str = "local_model") -> list[dict]:
+def wire_gaps(run: NetworkRun, bound_s: float, label: str = ROOT_LABEL) -> list[dict]:
     """The gaps longer than `bound_s` between the `label` force commands published within the run's
     `window_s`, each with the part of it the machine stalled (machine_stalls.gaps_with_stalls; `start_s` from
     the window's start)."""
@@ -240,14 +269,13 @@ def wire_gaps(run: NetworkRun, bound_s: float, label: str = "local_model") -> li
     return [{**gap, "start_s": gap["start_s"] - start} for gap in gaps]
 
 
-def _recorder_ready(listener, log: Path) -> bool:
-    """Whether the recorder logging to `log` said READY and the graph shows its subscriptions to the
-    contract's topics."""
+def _recorder_ready(listener, log: Path, topics: list[str]) -> bool:
+    """Whether the recorder logging to `log` said READY and the graph shows its subscriptions to `topics`."""
 
     if not any(line.startswith(READY) for line in log_tail(log, 1000)):
         return False
-    return all(any(s.node_name == RECORDER_NODE for s in listener.get_subscriptions_info_by_topic(t.name))
-               for key, t in TOPICS.items() if key != "marker")
+    return all(any(s.node_name == RECORDER_NODE for s in listener.get_subscriptions_info_by_topic(topic))
+               for topic in topics)
 
 
 def _wait_until(listener, processes: NodeProcesses, what: str, ready, timeout_s: float = 60.0) -> None:

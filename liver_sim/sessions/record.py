@@ -24,7 +24,7 @@ from rclpy.signals import SignalHandlerOptions
 
 from liver_sim.base.process_settings import cli_command_line, set_realtime_priority
 from liver_sim.base.stop_request import StopRequest, stop_on_signals
-from liver_sim.base.topic_names import BASELINE_FORCE_TOPIC
+from liver_sim.base.topic_names import BASELINE_FORCE_TOPIC, TOOL_TOPICS, in_namespace, tool_namespace, tool_topic
 from liver_sim.nodes.rcl_take import SerializedTake
 from liver_sim.sessions.bag import BagWriter, QosSpec
 from liver_sim.sessions.gaps import SequenceGaps
@@ -54,16 +54,29 @@ EXIT_LOST = 3
 REALTIME_PRIORITY = 20
 
 
-def default_topics(marker: bool = False) -> list[str]:
-    """The topics of docs/contract.md (and the Fig. 8 baseline force); /liver/marker only when asked for."""
-
-    names = [t.name for key, t in TOPICS.items() if marker or key != "marker"]
-    return names + [BASELINE_FORCE_TOPIC]
+#: A tool's topics beside TOOL_TOPICS: the Fig. 8 baseline force, relative.
+BASELINE_TOOL_TOPIC = BASELINE_FORCE_TOPIC.lstrip("/")
 
 
-def recorder_command(out: Path, storage: str = "mcap") -> list[str]:
-    """The command line of `liver-sim record` into `out`."""
-    return cli_command_line("record", "--out", str(out), "--storage", storage)
+def default_topics(marker: bool = False, tools=("",)) -> list[str]:
+    """The topics of docs/contract.md (and the Fig. 8 baseline force), each tool's (TOOL_TOPICS and the baseline)
+    in the namespace of each of `tools` (default: one tool in the root namespace); /liver/marker only when asked
+    for."""
+
+    names = []
+    for key, topic in TOPICS.items():
+        if key in TOOL_TOPICS:
+            names += [in_namespace(tool_topic(key), tool_namespace(tool)) for tool in tools]
+        elif marker or key != "marker":
+            names.append(topic.name)
+    return names + [in_namespace(BASELINE_TOOL_TOPIC, tool_namespace(tool)) for tool in tools]
+
+
+def recorder_command(out: Path, storage: str = "mcap", tools=("",)) -> list[str]:
+    """The command line of `liver-sim record` into `out`, of `tools`' topics (default_topics)."""
+    named = [tool for tool in tools if tool]
+    return cli_command_line("record", "--out", str(out), "--storage", storage,
+                            *(["--tools", *named] if named else []))
 
 
 def known_topics() -> dict:
@@ -77,6 +90,19 @@ def known_topics() -> dict:
         known[topic.name] = (topic.type or WrenchStamped, spec)
     known[BASELINE_FORCE_TOPIC] = (WrenchStamped, known[TOPICS["servo_cf"].name][1])
     return known
+
+
+def known_topic(name: str) -> tuple | None:
+    """(message class, QosSpec) of a product topic (known_topics), a tool's in any namespace included
+    (/left/phantom/servo_cf as /phantom/servo_cf); None for another topic."""
+
+    known = known_topics()
+    if name in known:
+        return known[name]
+    for relative in [tool_topic(key) for key in TOOL_TOPICS] + [BASELINE_TOOL_TOPIC]:
+        if name.endswith("/" + relative):
+            return known["/" + relative]
+    return None
 
 
 def message_class(type_name: str):
@@ -129,11 +155,9 @@ class Recorder:
         self.overflowed: list[str] = []
         self.gaps = SequenceGaps()
         self._writer_nodes: dict[bytes, str] = {}
-        known = known_topics()
         for topic in topics:
-            if topic in known:
-                msg_class, spec = known[topic]
-                self._subscribe(topic, msg_class, spec)
+            if (product := known_topic(topic)) is not None:
+                self._subscribe(topic, *product)
             else:
                 self._pending.append(topic)
         self._next_discovery = 0.0

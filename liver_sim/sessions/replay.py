@@ -4,10 +4,10 @@ Message k goes out at start + (t_k − t_0)/rate on an absolute schedule, so a s
 the next messages without shifting the rest.  Product topics keep their QoS of docs/contract.md;
 other topics are published reliable, volatile, keep-last 10.
 
-Device commands (DEVICE_COMMAND_TOPICS) are never republished on their own topics: a replay next to a
-rig would drive its device past the bridge's clamp, rate limit and watchdog.  They are left out, or, with
-`remap_device_commands`, published on that topic instead (the baseline's on that topic +
-"_without_local_model").
+Device commands (DEVICE_COMMAND_TOPICS, in any namespace: /left/phantom/servo_cf of a two-hand session too) are
+never republished on their own topics: a replay next to a rig would drive its device past the bridge's clamp, rate
+limit and watchdog.  They are left out, or, with `remap_device_commands`, published on that topic instead (the
+baseline's on that topic + "_without_local_model"; a namespace's under the namespace: /left + TOPIC).
 """
 from __future__ import annotations
 
@@ -22,19 +22,28 @@ from liver_sim.base.stop_request import stop_on_signals
 from liver_sim.base.topic_names import BASELINE_FORCE_TOPIC
 from liver_sim.nodes.occupants import refuse_occupied
 from liver_sim.sessions.bag import bag_info, read_messages
-from liver_sim.sessions.record import _rclpy_qos, known_topics, message_class
+from liver_sim.sessions.record import _rclpy_qos, known_topic, message_class
 from msg_defs.topics import TOPICS
 
 REPLAY_NODE = "liver_sim_replay"
-#: Recorded force commands: a replay never publishes them where a device driver listens.
+#: Recorded force commands: a replay never publishes them where a device driver listens, in any namespace.
 DEVICE_COMMAND_TOPICS = (TOPICS["servo_cf"].name, BASELINE_FORCE_TOPIC)
+
+
+def device_command_namespace(topic: str) -> str | None:
+    """The namespace prefix ('' for the root, '/left') of a device command topic (DEVICE_COMMAND_TOPICS under any
+    namespace), or None for another topic."""
+    for command in DEVICE_COMMAND_TOPICS:
+        if topic == command or topic.endswith(command):
+            return topic.removesuffix(command)
+    return None
 
 
 def output_topics(wanted: list[str], remap_device_commands: str | None, progress=print) -> dict[str, str]:
     """{recorded topic: topic to publish it on} for the `wanted` topics: device commands left out, or moved
     to `remap_device_commands`; ValueError when the commands are asked for by name without a remap, or the
     remap is itself a device command topic."""
-    commands = [t for t in wanted if t in DEVICE_COMMAND_TOPICS]
+    commands = [t for t in wanted if device_command_namespace(t) is not None]
     if remap_device_commands is None:
         out = {t: t for t in wanted if t not in commands}
         if commands:
@@ -44,11 +53,14 @@ def output_topics(wanted: list[str], remap_device_commands: str | None, progress
             raise ValueError(f"{', '.join(commands)}: device commands are never replayed on their own topic; "
                              "give --remap-device-commands TOPIC to replay them on another topic")
         return out
-    if remap_device_commands in DEVICE_COMMAND_TOPICS or remap_device_commands in wanted:
+    servo = TOPICS["servo_cf"].name
+    out = {t: device_command_namespace(t) + remap_device_commands + t.removeprefix(device_command_namespace(t) + servo)
+           if t in commands else t for t in wanted}
+    remapped = [out[t] for t in commands]
+    if any(device_command_namespace(t) is not None or t in wanted for t in [remap_device_commands, *remapped]):
         raise ValueError(f"--remap-device-commands {remap_device_commands}: must be a topic no device and no "
                          "other replayed topic uses")
-    servo = TOPICS["servo_cf"].name
-    return {t: remap_device_commands + t.removeprefix(servo) if t in commands else t for t in wanted}
+    return out
 
 
 def run_replay(bag: Path, rate: float = 1.0, topics: list[str] | None = None, delay_s: float = 1.0,
@@ -73,11 +85,10 @@ def run_replay(bag: Path, rate: float = 1.0, topics: list[str] | None = None, de
         try:
             node = rclpy.create_node(REPLAY_NODE, context=context, start_parameter_services=False)
             refuse_occupied(node, "a replay")  # before any publisher shows itself to the running nodes
-            known = known_topics()
             publishers = {}
             for topic in wanted:
                 msgtype = info.topics[topic][0]
-                spec = known[topic][1] if topic in known else None
+                spec = known[1] if (known := known_topic(topic)) is not None else None
                 qos = _rclpy_qos(spec, spec.depth) if spec else 10
                 publishers[topic] = node.create_publisher(message_class(msgtype), out_topics[topic], qos)
             t0 = first.timestamp_ns

@@ -3,8 +3,9 @@
 Writes force.png (force command and physics contact force over time), penetration.png (depth of the
 tool sphere below the local model, the bridge's penetration()), tool_path.png, loop_rates.png
 (on-wire rates per second, and the nodes' own loop rate and jitter from /diagnostics when recorded),
-fig8.png when the bag holds the force with and without local model (Fig. 8), and summary.json/.md.
-Times are the bag's log times, from its first message.
+fig8.png when the bag holds the force with and without local model (Fig. 8), and summary.json/.md, of one
+tool: the one in the root namespace, or tool NAME of a session with several (`--tool NAME`: its topics under
+/NAME). Times are the bag's log times, from its first message.
 """
 from __future__ import annotations
 
@@ -23,7 +24,7 @@ from liver_sim.analysis import (
     rate_figures,
 )
 from liver_sim.base.local_model import penetration
-from liver_sim.base.topic_names import BASELINE_FORCE_TOPIC
+from liver_sim.base.topic_names import BASELINE_FORCE_TOPIC, in_namespace, tool_namespace
 from liver_sim.sessions.bag import BagError, bag_info, read_messages
 from liver_sim.sessions.parameters import node_parameters
 from liver_sim.sessions.record import message_class, type_name
@@ -46,15 +47,25 @@ def _force_format(msgtype: str) -> str | None:
     return None
 
 
-def session_arrays(bag: Path, physics: dict, bridge: dict) -> dict:
-    """One pass over the bag: log times of every topic, forces, wrench, tool tips, local models, diagnostics. The
-    tool tips are the device's samples placed in the liver frame by the recorded device map (1 kHz, what the
-    bridge rendered), or, in a bag without them, the tool poses."""
+def tool_topics(physics, bridge, tool: str = "") -> dict:
+    """{what: topic} of tool `tool` ('': the root namespace's) in a session: its force commands (with and without
+    local model), physics wrench, tool pose, local model, device samples and device map."""
+    namespace = tool_namespace(tool)
+    return {key: in_namespace(name, namespace) for key, name in (
+        ("force", bridge.force_topic), ("baseline", BASELINE_FORCE_TOPIC.lstrip("/")),
+        ("tool_wrench", physics.tool_wrench_topic), ("tool_pose", physics.tool_pose_topic),
+        ("contact_plane", physics.contact_plane_topic), ("measured_cp", bridge.measured_cp_topic),
+        ("device_map", bridge.device_map_topic))}
 
-    force_topics = {"local_model": bridge.force_topic, "without_local_model": BASELINE_FORCE_TOPIC}
-    decoded = {bridge.force_topic, BASELINE_FORCE_TOPIC, physics.tool_wrench_topic, physics.tool_pose_topic,
-               physics.contact_plane_topic, TOPICS["diagnostics"].name, bridge.measured_cp_topic,
-               bridge.device_map_topic}
+
+def session_arrays(bag: Path, physics: dict, bridge: dict, tool: str = "") -> dict:
+    """One pass over the bag: log times of every topic, tool `tool`'s forces, wrench, tool tips and local models
+    (tool_topics), diagnostics. The tool tips are the device's samples placed in the liver frame by the recorded
+    device map (1 kHz, what the bridge rendered), or, in a bag without them, the tool poses."""
+
+    names = tool_topics(physics, bridge, tool)
+    force_topics = {"local_model": names["force"], "without_local_model": names["baseline"]}
+    decoded = {*names.values(), TOPICS["diagnostics"].name}
     times: dict[str, list] = {}
     values: dict[str, list] = {}
     diagnostics: list = []
@@ -73,13 +84,13 @@ def session_arrays(bag: Path, physics: dict, bridge: dict) -> dict:
                 if fmt is None:
                     raise ValueError(f"{m.msgtype} is not a force command type")
                 value = force_from_message(fmt, message)
-            elif m.topic == physics.tool_wrench_topic:
+            elif m.topic == names["tool_wrench"]:
                 value = force_from_message("wrench_stamped", message)
-            elif m.topic in (physics.tool_pose_topic, bridge.measured_cp_topic):
+            elif m.topic in (names["tool_pose"], names["measured_cp"]):
                 value = pose_to_arrays(message.pose)[0]
-            elif m.topic == bridge.device_map_topic:
+            elif m.topic == names["device_map"]:
                 value = device_map_from_message(message)
-            elif m.topic == physics.contact_plane_topic:
+            elif m.topic == names["contact_plane"]:
                 value = marker_to_local_model(message)[0]
             else:
                 for status in message.status:
@@ -99,14 +110,14 @@ def session_arrays(bag: Path, physics: dict, bridge: dict) -> dict:
         t, f = series(topic)
         if len(t):
             forces[label] = (t, np.array(f).reshape(-1, 3))
-    wrench_t, wrench = series(physics.tool_wrench_topic)
-    sample_t, samples = series(bridge.measured_cp_topic)
-    device_maps = series(bridge.device_map_topic)[1]
+    wrench_t, wrench = series(names["tool_wrench"])
+    sample_t, samples = series(names["measured_cp"])
+    device_maps = series(names["device_map"])[1]
     if len(sample_t) and device_maps:
         pose_t, tips = sample_t, [device_maps[0].device_to_liver(sample) for sample in samples]
     else:
-        pose_t, tips = series(physics.tool_pose_topic)
-    plane_t, models = series(physics.contact_plane_topic)
+        pose_t, tips = series(names["tool_pose"])
+    plane_t, models = series(names["contact_plane"])
     return {"origin_s": origin, "times": {k: np.array(v) - origin for k, v in times.items()},
             "forces": forces, "wrench": (wrench_t, np.array(wrench).reshape(-1, 3)),
             "tool": (pose_t, np.array(tips).reshape(-1, 3)), "local_models": (plane_t, models),
@@ -245,22 +256,24 @@ def plot_fig8(data: dict, path: Path) -> None:
     _save(fig, path, plt)
 
 
-def write_report(bag: Path, out: Path, progress=print) -> dict:
-    """Read the bag, write the PNGs and summary.json/.md into `out`; return the summary."""
+def write_report(bag: Path, out: Path, progress=print, tool: str = "") -> dict:
+    """Read the bag, write the PNGs and summary.json/.md of tool `tool` ('': the root namespace's) into `out`;
+    return the summary."""
 
     info = bag_info(bag)
     params = node_parameters()
     physics, bridge = params["liver_physics"], params["haptic_bridge"]
     progress(f"reading {bag}: {info.message_count} messages on {len(info.topics)} topics")
-    data = session_arrays(bag, physics, bridge)
+    data = session_arrays(bag, physics, bridge, tool)
+    topic = tool_topics(physics, bridge, tool)
     out.mkdir(parents=True, exist_ok=True)
     figures = []
-    summary = {"bag": str(bag), "storage": info.storage, "duration_s": info.duration_ns * 1e-9,
+    summary = {"bag": str(bag), "tool": tool, "storage": info.storage, "duration_s": info.duration_ns * 1e-9,
                "topics": {t: {"type": kind, "messages": n} for t, (kind, n) in sorted(info.topics.items())},
                "recorder": info.custom_data}
-    nominal = {physics.tool_pose_topic: physics.rate_hz, bridge.force_topic: bridge.rate_hz,
-               TOPICS["measured_cp"].name: bridge.rate_hz, physics.nodes_topic: physics.rate_hz,
-               physics.contact_plane_topic: physics.rate_hz, physics.tool_wrench_topic: physics.rate_hz}
+    nominal = {topic["tool_pose"]: physics.rate_hz, topic["force"]: bridge.rate_hz,
+               topic["measured_cp"]: bridge.rate_hz, physics.nodes_topic: physics.rate_hz,
+               topic["contact_plane"]: physics.rate_hz, topic["tool_wrench"]: physics.rate_hz}
     rate_topics = [t for t in nominal if t in data["times"]]
     summary["rates_received"] = {t: rate_figures(data["times"][t], nominal[t]) for t in rate_topics}
     latest = {}

@@ -16,7 +16,7 @@ from liver_sim.analysis import largest_force_jump_n
 from liver_sim.base.link import LinkSettings
 from liver_sim.base.process_settings import cli_command_line
 from liver_sim.running.machine_stalls import stall_summary
-from liver_sim.running.network import NetworkRun, closed_loop_plan, run_network, wire_gaps, wire_rates
+from liver_sim.running.network import ROOT_LABEL, NetworkRun, closed_loop_plan, run_network, wire_gaps, wire_rates
 from liver_sim.sessions.record import recorder_command
 from liver_sim.sessions.report import plot_force
 from liver_sim.studies.demo_liver import DemoMesh
@@ -80,35 +80,17 @@ def run_demo(out_dir: Path, duration_s: float | None = None, progress=print, rec
         plan.commands["view"] = cli_command_line("view", *view, "--picture", str(out_dir / "view.png"))
     progress(f"{spec.title}: starting the node network (the same command lines work in four terminals):")
     run = run_network(plan, duration_s, out_dir / "logs", progress, extra_load=extra_load, check_domain=check_domain)
-    _, haptic_force = run.forces["local_model"]
-    wrench = run.wrench_n
-    peak_nodes = run.peak_nodes if run.peak_nodes is not None else mesh.points
-    last_nodes = run.last_nodes if run.last_nodes is not None else mesh.points
-    haptic_norm = np.linalg.norm(haptic_force, axis=1)
     summary = {
         "scenario": scenario,
         "mesh": {"source": mesh.source, "scale": liver.scale, "sha256": mesh.sha256},
         "duration_s": duration_s,
         "link": {"delay_s": link.delay_s, "jitter_s": link.jitter_s, "loss_fraction": link.loss_fraction,
                  "seed": link.seed},
-        **wire_rates(run),
-        "machine_stalls": stall_summary(run.machine_stalls),
-        "haptic_gaps_over_5ms": wire_gaps(run, GAP_S),
-        "peak_haptic_force_n": float(haptic_norm.max()) if haptic_norm.size else 0.0,
-        "peak_physics_force_n": float(np.linalg.norm(wrench, axis=1).max()) if len(wrench) else 0.0,
-        "largest_force_jump_n": largest_force_jump_n(haptic_force),
-        "topology_changes": max(0, run.surface_messages - 1),
-        "nodes": [len(n) if n is not None else 0 for n in (run.initial_nodes, run.last_nodes)],
-        "skin_triangles": [len(s[0]) if s is not None else 0
-                           for s in (run.initial_surface, run.surface)],
-        "surface_nodes": [len(s[1]) if s is not None else 0
-                          for s in (run.initial_surface, run.surface)],
-        "diagnostics": run.diagnostics,
-        "stop_requested_unix_s": run.stop_requested_ns * 1e-9,
+        "physics": wire_rates(run)["physics"],
+        **device_summary(run, ROOT_LABEL),
+        **network_summary(run, mesh),
     }
-    if len(last_nodes) == len(mesh.points):
-        summary["peak_displacement_m"] = float(np.linalg.norm(peak_nodes - mesh.points, axis=1).max())
-        summary["final_displacement_m"] = float(np.linalg.norm(last_nodes - mesh.points, axis=1).max())
+    peak_nodes = run.peak_nodes if run.peak_nodes is not None else mesh.points
     out_dir.mkdir(parents=True, exist_ok=True)
     (out_dir / "summary.json").write_text(json.dumps(summary, indent=2, default=float) + "\n")
     (out_dir / "summary.md").write_text(_network_markdown(summary, f"{spec.title} ({liver.name})"))
@@ -123,7 +105,7 @@ def run_demo(out_dir: Path, duration_s: float | None = None, progress=print, rec
         plot_topology(run, spec.title, mesh, out_dir)
     progress(f"physics {summary['physics']['rate_hz']:.1f} Hz, haptic {summary['haptic']['rate_hz']:.1f} Hz "
              f"(period error p99 {1e3 * (summary['haptic']['period_error_p99_s'] or 0):.2f} ms; "
-             f"{_gaps_line(summary)}), "
+             f"{gaps_line(summary)}), "
              f"peak force "
              f"{summary['peak_haptic_force_n']:.2f} N"
              + (f", residual displacement {summary['final_displacement_m'] * 1e3:.2f} mm"
@@ -140,9 +122,43 @@ def run_demo(out_dir: Path, duration_s: float | None = None, progress=print, rec
 GAP_S = 0.005
 
 
-def _gaps_line(summary: dict) -> str:
-    """How many command gaps over GAP_S there were, how many held a stall of the machine itself, and those stalls."""
-    gaps, stalls = summary["haptic_gaps_over_5ms"], summary["machine_stalls"]
+def device_summary(run: NetworkRun, label: str) -> dict:
+    """What one device side of a run did: its commands' rates on the wire (`haptic`), their gaps over GAP_S with
+    the machine's share, the peak force commanded and the peak physics force on its tool (N), the largest change
+    between consecutive commands in contact (N)."""
+    _, command = run.forces[label]
+    wrench = run.wrench_n[label]
+    norm = np.linalg.norm(command, axis=1)
+    return {"haptic": wire_rates(run, label)["haptic"], "haptic_gaps_over_5ms": wire_gaps(run, GAP_S, label),
+            "peak_haptic_force_n": float(norm.max()) if norm.size else 0.0,
+            "peak_physics_force_n": float(np.linalg.norm(wrench, axis=1).max()) if len(wrench) else 0.0,
+            "largest_force_jump_n": largest_force_jump_n(command)}
+
+
+def network_summary(run: NetworkRun, mesh) -> dict:
+    """What the run did to the liver and the machine: its stalls, topology changes, nodes, skin triangles, the
+    diagnostics, when the stop was asked, and (same node count) the peak and final displacement (m)."""
+    summary = {
+        "machine_stalls": stall_summary(run.machine_stalls),
+        "topology_changes": max(0, run.surface_messages - 1),
+        "nodes": [len(n) if n is not None else 0 for n in (run.initial_nodes, run.last_nodes)],
+        "skin_triangles": [len(s[0]) if s is not None else 0 for s in (run.initial_surface, run.surface)],
+        "surface_nodes": [len(s[1]) if s is not None else 0 for s in (run.initial_surface, run.surface)],
+        "diagnostics": run.diagnostics,
+        "stop_requested_unix_s": run.stop_requested_ns * 1e-9,
+    }
+    peak_nodes = run.peak_nodes if run.peak_nodes is not None else mesh.points
+    last_nodes = run.last_nodes if run.last_nodes is not None else mesh.points
+    if len(last_nodes) == len(mesh.points):
+        summary["peak_displacement_m"] = float(np.linalg.norm(peak_nodes - mesh.points, axis=1).max())
+        summary["final_displacement_m"] = float(np.linalg.norm(last_nodes - mesh.points, axis=1).max())
+    return summary
+
+
+def gaps_line(summary: dict, stalls: dict | None = None) -> str:
+    """How many command gaps over GAP_S there were (a device summary), how many held a stall of the machine itself,
+    and those stalls (`stalls`: the run's, default the summary's own)."""
+    gaps, stalls = summary["haptic_gaps_over_5ms"], stalls or summary["machine_stalls"]
     machine = sum(gap["machine_s"] > 0.0 for gap in gaps)
     return (f"{len(gaps)} command gap(s) over {GAP_S * 1e3:g} ms, {machine} of them during a stall of the machine "
             f"itself ({stalls['count']} stall(s), largest {stalls['largest_s'] * 1e3:.1f} ms)")
@@ -163,7 +179,7 @@ def _network_markdown(summary: dict, title: str) -> str:
         f"- haptic commands: {haptic['rate_hz']:.1f} Hz ({haptic['samples']} commands), period error p50 "
         f"{ms(haptic['period_error_p50_s'])}, p99 {ms(haptic['period_error_p99_s'])}, largest gap "
         f"{ms(haptic['max_gap_s'])}",
-        f"- {_gaps_line(summary)}: the machine stalls when it runs none of its threads that are due (a virtual "
+        f"- {gaps_line(summary)}: the machine stalls when it runs none of its threads that are due (a virtual "
         f"CPU its host did not run), measured by a sentinel per CPU at SCHED_FIFO 99 "
         f"(liver_sim/running/machine_stalls.py)",
         f"- peak force sent to the device: {summary['peak_haptic_force_n']:.3f} N; physics contact force peak "
@@ -180,7 +196,8 @@ def _network_markdown(summary: dict, title: str) -> str:
 def plot_network_forces(run: NetworkRun, title: str, path: Path) -> None:
     """The report's force plot (sessions.report.plot_force: 1 kHz commands, 150 Hz physics force as markers,
     a zoom on contact where they meet at each update) of what the listener received, titled `title`."""
-    arrival, force = run.forces["local_model"]
-    origin = min([a[0] for a in (arrival, run.wrench_arrival_s) if len(a)], default=0.0)
+    arrival, force = run.forces[ROOT_LABEL]
+    wrench_arrival = run.wrench_arrival_s[ROOT_LABEL]
+    origin = min([a[0] for a in (arrival, wrench_arrival) if len(a)], default=0.0)
     plot_force({"forces": {"local_model": (arrival - origin, force)},
-                "wrench": (run.wrench_arrival_s - origin, run.wrench_n)}, path, title)
+                "wrench": (wrench_arrival - origin, run.wrench_n[ROOT_LABEL])}, path, title)

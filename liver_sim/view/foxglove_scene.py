@@ -19,7 +19,16 @@ from foxglove.messages import (
     Vector3,
 )
 
-from liver_sim.view.scene import FORCE_COLOUR, LIPS_COLOUR, MODEL_COLOUR, TOOL_COLOUR, Scene, force_arrow, plane_patch
+from liver_sim.view.scene import (
+    FORCE_COLOUR,
+    LIPS_COLOUR,
+    MODEL_COLOUR,
+    TOOL_COLOUR,
+    Scene,
+    SceneTool,
+    force_arrow,
+    plane_patch,
+)
 
 
 def _colour(rgba):
@@ -52,8 +61,8 @@ def arrow_orientation(direction: np.ndarray) -> tuple[float, float, float, float
 
 def scene_update(scene: Scene, stamp_ns: int, frame_id: str = "liver") -> SceneUpdate:
     """The foxglove.SceneUpdate of `scene`: entities `skin` (the node points with their colours, indexed by the
-    skin triangles), `tool`, `local_model`, `force`, `lips` (an absent one is sent empty, so that the app removes
-    what it showed)."""
+    skin triangles), per tool `tool`, `local_model`, `force` (after 'NAME/' for a named tool: `left/tool`, …),
+    `lips` (an absent one is sent empty, so that the app removes what it showed)."""
     stamp = Timestamp(stamp_ns // 1_000_000_000, stamp_ns % 1_000_000_000)
 
     def entity(name, **primitives):
@@ -62,12 +71,26 @@ def scene_update(scene: Scene, stamp_ns: int, frame_id: str = "liver") -> SceneU
     skin = TriangleListPrimitive(pose=_pose(), points=[_point(p) for p in scene.points],
                                  colors=[_colour(c) for c in scene.colours], indices=scene.skin.ravel().tolist())
     entities = [entity("skin", triangles=[skin])]
-    tool = []
-    if scene.tool_tip_m is not None:
-        d = 2.0 * scene.tool_radius_m
-        tool = [SpherePrimitive(pose=_pose(scene.tool_tip_m), size=Vector3(x=d, y=d, z=d), color=_colour(TOOL_COLOUR))]
-    entities.append(entity("tool", spheres=tool))
-    model = scene.local_model
+    for tool in scene.tools:
+        entities += tool_entities(tool, entity)
+    lines = []
+    if len(scene.lips):
+        lines = [LinePrimitive(type=LinePrimitiveLineType.LineList, pose=_pose(), thickness=2.0, scale_invariant=True,
+                               points=[_point(p) for p in scene.lips.reshape(-1, 3)], color=_colour(LIPS_COLOUR))]
+    entities.append(entity("lips", lines=lines))
+    return SceneUpdate(entities=entities)
+
+
+def tool_entities(tool: SceneTool, entity) -> list[SceneEntity]:
+    """A tool's entities `tool` (its sphere), `local_model` (a plane patch or a sphere), `force` (an arrow), after
+    'NAME/' for a named tool; `entity(id, **primitives)` makes one."""
+    prefix = f"{tool.name}/" if tool.name else ""
+    sphere = []
+    if tool.tool_tip_m is not None:
+        d = 2.0 * tool.tool_radius_m
+        sphere = [SpherePrimitive(pose=_pose(tool.tool_tip_m), size=Vector3(x=d, y=d, z=d),
+                                  color=_colour(TOOL_COLOUR))]
+    model = tool.local_model
     patch, ball = [], []
     if model is not None and model.kind == "plane":
         corners = plane_patch(model).reshape(-1, 3)
@@ -75,8 +98,7 @@ def scene_update(scene: Scene, stamp_ns: int, frame_id: str = "liver") -> SceneU
     elif model is not None:
         d = 2.0 * model.radius_m
         ball = [SpherePrimitive(pose=_pose(model.centre), size=Vector3(x=d, y=d, z=d), color=_colour(MODEL_COLOUR))]
-    entities.append(entity("local_model", triangles=patch, spheres=ball))
-    arrow = force_arrow(scene)
+    arrow = force_arrow(tool)
     arrows = []
     if arrow is not None:
         start, end = arrow
@@ -84,10 +106,5 @@ def scene_update(scene: Scene, stamp_ns: int, frame_id: str = "liver") -> SceneU
         arrows = [ArrowPrimitive(pose=_pose(start, arrow_orientation(end - start)), shaft_length=0.8 * length,
                                  shaft_diameter=0.002, head_length=0.2 * length, head_diameter=0.005,
                                  color=_colour(FORCE_COLOUR))]
-    entities.append(entity("force", arrows=arrows))
-    lines = []
-    if len(scene.lips):
-        lines = [LinePrimitive(type=LinePrimitiveLineType.LineList, pose=_pose(), thickness=2.0, scale_invariant=True,
-                               points=[_point(p) for p in scene.lips.reshape(-1, 3)], color=_colour(LIPS_COLOUR))]
-    entities.append(entity("lips", lines=lines))
-    return SceneUpdate(entities=entities)
+    return [entity(f"{prefix}tool", spheres=sphere), entity(f"{prefix}local_model", triangles=patch, spheres=ball),
+            entity(f"{prefix}force", arrows=arrows)]

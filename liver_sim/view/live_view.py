@@ -1,12 +1,15 @@
 """The live view's node (`liver_view`), at normal priority: it joins the user's domain as any viewer would, takes
-the newest of each product topic (best effort, keep last one: it never holds a publisher back), and a RateLoop at
+the newest of each product topic (best effort, keep last one: it never holds a publisher back), each tool's in its
+namespace (`tools`: one in the root namespace by default, or names, each under /NAME), and a RateLoop at
 `rate_hz` (normal scheduling) builds the Scene (liver_sim.view.scene) and logs, on the Foxglove server's channels:
 
 - `/liver/scene` (foxglove.SceneUpdate, frame `liver`; liver_sim.view.foxglove_scene): the skin coloured by
-  displacement (`skin`), the tool sphere (`tool`), the local model as a plane patch or a sphere (`local_model`),
-  the contact force as an arrow (`force`), the lips of cuts and tears (`lips`);
-- `/liver/forces` (JSON): the newest device force command (`/phantom/servo_cf`) and physics contact force
-  (`/liver/tool_wrench`), their norms, for a Plot panel;
+  displacement (`skin`), per tool its sphere (`tool`), its local model as a plane patch or a sphere
+  (`local_model`), its contact force as an arrow (`force`) (`left/tool`, … for a named tool), the lips of cuts and
+  tears (`lips`);
+- `/liver/forces` (JSON): per tool the newest device force command (`phantom/servo_cf`) and physics contact force
+  (`liver/tool_wrench`), their norms, for a Plot panel: the root tool's at the top level, a named tool's under its
+  name (`left.device_command_norm_n`);
 - `/liver/diagnostics` (JSON): each node's newest status, its level, message and key-values.
 
 Each message is logged at the ROS time of the state it shows (the nodes' stamp). A malformed message is refused
@@ -26,12 +29,12 @@ import numpy as np
 from foxglove.channels import SceneUpdateChannel
 from rclpy.node import Node
 
-from liver_sim.base.local_model import LocalModel
+from liver_sim.base.topic_names import in_namespace, tool_namespace, tool_topic
 from liver_sim.nodes.inputs import LoopInputs
 from liver_sim.realtime.rate_loop import RateLoop
 from liver_sim.view.defaults import DEFAULT_HOST, DEFAULT_PORT, VIEW_RATE_HZ
 from liver_sim.view.foxglove_scene import scene_update
-from liver_sim.view.scene import build_scene, lip_edges
+from liver_sim.view.scene import build_scene, lip_edges, scene_tool
 from msg_defs.forces import force_from_bytes, force_message_type
 from msg_defs.local_model import local_model_from_bytes
 from msg_defs.point_cloud import pointcloud2_to_nodes
@@ -62,19 +65,29 @@ def check_host(host: str, allow_remote: bool) -> str:
     return host
 
 
+class ToolInputs:
+    """The newest state of one tool the view takes (in its namespace): tip, local model, physics force, device
+    command."""
+
+    def __init__(self, name: str):
+        self.name = name
+        self.tip = self.model = None
+        self.physics_force = np.zeros(3)
+        self.command = np.zeros(3)
+
+
 class LiveView(Node):
     """Takes the product's topics and serves them as a Scene at `rate_hz` (module docstring). `on_scene(scene,
     stamp_ns)` is called with each scene built (the command's picture keeps the one with the largest force)."""
 
     def __init__(self, host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, rate_hz: float = VIEW_RATE_HZ,
-                 allow_remote: bool = False, on_scene=None, name: str = "liver_view", context=None):
+                 allow_remote: bool = False, on_scene=None, name: str = "liver_view", context=None, tools=("",)):
         super().__init__(name, context=context)
         self._lock = threading.Lock()
         self._skin = self._rest = self._lips = None
-        self._nodes = self._tip = self._model = None
+        self._nodes = None
         self._stamp_ns = 0
-        self._command = np.zeros(3)
-        self._physics_force = np.zeros(3)
+        self._tools = [ToolInputs(tool) for tool in tools]
         self._statuses: dict[str, dict] = {}
         #: scenes served, malformed messages refused, ticks that raised
         self.scenes = self.refused = 0
@@ -82,14 +95,13 @@ class LiveView(Node):
         self._inputs = LoopInputs(self)
         self._inputs.subscribe(TOPICS["nodes"].type, TOPICS["nodes"].name, loop_input_qos(TOPICS["nodes"]),
                                self._on_nodes)
-        self._inputs.subscribe(TOPICS["tool_pose"].type, TOPICS["tool_pose"].name,
-                               loop_input_qos(TOPICS["tool_pose"]), self._on_pose, raw=True)
-        self._inputs.subscribe(TOPICS["contact_plane"].type, TOPICS["contact_plane"].name,
-                               loop_input_qos(TOPICS["contact_plane"]), self._on_model, raw=True)
-        self._inputs.subscribe(TOPICS["tool_wrench"].type, TOPICS["tool_wrench"].name,
-                               loop_input_qos(TOPICS["tool_wrench"]), self._on_wrench, raw=True)
-        self._inputs.subscribe(force_message_type("wrench_stamped"), TOPICS["servo_cf"].name,
-                               loop_input_qos(TOPICS["servo_cf"]), self._on_command, raw=True)
+        for tool in self._tools:
+            namespace = tool_namespace(tool.name)
+            for key, on_message in (("tool_pose", self._on_pose), ("contact_plane", self._on_model),
+                                    ("tool_wrench", self._on_wrench), ("servo_cf", self._on_command)):
+                msg_type = TOPICS[key].type or force_message_type("wrench_stamped")
+                self._inputs.subscribe(msg_type, in_namespace(tool_topic(key), namespace), loop_input_qos(TOPICS[key]),
+                                       lambda data, tool=tool, on_message=on_message: on_message(tool, data), raw=True)
         self.create_subscription(TOPICS["surface"].type, TOPICS["surface"].name, self._on_surface,
                                  TOPICS["surface"].qos)
         self.create_subscription(TOPICS["diagnostics"].type, TOPICS["diagnostics"].name, self._on_diagnostics,
@@ -148,21 +160,21 @@ class LiveView(Node):
         self.get_logger().error(f"view: a tick failed ({self.tick_errors} so far): {type(exc).__name__}: {exc}",
                                 throttle_duration_sec=LOG_THROTTLE_S)
 
-    def _on_pose(self, data: bytes) -> None:
+    def _on_pose(self, tool: ToolInputs, data: bytes) -> None:
         with self._refused():
-            self._tip = pose_from_bytes(data)[0]
+            tool.tip = pose_from_bytes(data)[0]
 
-    def _on_model(self, data: bytes) -> None:
+    def _on_model(self, tool: ToolInputs, data: bytes) -> None:
         with self._refused():
-            self._model = local_model_from_bytes(data)[0]
+            tool.model = local_model_from_bytes(data)[0]
 
-    def _on_wrench(self, data: bytes) -> None:
+    def _on_wrench(self, tool: ToolInputs, data: bytes) -> None:
         with self._refused():
-            self._physics_force = force_from_bytes("wrench_stamped", data)
+            tool.physics_force = force_from_bytes("wrench_stamped", data)
 
-    def _on_command(self, data: bytes) -> None:
+    def _on_command(self, tool: ToolInputs, data: bytes) -> None:
         with self._refused():
-            self._command = force_from_bytes("wrench_stamped", data)
+            tool.command = force_from_bytes("wrench_stamped", data)
 
     def _on_diagnostics(self, message) -> None:
         for status in message.status:
@@ -179,14 +191,17 @@ class LiveView(Node):
         nodes, stamp_ns = self._nodes, self._stamp_ns
         if skin is None or nodes is None or (len(skin) and skin.max() >= len(nodes)):
             return  # no surface yet, or nodes from before a topology change
-        model: LocalModel | None = self._model
-        scene = build_scene(nodes, rest, skin, lips, self._tip, local_model=model, force_n=self._physics_force)
+        tools = tuple(scene_tool(tool.tip, local_model=tool.model, force_n=tool.physics_force, name=tool.name)
+                      for tool in self._tools)
+        scene = build_scene(nodes, rest, skin, lips, tools=tools)
         self._scene_channel.log(scene_update(scene, stamp_ns), log_time=stamp_ns)
-        command, physics = self._command, self._physics_force
-        self._forces_channel.log(json.dumps({
-            "device_command_n": command.tolist(), "device_command_norm_n": float(np.linalg.norm(command)),
-            "physics_force_n": physics.tolist(), "physics_force_norm_n": float(np.linalg.norm(physics))}),
-            log_time=stamp_ns)
+        forces = {}
+        for tool in self._tools:
+            command, physics = tool.command, tool.physics_force
+            values = {"device_command_n": command.tolist(), "device_command_norm_n": float(np.linalg.norm(command)),
+                      "physics_force_n": physics.tolist(), "physics_force_norm_n": float(np.linalg.norm(physics))}
+            forces.update({tool.name: values} if tool.name else values)
+        self._forces_channel.log(json.dumps(forces), log_time=stamp_ns)
         self.scenes += 1
         if self._on_scene is not None:
             self._on_scene(scene, stamp_ns)

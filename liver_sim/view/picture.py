@@ -20,19 +20,21 @@ def _draw(axis, scene: Scene, centre: np.ndarray, half: float, skin_alpha: float
     faces[:, 3] = skin_alpha
     axis.add_collection3d(Poly3DCollection(scene.triangles, facecolors=faces, edgecolors=(0.3, 0.15, 0.1, 0.2),
                                            linewidths=0.2))
-    if scene.local_model is not None and scene.local_model.kind == "plane":
-        axis.add_collection3d(Poly3DCollection(plane_patch(scene.local_model), facecolors=MODEL_COLOUR,
-                                               edgecolors=MODEL_COLOUR[:3]))
-    if scene.tool_tip_m is not None:
-        u, v = np.mgrid[0:2 * np.pi:16j, 0:np.pi:8j]
-        r = scene.tool_radius_m
-        tip = scene.tool_tip_m
-        axis.plot_surface(tip[0] + r * np.cos(u) * np.sin(v), tip[1] + r * np.sin(u) * np.sin(v),
-                          tip[2] + r * np.cos(v), color=TOOL_COLOUR, linewidth=0, alpha=0.6)
-    arrow = force_arrow(scene)
-    if arrow is not None:
-        start, end = arrow
-        axis.quiver(*start, *(end - start), color=FORCE_COLOUR, linewidth=2.5, arrow_length_ratio=0.25)
+    for tool in scene.tools:
+        if tool.local_model is not None and tool.local_model.kind == "plane":
+            axis.add_collection3d(Poly3DCollection(plane_patch(tool.local_model), facecolors=MODEL_COLOUR,
+                                                   edgecolors=MODEL_COLOUR[:3]))
+        if tool.tool_tip_m is not None:
+            u, v = np.mgrid[0:2 * np.pi:16j, 0:np.pi:8j]
+            r, tip = tool.tool_radius_m, tool.tool_tip_m
+            axis.plot_surface(tip[0] + r * np.cos(u) * np.sin(v), tip[1] + r * np.sin(u) * np.sin(v),
+                              tip[2] + r * np.cos(v), color=TOOL_COLOUR, linewidth=0, alpha=0.6)
+            if tool.name:
+                axis.text(tip[0], tip[1], tip[2] + 1.5 * r, tool.name, fontsize=8)
+        arrow = force_arrow(tool)
+        if arrow is not None:
+            start, end = arrow
+            axis.quiver(*start, *(end - start), color=FORCE_COLOUR, linewidth=2.5, arrow_length_ratio=0.25)
     if len(scene.lips):
         axis.add_collection3d(Line3DCollection(scene.lips, colors=LIPS_COLOUR, linewidths=1.5))
     for setter, c in zip((axis.set_xlim, axis.set_ylim, axis.set_zlim), centre):
@@ -46,8 +48,8 @@ def _draw(axis, scene: Scene, centre: np.ndarray, half: float, skin_alpha: float
 
 
 def draw_scene(scene: Scene, path: Path, title: str = "") -> Path:
-    """Draw `scene` into the PNG `path`: the whole liver (skin coloured by displacement, tool, local model, force
-    arrow, lips) and, with a tool, a close-up around it with the skin made see-through."""
+    """Draw `scene` into the PNG `path`: the whole liver (skin coloured by displacement, each tool with its local
+    model and force arrow, lips) and, with a tool, a close-up around the tools with the skin made see-through."""
     import matplotlib  # heavy, and only for the commands that draw
 
     matplotlib.use("Agg")
@@ -55,17 +57,21 @@ def draw_scene(scene: Scene, path: Path, title: str = "") -> Path:
 
     corners = scene.triangles.reshape(-1, 3)
     low, high = corners.min(axis=0), corners.max(axis=0)
-    close_up = scene.tool_tip_m is not None
+    tips = np.array([tool.tool_tip_m for tool in scene.tools if tool.tool_tip_m is not None]).reshape(-1, 3)
+    close_up = len(tips) > 0
     figure = plt.figure(figsize=(11 if close_up else 7, 5))
     whole = figure.add_subplot(1, 2 if close_up else 1, 1, projection="3d")
     _draw(whole, scene, (low + high) / 2.0, (high - low).max() / 2.0, 1.0)
     whole.set_title("the liver", fontsize=9)
     if close_up:
         near = figure.add_subplot(1, 2, 2, projection="3d")
-        _draw(near, scene, scene.tool_tip_m, CLOSE_UP_HALF_M, 0.35)
-        shown = [what for what, present in (("local model (blue)", scene.local_model is not None),
-                                            ("contact force (green)", force_arrow(scene) is not None)) if present]
-        near.set_title("at the tool" + (": " + ", ".join(shown) if shown else ""), fontsize=9)
+        middle = (tips.min(axis=0) + tips.max(axis=0)) / 2.0
+        _draw(near, scene, middle, max(CLOSE_UP_HALF_M, float(np.ptp(tips, axis=0).max()) / 2.0 + 0.025), 0.35)
+        shown = [what for what, present in (
+            ("local model (blue)", any(tool.local_model is not None for tool in scene.tools)),
+            ("contact force (green)", any(force_arrow(tool) is not None for tool in scene.tools))) if present]
+        near.set_title(("at the tools" if len(tips) > 1 else "at the tool") + (": " + ", ".join(shown) if shown
+                                                                                else ""), fontsize=9)
     figure.suptitle(title, fontsize=10)
     figure.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)

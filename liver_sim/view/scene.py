@@ -1,5 +1,5 @@
-"""What the live view shows, without ROS or Foxglove: the deformed skin coloured by displacement, the tool, the
-local model, the contact force, and the lips of what a tear or a cut opened (liver frame, metres).
+"""What the live view shows, without ROS or Foxglove: the deformed skin coloured by displacement, each tool with its
+local model and contact force, and the lips of what a tear or a cut opened (liver frame, metres).
 
 `liver-sim view` (liver_sim.view.server) turns a Scene into a foxglove.SceneUpdate; `liver-sim view --picture`
 draws the same Scene with matplotlib (liver_sim.view.picture), so the picture in the README is the view's.
@@ -28,19 +28,32 @@ LIPS_COLOUR = (0.9, 0.1, 0.1, 1.0)
 
 
 @dataclass(frozen=True)
-class Scene:
-    """One frame of the view: the deformed node `points` (N, 3) m with their `colours` (N, 4) RGBA, the `skin`
-    triangles (K, 3) over them, the tool tip (m) and radius, the local model (or None), the contact force on the
-    tool (N, liver frame) and the lips of opened skin as (L, 2, 3) segments."""
+class SceneTool:
+    """One tool of a scene: its `name` ('' for the tool in the root namespace, the only one by default), its tip
+    (m; None: not seen) and radius, its local model (or None) and the contact force on it (N, liver frame)."""
 
-    points: np.ndarray
-    colours: np.ndarray
-    skin: np.ndarray
+    name: str = ""
     tool_tip_m: np.ndarray | None = None
     tool_radius_m: float = 0.015
     local_model: LocalModel | None = None
     force_n: np.ndarray = field(default_factory=lambda: np.zeros(3))
+
+
+@dataclass(frozen=True)
+class Scene:
+    """One frame of the view: the deformed node `points` (N, 3) m with their `colours` (N, 4) RGBA, the `skin`
+    triangles (K, 3) over them, the `tools` and the lips of opened skin as (L, 2, 3) segments."""
+
+    points: np.ndarray
+    colours: np.ndarray
+    skin: np.ndarray
+    tools: tuple[SceneTool, ...] = ()
     lips: np.ndarray = field(default_factory=lambda: np.zeros((0, 2, 3)))
+
+    @property
+    def largest_force_n(self) -> float:
+        """The largest contact force on a tool (N, its norm)."""
+        return max((float(np.linalg.norm(tool.force_n)) for tool in self.tools), default=0.0)
 
     @property
     def triangles(self) -> np.ndarray:
@@ -93,22 +106,31 @@ def lip_edges(rest_m: np.ndarray, skin: np.ndarray) -> np.ndarray:
     return unique[counts > 1]
 
 
+def scene_tool(tool_tip_m: np.ndarray | None = None, tool_radius_m: float = 0.015,
+               local_model: LocalModel | None = None, force_n: np.ndarray | None = None, name: str = "") -> SceneTool:
+    """The SceneTool of a tool's state: its tip, radius, local model (an invalid one: none) and force."""
+    return SceneTool(name, None if tool_tip_m is None else np.asarray(tool_tip_m, float), tool_radius_m,
+                     local_model if local_model is not None and local_model.valid else None,
+                     np.zeros(3) if force_n is None else np.asarray(force_n, dtype=np.float64))
+
+
 def build_scene(positions: np.ndarray, rest_positions: np.ndarray, skin: np.ndarray, lips: np.ndarray | None = None,
                 tool_tip_m: np.ndarray | None = None, tool_radius_m: float = 0.015,
-                local_model: LocalModel | None = None, force_n: np.ndarray | None = None) -> Scene:
+                local_model: LocalModel | None = None, force_n: np.ndarray | None = None,
+                tools: tuple[SceneTool, ...] | None = None) -> Scene:
     """The Scene of node `positions` (N, 3) m over `rest_positions` (the first ones of this node count), the
-    `skin` (K, 3), its `lips` (L, 2) node pairs (lip_edges) and the rest of the state; colours by each node's
-    displacement from rest."""
+    `skin` (K, 3), its `lips` (L, 2) node pairs (lip_edges), and the tool's state (scene_tool), or `tools`, the
+    SceneTools of several; colours by each node's displacement from rest."""
     positions = np.asarray(positions, dtype=np.float64)
     if len(rest_positions) == len(positions):
         displacement = np.linalg.norm(positions - rest_positions, axis=1)
     else:
         displacement = np.zeros(len(positions))
     lips = np.zeros((0, 2), dtype=np.int64) if lips is None else np.asarray(lips, dtype=np.int64).reshape(-1, 2)
-    return Scene(positions, displacement_colours(displacement), np.asarray(skin, dtype=np.int64),
-                 None if tool_tip_m is None else np.asarray(tool_tip_m, float), tool_radius_m,
-                 local_model if local_model is not None and local_model.valid else None,
-                 np.zeros(3) if force_n is None else np.asarray(force_n, dtype=np.float64), positions[lips])
+    if tools is None:
+        tools = (scene_tool(tool_tip_m, tool_radius_m, local_model, force_n),)
+    return Scene(positions, displacement_colours(displacement), np.asarray(skin, dtype=np.int64), tuple(tools),
+                 positions[lips])
 
 
 def plane_patch(model: LocalModel, side_m: float = PLANE_PATCH_M) -> np.ndarray:
@@ -124,9 +146,9 @@ def plane_patch(model: LocalModel, side_m: float = PLANE_PATCH_M) -> np.ndarray:
     return np.array([[corners[0], corners[1], corners[2]], [corners[0], corners[2], corners[3]]])
 
 
-def force_arrow(scene: Scene) -> tuple[np.ndarray, np.ndarray] | None:
-    """(start, end) of the force arrow (m): from the tool tip along the force, ARROW_M_PER_N per newton; None
-    without a tool or a force."""
-    if scene.tool_tip_m is None or not np.any(scene.force_n):
+def force_arrow(tool: SceneTool) -> tuple[np.ndarray, np.ndarray] | None:
+    """(start, end) of the force arrow of a tool (m): from the tool tip along the force,
+    ARROW_M_PER_N per newton; None without a tip or a force."""
+    if tool.tool_tip_m is None or not np.any(tool.force_n):
         return None
-    return scene.tool_tip_m, scene.tool_tip_m + ARROW_M_PER_N * scene.force_n
+    return tool.tool_tip_m, tool.tool_tip_m + ARROW_M_PER_N * tool.force_n

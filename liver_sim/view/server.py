@@ -10,7 +10,6 @@ import threading
 import time
 from pathlib import Path
 
-import numpy as np
 import rclpy
 from rclpy.experimental import EventsExecutor
 from rclpy.signals import SignalHandlerOptions
@@ -25,15 +24,16 @@ from liver_sim.view.scene import Scene
 
 def serve(host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, rate_hz: float = VIEW_RATE_HZ,
           allow_remote: bool = False, picture: Path | None = None, duration_s: float | None = None,
-          progress=print, summary: Path | None = None) -> dict:
-    """`liver-sim view`: a LiveView until an ending signal (or `duration_s`); with `picture`, the scene with the
-    largest contact force (the last one if none) drawn into that PNG at exit. Returns what it served, {scenes,
-    seconds, scenes_per_s, refused_messages, tick_errors}, also written as JSON into `summary` when given."""
+          progress=print, summary: Path | None = None, tools=("",)) -> dict:
+    """`liver-sim view`: a LiveView of `tools` until an ending signal (or `duration_s`); with `picture`, the scene
+    with the largest contact force on a tool (the last one if none) drawn into that PNG at exit. Returns what it
+    served, {scenes, seconds, scenes_per_s, refused_messages, tick_errors}, also written as JSON into `summary` when
+    given."""
     check_host(host, allow_remote)
     kept = {}
 
     def keep(scene: Scene, stamp_ns: int) -> None:
-        if "scene" not in kept or np.linalg.norm(scene.force_n) >= np.linalg.norm(kept["scene"].force_n):
+        if "scene" not in kept or scene.largest_force_n >= kept["scene"].largest_force_n:
             kept["scene"] = scene
 
     context = rclpy.Context()
@@ -42,7 +42,8 @@ def serve(host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, rate_hz: float = V
     started = time.monotonic()
     try:
         with stop_on_signals() as stop:
-            view = LiveView(host, port, rate_hz, allow_remote, keep if picture else None, context=context)
+            view = LiveView(host, port, rate_hz, allow_remote, keep if picture else None, context=context,
+                            tools=tools)
             executor = EventsExecutor(context=context)
             executor.add_node(view)
             progress(f"serving the live view on ws://{host}:{view.port} (Foxglove: Open connection → Foxglove "
@@ -68,7 +69,7 @@ def serve(host: str = DEFAULT_HOST, port: int = DEFAULT_PORT, rate_hz: float = V
         summary.parent.mkdir(parents=True, exist_ok=True)
         summary.write_text(json.dumps(served) + "\n")
     if picture is not None and "scene" in kept:
-        force = float(np.linalg.norm(kept["scene"].force_n))
+        force = kept["scene"].largest_force_n
         draw_scene(kept["scene"], picture, f"liver-sim view: the scene at the largest contact force ({force:.2f} N)")
         progress(f"wrote {picture}")
     elif picture is not None:

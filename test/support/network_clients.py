@@ -1,15 +1,20 @@
 """Clients the process tests watch the product's network with, as a rig would: an independent subscriber that
-numbers what each writer sent (Tally), and waits on conditions with a deadline that fail with what was seen."""
+numbers what each writer sent (Tally), nodes started by a test with a listener beside them (Network), and waits on
+conditions with a deadline that fail with what was seen."""
 from __future__ import annotations
 
 import threading
 import time
 
 import rclpy
+from rclpy.experimental import EventsExecutor
 from rosbags.rosbag2 import Reader
 from rosbags.typesys import Stores, get_typestore
 
 from liver_sim.nodes.rcl_take import SerializedTake
+from liver_sim.nodes.run import spin
+from liver_sim.running.launcher import NodeProcesses
+from liver_sim.running.listener import NetworkListener
 from liver_sim.sessions.record import _rclpy_qos, default_topics, known_topics
 
 
@@ -99,3 +104,35 @@ class Tally:
             take.close()
         self.node.destroy_node()
         self.context.try_shutdown()
+
+
+class Network:
+    """Nodes started by a test, and a listener in the test process (running.listener.NetworkListener) of the force
+    topics `force_topics` (label -> (topic, format); default the one device's) and each label's namespace
+    (`namespaces`, NetworkPlan.namespaces)."""
+
+    def __init__(self, log_dir, force_topics: dict | None = None, namespaces: dict | None = None):
+        self.processes = NodeProcesses(log_dir)
+        self.context = rclpy.Context()
+        rclpy.init(context=self.context)
+        self.listener = NetworkListener(force_topics or {"local_model": ("/phantom/servo_cf", "wrench_stamped")},
+                                        context=self.context, namespaces=namespaces)
+        self.executor = EventsExecutor(context=self.context)
+        self.executor.add_node(self.listener)
+        self.thread = threading.Thread(target=spin, args=(self.executor, self.context), daemon=True)
+        self.thread.start()
+
+    def forces_since(self, t0, label: str = "local_model"):
+        """The `label` force commands (K, 3) N received at or after `t0` (time.monotonic())."""
+        arrival, forces = self.listener.snapshot().forces[label]
+        return forces[arrival >= t0]
+
+    def wait_for(self, condition, timeout_s, what):
+        wait_for(condition, timeout_s, what, lambda: f"exited {self.processes.failed()}; logs in "
+                                                    f"{self.processes.log_dir}")
+
+    def close(self):
+        self.processes.stop()
+        self.context.try_shutdown()
+        self.thread.join(timeout=2.0)
+        self.listener.destroy_node()

@@ -1,9 +1,10 @@
-"""The physics benchmark's report and the headless demo's outputs (behaviour, not speed)."""
+"""The physics benchmark's report, the frame time of two contacts, and the headless demo's outputs (behaviour, not
+speed)."""
 import json
 
 import pytest
 
-from liver_sim.bench.physics import run_physics_bench
+from liver_sim.bench.physics import contact_frame_times, run_physics_bench
 from liver_sim.bench.topology import TOPOLOGY_TARGETS, run_topology_bench
 from liver_sim.mesh.tetmesh import MeshError
 from liver_sim.studies.demo_liver import DemoMesh
@@ -12,6 +13,19 @@ from liver_sim.studies.demo_offline import PLOTTED_FIGURES, run_offline_demo
 from meshes import write_sphere_surface
 
 PNG = b"\x89PNG\r\n\x1a\n"
+
+
+def test_the_frame_time_of_two_contacts_is_measured_with_both_tools_pressing():
+    from liver_sim.bench.loop import HAND_SPOTS_XY
+    from liver_sim.mesh.landmarks import upper_skin_point
+    from liver_sim.mesh.liver_shape import default_liver
+
+    liver = default_liver()
+    figures = contact_frame_times([upper_skin_point(liver, xy) for xy in HAND_SPOTS_XY.values()], frames=30,
+                                  approach_frames=20)
+    assert [figures[label]["tools_in_contact"] for label in ("one_contact", "two_contacts")] == [1, 2]
+    for row in figures.values():
+        assert row["frames"] == 10 and 0.0 < row["median_ms"] <= row["p99_ms"]
 
 
 def test_physics_bench_reports_the_default_liver_first_and_agrees_with_numpy():

@@ -1,28 +1,26 @@
 """The node network as real processes on loopback, each test in its own ROS_DOMAIN_ID (no timing thresholds)."""
 import os
 import subprocess
-import threading
 import time
 from types import SimpleNamespace
 
 import numpy as np
 import pytest
 import rclpy
-from rclpy.experimental import EventsExecutor
 from sensor_msgs.msg import PointCloud2
 
 from liver_sim.base.process_settings import command_line
 from liver_sim.bench.loop import neighbour_figures
 from liver_sim.nodes.occupants import domain_occupants
-from liver_sim.nodes.run import spin
 from liver_sim.running import listener as listener_module
-from liver_sim.running.launcher import NodeProcesses
 from liver_sim.running.listener import NetworkListener
 from liver_sim.running.network import default_anchor
 from msg_defs.forces import wrench_stamped_bytes
 from msg_defs.point_cloud import nodes_to_pointcloud2
 from msg_defs.poses import pose_stamped
 from msg_defs.topics import TOPICS
+
+from network_clients import Network
 
 MAX_FORCE_N = 2.0
 
@@ -43,39 +41,6 @@ def test_closed_loop_press_deforms_the_liver_and_it_returns(recorded_demo):
     summary = recorded_demo.summary               # node positions as the demo's listener received them
     assert summary["peak_displacement_m"] > 0.002
     assert summary["final_displacement_m"] < 0.3 * summary["peak_displacement_m"]
-
-
-class Network:
-    """Nodes started by a test, and a listener in the test process."""
-
-    def __init__(self, log_dir):
-        self.processes = NodeProcesses(log_dir)
-        self.context = rclpy.Context()
-        rclpy.init(context=self.context)
-        self.listener = NetworkListener({"local_model": ("/phantom/servo_cf", "wrench_stamped")},
-                                        context=self.context)
-        self.executor = EventsExecutor(context=self.context)
-        self.executor.add_node(self.listener)
-        self.thread = threading.Thread(target=spin, args=(self.executor, self.context), daemon=True)
-        self.thread.start()
-
-    def forces_since(self, t0):
-        arrival, forces = self.listener.snapshot().forces["local_model"]
-        return forces[arrival >= t0]
-
-    def wait_for(self, condition, timeout_s, what):
-        start = time.monotonic()
-        while time.monotonic() - start < timeout_s:
-            if condition():
-                return
-            time.sleep(0.05)
-        raise AssertionError(f"timed out waiting for {what}; logs in {self.processes.log_dir}")
-
-    def close(self):
-        self.processes.stop()
-        self.context.try_shutdown()
-        self.thread.join(timeout=2.0)
-        self.listener.destroy_node()
 
 
 @pytest.fixture
@@ -348,6 +313,27 @@ def test_loop_bench_reports_every_figure_against_its_target(ros_domain_id, tmp_p
         assert gap["product_s"] == pytest.approx(gap["gap_s"] - gap["machine_s"])
 
 
+def test_loop_bench_with_two_tools_reports_each_device_and_both_contacts(ros_domain_id, tmp_path):
+    import json
+
+    from liver_sim.bench.loop import HAND_SPOTS_XY, run_loop_bench
+
+    report = json.loads(json.dumps(run_loop_bench(duration_s=3.0, log_dir=tmp_path, check_domain=False, tools=2)))
+    results, names = report["results"], list(HAND_SPOTS_XY)
+    assert report["tools"] == 2 and set(results["devices"]) == set(names)
+    assert results["physics_on_wire"]["samples"] > 100 and results["physics_frame_compute_p99_s"] > 0.0
+    for name in names:  # each bridge on the wire, its latency from its own device's samples
+        device = results["devices"][name]
+        assert device["haptic_on_wire"]["samples"] > 1000
+        assert 0.0 < device["pose_to_force_p50_s"] <= device["pose_to_force_p99_s"]
+        assert report["met"][f"{name}_haptic_rate_hz_min"] in (True, False)
+        assert f"{name}/haptic_bridge: loop" in results["node_loops"]
+    assert {f"{executable}_{name}" for executable in ("haptic_bridge", "liver_tool", "phantom_sim")
+            for name in names} | {"liver_physics", "listener"} == set(report["processes"])
+    offline = results["physics_frame_offline"]
+    assert offline["one_contact"]["tools_in_contact"] == 1 and offline["two_contacts"]["tools_in_contact"] == 2
+
+
 def test_the_listener_keeps_a_bounded_window_and_lets_decoded_bytes_go(ros_domain_id, monkeypatch):
     monkeypatch.setattr(listener_module, "MAX_KEPT_S", 1.0)
     context = rclpy.Context()
@@ -402,6 +388,19 @@ def test_domain_occupants_name_product_nodes_devices_and_bridges_but_not_observe
     assert domain_occupants(graph) == ["a node (its name not discovered yet) publishing /phantom/measured_cp",
                                        "node /liver_physics", "node /my_bridge publishing /phantom/servo_cf",
                                        "node /omni_driver publishing /phantom/measured_cp", "node /phantom_sim"]
+
+
+def test_domain_occupants_are_found_in_every_namespace_of_the_graph():
+    """A device side of two hands in /left and a driver publishing /right/phantom/measured_cp occupy the domain as
+    much as those of the root namespace."""
+    publishers = {"/right/phantom/measured_cp": [SimpleNamespace(node_name="omni_driver", node_namespace="/right")]}
+    graph = SimpleNamespace(get_name=lambda: "liver_sim_listener",
+                            get_node_names_and_namespaces=lambda: [("haptic_bridge", "/left"),
+                                                                   ("_haptic_bridge_loop", "/left"),
+                                                                   ("omni_driver", "/right"), ("rviz", "/")],
+                            get_publishers_info_by_topic=lambda topic: publishers.get(topic, []))
+    assert domain_occupants(graph) == ["node /left/haptic_bridge",
+                                       "node /right/omni_driver publishing /right/phantom/measured_cp"]
 
 
 def test_floor_bench_runs_the_three_bare_hops_and_reports_their_cost(ros_domain_id, tmp_path):

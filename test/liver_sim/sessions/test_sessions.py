@@ -162,11 +162,13 @@ def test_parameter_overrides_are_checked_as_the_nodes_check_them():
 
 
 def test_the_physics_topic_parameters_default_to_the_topics_table():
+    """In the root namespace; a tool's topics are relative names (README, "Two hands")."""
+    from liver_sim.base.topic_names import in_namespace
     from liver_sim.physics.parameters import PARAMETERS
     from msg_defs.topics import TOPICS
 
     for key in ("nodes", "surface", "marker", "contact_plane", "tool_wrench", "tool_pose"):
-        assert PARAMETERS[f"{key}_topic"].default == TOPICS[key].name
+        assert in_namespace(PARAMETERS[f"{key}_topic"].default, "/") == TOPICS[key].name
 
 
 @NO_RATE_LOOPS

@@ -1,5 +1,6 @@
 """The live view: its scene (no ROS), its Foxglove messages read back as the app reads them, its address check, the
 view of a running network through a real Foxglove WebSocket client, and recorded sessions Foxglove can open."""
+import json
 import struct
 import subprocess
 import sys
@@ -11,6 +12,7 @@ import pytest
 from foxglove_client import VIEW_TOPICS, field_numbers, fields, packed_count, schema_bytes
 
 from liver_sim.base.local_model import LocalModel
+from liver_sim.base.process_settings import config_dir
 from liver_sim.mesh.liver_shape import default_liver
 from liver_sim.view import scene as scene_module
 from liver_sim.view.scene import (
@@ -21,6 +23,7 @@ from liver_sim.view.scene import (
     lip_edges,
     opened_triangles,
     plane_patch,
+    scene_tool,
 )
 
 LIVER = default_liver()
@@ -39,7 +42,7 @@ def test_the_scene_holds_every_skin_triangle_coloured_by_its_displacement():
     untouched = ~np.isin(LIVER.skin, LIVER.skin[0]).any(axis=1)
     assert np.allclose(scene.colours[LIVER.skin[untouched]], REST_COLOUR)
     assert len(scene.lips) == 0                                    # no topology change
-    start, end = force_arrow(scene)
+    start, end = force_arrow(scene.tools[0])
     assert end - start == pytest.approx([0.0, 0.0, 0.5 * scene_module.ARROW_M_PER_N])
 
 
@@ -130,6 +133,27 @@ def test_scene_updates_read_back_with_the_advertised_schema():
     assert len(entities["local_model"]["triangles"]) == 1 and "lines" not in entities["lips"]
 
 
+def test_two_tools_show_each_with_its_local_model_and_force(tmp_path):
+    """Two hands: each tool's sphere, local model and force arrow, under its name; the picture draws both."""
+    from foxglove.messages import SceneUpdate
+
+    from liver_sim.view.foxglove_scene import scene_update
+    from liver_sim.view.picture import draw_scene
+
+    tools = (scene_tool(np.array([-0.04, 0.0, 0.08]), local_model=PLANE, force_n=np.array([0.0, 0.0, -1.5]),
+                        name="left"),
+             scene_tool(np.array([0.03, 0.0, 0.06]), force_n=np.array([0.0, 0.0, 0.7]), name="right"))
+    scene = build_scene(LIVER.points, LIVER.points, LIVER.skin, None, tools=tools)
+    assert scene.largest_force_n == pytest.approx(1.5) and scene.tools[0].tool_tip_m[0] == pytest.approx(-0.04)
+    schema = SceneUpdate.get_schema()
+    entities = decode_scene(scene_update(scene, 1_500_000_000).encode(), bytes(schema.data))
+    assert {"left/tool", "left/local_model", "left/force", "right/tool", "right/local_model", "right/force"} <= set(
+        entities)
+    assert len(entities["left/local_model"]["triangles"]) == 1 and "triangles" not in entities["right/local_model"]
+    assert len(entities["right/force"]["arrows"]) == 1 and len(entities["left/tool"]["spheres"]) == 1
+    assert draw_scene(scene, tmp_path / "two.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
 def wait_for(condition, timeout_s: float, what: str, every=None) -> None:
     """Wait until `condition()` holds (calling `every()` between polls), or fail naming `what`."""
     deadline = time.monotonic() + timeout_s
@@ -218,6 +242,26 @@ def test_the_live_view_serves_the_running_network_to_a_foxglove_client(recorded_
     assert len(scenes) / (arrivals[-1] - arrivals[0] + 1.0 / recorded_demo.view_rate_hz) >= 20.0
     assert received["/liver/forces"] and b"device_command_norm_n" in received["/liver/forces"][-1][2]
     assert (recorded_demo.out / "view.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_the_live_view_shows_both_tools_their_local_models_and_forces(two_hands_demo):
+    from liver_sim.studies.two_hands import HANDS
+
+    assert two_hands_demo.view is not None, "the Foxglove client never connected to the view"
+    _, channels, received = two_hands_demo.view
+    schema = schema_bytes(channels["/liver/scene"])
+    scenes = [decode_scene(data, schema) for _, _, data in received["/liver/scene"]]
+    for name in HANDS:
+        assert any(scene[f"{name}/tool"].get("spheres") for scene in scenes), name
+        assert any(scene[f"{name}/force"].get("arrows") for scene in scenes), name
+        assert any(scene[f"{name}/local_model"] for scene in scenes), name
+    # each hand's forces, under its name, where the layout's plot reads them (config/foxglove_layout.json)
+    forces = json.loads(received["/liver/forces"][-1][2])
+    plot = json.loads((config_dir() / "foxglove_layout.json").read_text())["configById"]["Plot!forces"]
+    read = [path["value"].split(".")[1:] for path in plot["paths"] if path["value"].startswith("/liver/forces.")]
+    for name in HANDS:
+        assert [name, "device_command_norm_n"] in read and [name, "physics_force_norm_n"] in read
+        assert {"device_command_norm_n", "physics_force_norm_n"} <= set(forces[name])
 
 
 def mcap_schemas(path) -> dict[str, tuple[str, str, bytes]]:
