@@ -70,6 +70,15 @@ class PhantomNode(Node):
             f"out: {p.measured_cp_topic} (frame {p.frame_id})")
         self._loop.start()
 
+    def _until_script_start(self) -> float:
+        """Seconds from now to `script_start_time_s` (ROS time); 0 without one, or when it has passed (warned)."""
+        if self.p.script_start_time_s <= 0.0:
+            return 0.0
+        wait = self.p.script_start_time_s - self.get_clock().now().nanoseconds * 1e-9
+        if wait < 0.0:
+            self.get_logger().warning(f"started {-wait:.2f} s after script_start_time_s: the script starts now")
+        return max(wait, 0.0)
+
     def close(self) -> None:
         self._loop.stop()
         self._inputs.destroy()
@@ -92,7 +101,7 @@ class PhantomNode(Node):
     def _step(self, now: float) -> None:
         self._inputs.poll()
         if self._start is None:
-            self._start = now
+            self._start = now + self._until_script_start()
         force, received = self._command.get()
         if now - received > self.p.command_timeout_s:
             force = _ZERO

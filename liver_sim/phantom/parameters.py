@@ -29,6 +29,9 @@ PARAMETERS = {
     "frame_id": Param("phantom_base", "frame of the published stylus pose"),
     "measured_cp_topic": Param(tool_topic("measured_cp"), "stylus pose out, device frame (PoseStamped)"),
     "servo_cf_topic": Param(tool_topic("servo_cf"), "force command in, device frame"),
+    "script_start_time_s": Param(0.0, "ROS time (s) at which the script's time 0 falls, so that several devices "
+                                 "play theirs together; 0: the node's first tick (one started later starts it then)",
+                                 0.0, 1e12),
     **SCRIPT_PARAMETERS,
     **DEVICE_MAP_PARAMETERS,
 }

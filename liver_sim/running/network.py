@@ -99,6 +99,11 @@ def closed_loop_plan(extra: dict | None = None, tools: dict[str, dict] | None = 
     return plan
 
 
+#: Several scripted devices (plan.after_physics) start their scripts together this long (s) after they are launched:
+#: more than a node takes to load on a busy 2-core machine, so that none starts its script late.
+SCRIPTS_START_AFTER_S = 4.0
+
+
 #: A process that keeps one core busy at normal priority (`extra_load`): what a person runs beside the rig.
 CORE_BOUND_PROCESS = [sys.executable, "-c", "while True: pass"]
 
@@ -201,8 +206,12 @@ def run_network(plan: NetworkPlan, duration_s: float, log_dir: Path, progress=pr
                     lambda heard: all(len(t) for t, _ in heard.snapshot().forces.values())
                     and len(heard.snapshot().nodes_arrival_s))
         late = [label for label in plan.after_physics if label in plan.commands]
+        together = []
+        if len(late) > 1:  # several scripted devices play their scripts from one start, however long each loads
+            start_s = listener.get_clock().now().nanoseconds * 1e-9 + SCRIPTS_START_AFTER_S
+            together = ["-p", f"script_start_time_s:={start_s:.6f}"]
         for label in late:
-            processes.start(label, plan.commands[label])
+            processes.start(label, plan.commands[label] + together)
         if late:
             _wait_until(listener, processes, f"the device samples from {', '.join(late)}",
                         lambda heard: all(len(a) for a in heard.snapshot().device_arrival_s.values()))
