@@ -31,6 +31,10 @@ CONTACT_MODELS = ("probe", "surface")
 #: coarse correction of physics.coarse_space), or 'auto': two-level on livers of implicit.TWO_LEVEL_MIN_NODES nodes
 #: and more.  Each keeps the answer within the solver's tolerance; they differ in iterations.
 PRECONDITIONERS = ("auto", "block_jacobi", "two_level")
+#: The threads of the numba kernels of a frame (the explicit spring pass, the implicit step's PCG): 'auto', all of
+#: numba's from structure.PARALLEL_MIN_EDGES springs on (fastest alone on the machine); 'one' (beside 1 kHz loops on
+#: two cores, where the threads wait for each other); 'all'.
+SOLVER_THREADS = ("auto", "one", "all")
 #: How the liver is held (physics.support): 'organ' (anchored where a liver is held) or 'paper' (§3.1's scene).
 SUPPORTS = ("organ", "paper")
 #: The default liver's supports (physics.support), spheres (x, y, z, radius; m) with a stiffness per unit
@@ -125,6 +129,7 @@ class ModelParams:
     'surface': a ball tool (sphere, capsule) meets the skin as a surface, `contact_stiffness_per_area_n_per_m3` per
     unit area of every node and face it presses (contact.surface_contacts; implicit integrator only).
     `preconditioner`: the implicit step's PCG preconditioner (PRECONDITIONERS; 'auto' by default).
+    `solver_threads`: the threads of a frame's kernels (SOLVER_THREADS; 'auto' by default).
     With `tearing`, an interior face whose stretch across it exceeds `tear_strain_parenchyma`
     (`tear_strain_capsule` for a face with an edge on the capsule) opens (P13, §2.6).
     """
@@ -154,6 +159,7 @@ class ModelParams:
     tear_strain_parenchyma: float = 0.4
     tear_strain_capsule: float = 0.5
     preconditioner: str = "auto"
+    solver_threads: str = "auto"
 
     def __post_init__(self):
         if self.substeps is None and self.integrator in INTEGRATOR_SUBSTEPS:
@@ -223,6 +229,8 @@ class ModelParams:
             raise ValueError(f"parameter integrator must be one of {INTEGRATORS}, got {self.integrator!r}")
         if not (isinstance(self.substeps, int) and 1 <= self.substeps <= 10_000):
             raise ValueError(f"parameter substeps must be an integer in 1..10000, got {self.substeps!r}")
+        if self.solver_threads not in SOLVER_THREADS:
+            raise ValueError(f"parameter solver_threads must be one of {SOLVER_THREADS}, got {self.solver_threads!r}")
         if self.preconditioner not in PRECONDITIONERS:
             raise ValueError(f"parameter preconditioner must be one of {PRECONDITIONERS}, got {self.preconditioner!r}")
         if not isinstance(self.tearing, bool):

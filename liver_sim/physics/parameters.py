@@ -18,6 +18,7 @@ from liver_sim.physics.model_params import (
     CONTACT_MODELS,
     INTEGRATOR_SUBSTEPS,
     INTEGRATORS,
+    SOLVER_THREADS,
     SPRING_CONSTANTS,
     SUPPORTS,
     TISSUE_LAWS,
@@ -46,6 +47,9 @@ PARAMETERS = {
                         "(co-rotational linear tetrahedra with parenchyma E, ν and η; implicit_euler and material "
                         "only)",
                         choices=TISSUE_LAWS),
+    "solver_threads": Param(DEFAULTS.solver_threads, "threads of a frame's numba kernels (the implicit step's PCG, "
+                            "the explicit spring pass): auto (all from 20 000 springs on), one (beside the 1 kHz "
+                            "loops on a 2-core machine) or all", choices=SOLVER_THREADS),
     "spring_constants": Param(DEFAULTS.spring_constants, "material: each spring's λ1, λ2, μ from the tissue "
                               "properties and the mesh; paper: the paper's per-spring constants below",
                               choices=SPRING_CONSTANTS),
@@ -225,7 +229,7 @@ def model_params(p: PhysicsParameters) -> ModelParams:
         raise ValueError(f"parameter support_regions must hold five numbers per region (x, y, z, radius m, "
                          f"stiffness N/m³), got {len(regions)} numbers")
     return ModelParams(
-        spring_constants=p.spring_constants, tissue_law=p.tissue_law,
+        spring_constants=p.spring_constants, tissue_law=p.tissue_law, solver_threads=p.solver_threads,
         tissue=TissueProperties(p.parenchyma_young_modulus_kpa, p.parenchyma_poisson_ratio,
                                 p.parenchyma_viscosity_pa_s, p.capsule_stiffness_n_per_m, p.capsule_viscosity_ns_per_m,
                                 p.cubic_ratio),

@@ -124,7 +124,8 @@ class Structure:
 def build_structure(mesh: TetMesh, params: ModelParams, capsule_triangles: np.ndarray, masses_kg: np.ndarray,
                     fixed_nodes: np.ndarray, parallel: bool | None = None, version: int = 0) -> Structure:
     """The Structure of these parts: the springs and support built on `mesh` and `capsule_triangles`, and the
-    integrators' arrays for them; `parallel` None: chosen by the spring count (PARALLEL_MIN_EDGES).
+    integrators' arrays for them; `parallel` None: as params.solver_threads says ('auto': by the spring count,
+    PARALLEL_MIN_EDGES).
 
     The explicit step's bound: exact (springs.stable_time_step) for the first structure (`version` 0); after a
     change (`version` > 0) its estimate, and when dt exceeds STABILITY_MARGIN of it (new short springs or light
@@ -133,7 +134,9 @@ def build_structure(mesh: TetMesh, params: ModelParams, capsule_triangles: np.nd
     capsule = np.ascontiguousarray(capsule_triangles, dtype=np.int64).reshape(-1, 3)
     springs = build_springs(mesh, params, capsule_triangles=capsule)
     support = build_support(mesh, capsule, params)
-    parallel = bool(springs.edges >= PARALLEL_MIN_EDGES if parallel is None else parallel)
+    if parallel is None:
+        parallel = {"one": False, "all": True}.get(params.solver_threads, springs.edges >= PARALLEL_MIN_EDGES)
+    parallel = bool(parallel)
     damping, integrator = params.environment_damping_per_s, params.integrator
     if integrator == "implicit_euler":
         bound = math.inf

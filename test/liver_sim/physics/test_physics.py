@@ -1,6 +1,7 @@
 """The physics core: Eq. 1, both integrators, kernels against the NumPy oracle, damping, divergence guard."""
 import math
 
+import numba
 import numpy as np
 import pytest
 
@@ -207,3 +208,21 @@ def test_non_finite_state_is_caught_within_one_frame(box):
     assert result.divergence is not None and "non-finite" in result.divergence
     np.testing.assert_array_equal(model.state.positions, box.points)
     assert np.isfinite(result.tool_force_n).all() and not result.local_model.valid
+
+
+@pytest.mark.parametrize("solver_threads, parallel", [("one", False), ("all", True), ("auto", False)])
+def test_solver_threads_choose_the_kernels_threads(solver_threads, parallel):
+    """'one' and 'all' as said; 'auto' by the spring count (a small box: one thread); the implicit step's PCG runs on
+    the threads the structure has, and says so."""
+    box = box_mesh(3, 3, 3, 0.01)
+    model = LiverModel(box, ModelParams(solver_threads=solver_threads))
+    assert model.structure.parallel is parallel
+    threads = numba.get_num_threads() if parallel else 1
+    assert model.structure.solver.threads == threads
+    assert ("threads" in model.structure.step_solver) is (threads > 1)
+    model.step_frame(None)  # steps on those threads
+
+
+def test_an_unknown_solver_threads_is_refused_by_name():
+    with pytest.raises(ValueError, match="solver_threads"):
+        ModelParams(solver_threads="two").validate()
