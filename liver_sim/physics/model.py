@@ -20,6 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from liver_sim.base import kernel_cache
 from liver_sim.base.local_model import LocalModel
 from liver_sim.mesh.tetmesh import TetMesh
 from liver_sim.physics.contact import ToolPose, probe_contacts, surface_contacts
@@ -315,7 +316,12 @@ class LiverModel:
 
     def warm_up(self) -> None:
         """Compile the kernels (numba, cached on disk) before a timed loop starts: the frame's, and the node
-        duplication of a tear or a cut (a first tear in the loop would otherwise stall it while it compiles)."""
+        duplication of a tear or a cut (a first tear in the loop would otherwise stall it while it compiles); under the
+        cache's lock (base.kernel_cache.compiling), so that processes warming up at once do not corrupt it."""
+        with kernel_cache.compiling():
+            self._warm_up()
+
+    def _warm_up(self) -> None:
         s, state = self.structure, self.state
         far = ToolPose(np.full(3, 1e3))
         integrate(s, state, [self.tool.over_frame(s, state, far)], 0)

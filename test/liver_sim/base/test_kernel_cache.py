@@ -1,6 +1,10 @@
 """numba's on-disk cache follows the kernels' sources (liver_sim.base.kernel_cache): a changed source in any folder of
-kernels clears every cached kernel of those folders, an unchanged one nothing."""
+kernels clears every cached kernel of those folders, an unchanged one nothing; a warm-up compiles under a lock that
+other processes wait for."""
 import os
+import subprocess
+import sys
+from contextlib import contextmanager
 
 from liver_sim.base import kernel_cache
 
@@ -31,3 +35,36 @@ def test_a_changed_kernel_source_clears_every_cached_kernel_and_an_unchanged_one
     os.utime(source, ns=(source.stat().st_atime_ns, source.stat().st_mtime_ns + 1_000_000))
     assert kernel_cache.refresh(tmp_path)
     assert cached(tmp_path) == []
+
+
+def _try_lock(path) -> int:
+    """The exit status of another process taking the lock file at `path` without waiting: 0 taken, 1 held."""
+    code = ("import fcntl, sys\nf = open(sys.argv[1], 'a')\ntry:\n    fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)\n"
+            "except BlockingIOError:\n    sys.exit(1)\n")
+    return subprocess.run([sys.executable, "-c", code, str(path)]).returncode
+
+
+def test_compiling_holds_the_cache_against_other_processes_and_not_against_itself(tmp_path):
+    make_tree(tmp_path)
+    lock = tmp_path / kernel_cache.LOCK
+    with kernel_cache.compiling(tmp_path):
+        assert _try_lock(lock) == 1  # another process's warm-up waits
+        with kernel_cache.compiling(tmp_path):  # this process again (a refresh within a warm-up): no wait
+            assert _try_lock(lock) == 1
+        assert _try_lock(lock) == 1  # the inner block did not release the outer one's lock
+    assert _try_lock(lock) == 0
+
+
+def test_a_warm_up_compiles_under_the_cache_lock(monkeypatch):
+    from liver_sim.mesh.liver_shape import default_liver
+    from liver_sim.physics.model import LiverModel
+    held = []
+
+    @contextmanager
+    def recording():
+        held.append(True)
+        yield
+
+    monkeypatch.setattr(kernel_cache, "compiling", recording)
+    LiverModel(default_liver()).warm_up()
+    assert held == [True]
