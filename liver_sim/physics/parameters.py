@@ -7,6 +7,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
 
+from liver_sim.base import kernel_cache
 from liver_sim.base.link import LINK_PARAMETERS
 from liver_sim.base.parameters import Param, parameter_record, realtime_priority_parameter
 from liver_sim.base.topic_names import TOOL_NAME, TOPIC_NAMES, in_namespace, tool_namespace, tool_topic
@@ -257,9 +258,10 @@ def tool_contact(tool: PhysicsTool) -> ToolContact:
 
 def build_model(p: PhysicsParameters, tools: tuple[PhysicsTool, ...] | None = None) -> LiverModel:
     """The LiverModel (mesh, parameters, its tools and their use) named by the node's parameters (`tools`: default
-    physics_tools(p)), warmed up."""
+    physics_tools(p)), warmed up; its kernels compiled under the cache's lock (base.kernel_cache.compiling)."""
     tools = physics_tools(p) if tools is None else tools
-    mesh = load_mesh(p.mesh_path, p.target_tets, p.mesh_scale) if p.mesh_path else default_liver()
-    model = LiverModel(mesh, model_params(p), [tool_contact(tool) for tool in tools])
-    model.warm_up()
+    with kernel_cache.compiling():  # meshing a surface compiles kernels too, not only the warm-up
+        mesh = load_mesh(p.mesh_path, p.target_tets, p.mesh_scale) if p.mesh_path else default_liver()
+        model = LiverModel(mesh, model_params(p), [tool_contact(tool) for tool in tools])
+        model.warm_up()
     return model
