@@ -164,7 +164,7 @@ def frame_figures(name: str, mesh, integrators=FRAME_INTEGRATORS) -> list[dict]:
     for integrator, law in integrators:
         params = reference_params if integrator == "symplectic_euler" else stable_params(mesh, integrator)
         params = params.with_changes(tissue_law=law)
-        serial, parallel = (LiverModel(mesh, params, parallel=p) for p in (False, True))
+        serial, parallel = (LiverModel(mesh, params.with_changes(solver_threads=t)) for t in ("one", "all"))
         ms_serial, error, _, iterations = _run_frames(serial, poses, reference_positions)
         ms_parallel, _, _, _ = _run_frames(parallel, poses, reference_positions)
         period_ms = 1e3 / params.frame_rate_hz
@@ -223,8 +223,8 @@ def bench_mesh(name: str, mesh, min_seconds: float = 1.0) -> dict:
     """Figures for one mesh: the explicit kernel's step with the default model parameters and symplectic Euler
     (substeps raised to its stability bound), and `frame_figures` per integrator under `integrators`."""
     params = stable_params(mesh)
-    serial = LiverModel(mesh, params, parallel=False)
-    parallel = LiverModel(mesh, params, parallel=True)
+    serial = LiverModel(mesh, params.with_changes(solver_threads="one"))
+    parallel = LiverModel(mesh, params.with_changes(solver_threads="all"))
     configured = serial.structure.params
     for model in (serial, parallel):
         model.warm_up()

@@ -119,7 +119,7 @@ def implicit_frame(structure: Structure, state: State, tools: Sequence[ToolState
         touching = [r for r in rows if len(r)]
         liver_force = structure.solver.step(state.history, x, v, state.inv_mass, state.external_forces_n, dt,
                                             params.environment_damping_per_s, gravity,
-                                            joined(touching) if touching else None)
+                                            joined(touching))
     for tool in tools:
         if tool.kind != TOOL_NONE:  # the contact geometry the local model is fitted to
             probe_contacts(x, v, tool, tool.velocity_m_s * (substeps * dt), dt)
@@ -172,8 +172,8 @@ class LiverModel:
     """
 
     def __init__(self, mesh: TetMesh, params: ModelParams | None = None,
-                 tool: ToolContact | Sequence[ToolContact] | None = None, parallel: bool | None = None):
-        self.structure = initial_structure(mesh, params, parallel)
+                 tool: ToolContact | Sequence[ToolContact] | None = None):
+        self.structure = initial_structure(mesh, params)
         self.state = rest_state(self.structure)
         self.tools = (tool,) if isinstance(tool, ToolContact) else tuple(tool) if tool is not None else (ToolContact(),)
         names = [t.name for t in self.tools]

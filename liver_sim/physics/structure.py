@@ -125,7 +125,7 @@ def build_structure(mesh: TetMesh, params: ModelParams, capsule_triangles: np.nd
                     fixed_nodes: np.ndarray, parallel: bool | None = None, version: int = 0) -> Structure:
     """The Structure of these parts: the springs and support built on `mesh` and `capsule_triangles`, and the
     integrators' arrays for them; `parallel` None: as params.solver_threads says ('auto': by the spring count,
-    PARALLEL_MIN_EDGES).
+    PARALLEL_MIN_EDGES); a change passes its structure's, so that it keeps its threads.
 
     The explicit step's bound: exact (springs.stable_time_step) for the first structure (`version` 0); after a
     change (`version` > 0) its estimate, and when dt exceeds STABILITY_MARGIN of it (new short springs or light
@@ -163,7 +163,7 @@ def build_structure(mesh: TetMesh, params: ModelParams, capsule_triangles: np.nd
                                    threads=threads))
 
 
-def initial_structure(mesh: TetMesh, params: ModelParams | None = None, parallel: bool | None = None) -> Structure:
+def initial_structure(mesh: TetMesh, params: ModelParams | None = None) -> Structure:
     """The structure of `mesh` with its whole skin as capsule: masses lumped at params.density_kg_m3 (scaled_masses);
     fixed nodes params.fixed_nodes, or when None the paper's central tet unless the organ's support holds the liver
     (params.support 'organ' with capsule nodes in its regions: then none).  ValueError naming the parameter for
@@ -177,4 +177,4 @@ def initial_structure(mesh: TetMesh, params: ModelParams | None = None, parallel
     fixed = np.unique(np.asarray(fixed, np.int64))
     if fixed.size and (fixed.min() < 0 or fixed.max() >= len(mesh.points)):
         raise ValueError(f"parameter fixed_nodes must index nodes 0..{len(mesh.points) - 1}")
-    return build_structure(mesh, params, mesh.skin, masses, fixed, parallel)
+    return build_structure(mesh, params, mesh.skin, masses, fixed)

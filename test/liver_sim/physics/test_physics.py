@@ -105,13 +105,13 @@ def test_spring_kernels_equal_numpy_oracle(box, parallel):
 
 
 @pytest.mark.parametrize("integrator", ["explicit_euler", "symplectic_euler"])
-@pytest.mark.parametrize("parallel", [False, True])
-def test_model_frame_equals_numpy_oracle_steps(box, integrator, parallel):
+@pytest.mark.parametrize("solver_threads", ["one", "all"])
+def test_model_frame_equals_numpy_oracle_steps(box, integrator, solver_threads):
     params = ModelParams(integrator=integrator, substeps=1, environment_damping_per_s=1.5,
                          gravity_m_s2=(0.0, 0.0, -9.81), spring_constants="paper")
     stable = LiverModel(box, params).structure.stable_dt_s
     params = params.with_changes(substeps=math.ceil(1.0 / (150.0 * 0.9 * stable)))
-    model = LiverModel(box, params, parallel=parallel)
+    model = LiverModel(box, params.with_changes(solver_threads=solver_threads))
     x, v = perturbed_state(box)
     model.state.positions[:], model.state.velocities[:] = x, v
     model.step_frame(None)
