@@ -170,12 +170,11 @@ class PhysicsNode(Node):
         with self._frame_seconds_lock:
             compute, self._frame_seconds = np.array(self._frame_seconds), []
         now = time.monotonic()
-        tools = {key: value for tool, contact, pose, link in zip(self.tools, self.model.tools, self._poses,
-                                                                  self._links)
-                 for key, value in {tool.parameter("tool_mode"): contact.use.mode,
-                                    tool.parameter("tool_pose_age_s"): float(now - pose.get()[1]),
-                                    **{tool.parameter(k): v for k, v in link_report(link, self._inputs).items()}
-                                    }.items()}
+        tools = {}  # per tool, under its parameter prefix
+        for tool, contact, pose, link in zip(self.tools, self.model.tools, self._poses, self._links):
+            tools[tool.parameter("tool_mode")] = contact.use.mode
+            tools[tool.parameter("tool_pose_age_s")] = float(now - pose.get()[1])
+            tools.update({tool.parameter(k): v for k, v in link_report(link, self._inputs).items()})
         extra = {"frame_compute_p99_s": float(np.percentile(compute, 99)) if compute.size else 0.0,
                  "divergences": self.model.divergences, "bad_tool_poses": self._pipeline.refused_poses,
                  "topology_changes": self.model.structure.version,
