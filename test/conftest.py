@@ -18,13 +18,14 @@
   process, an independent subscriber and a Foxglove client of the view, and
   several tests assert on its summary, pictures, recording and what the
   subscriber and the client saw.
-* Two workers: ``make test`` runs pytest-xdist with two workers; the ``ros``
-  tests that start processes keeping a rate (nodes, closed loops) form one
-  group, run in order on one worker (their processes keep the timing they
-  would have alone: a closed loop and a node test side by side on two cores
-  missed their deadlines, even with nothing else running). The ROS-free tests
-  and the ``no_rate_loops`` ones (recorders, replays and clients at normal
-  priority, which a closed loop beside them outranks) fill both workers.
+* Two phases: the ``ros`` tests that start processes keeping a rate (nodes,
+  closed loops) are marked ``rate_loops``. ``make test`` first runs everything
+  else on two pytest-xdist workers (``-m "not rate_loops"``: the ROS-free
+  tests and the ``no_rate_loops`` ones, recorders, replays and clients at
+  normal priority), then the ``rate_loops`` tests in order in one process
+  with nothing else of the suite computing (``-m rate_loops``): their loops
+  get the machine's cores as a rig's would. A closed loop beside a worker
+  computing physics lost its rate on two cores.
 * Test tiers: every test that takes ``ros_domain_id`` (directly, through
   ``ros_env`` or through another fixture), or is listed in
   ``ROS_WITHOUT_FIXTURE``, is marked ``ros``: it starts node processes or an
@@ -78,17 +79,18 @@ ROS_FIXTURES = frozenset({"ros_domain_id", "ros_env", "recorded_demo", "two_hand
 ROS_WITHOUT_FIXTURE = ("test_a_damaged_bag_is_refused_with_a_clear_error[replay-",)
 
 
-@pytest.hookimpl(tryfirst=True)  # before pytest-xdist reads the groups off the markers
+@pytest.hookimpl(tryfirst=True)  # before pytest's -m and pytest-xdist's groups read the markers
 def pytest_collection_modifyitems(config, items):
     """Mark ``ros`` every test whose fixture closure holds one of ROS_FIXTURES, or named in ROS_WITHOUT_FIXTURE, and
-    put those not marked ``no_rate_loops`` in one xdist group: under ``pytest -n 2 --dist loadgroup``
-    (``make test``) they run one after the other on one worker, sharing its session fixtures, while the other
-    worker takes the rest."""
+    ``rate_loops`` those of them not marked ``no_rate_loops``; the latter also form one xdist group, so that under
+    ``pytest -n 2 --dist loadgroup`` they still run one after the other on one worker, sharing its session
+    fixtures (``make test`` runs them in a phase of their own, see the module doc)."""
     for item in items:
         if (ROS_FIXTURES.intersection(getattr(item, "fixturenames", ()))
                 or item.name.startswith(ROS_WITHOUT_FIXTURE)):
             item.add_marker(pytest.mark.ros)
             if item.get_closest_marker("no_rate_loops") is None:
+                item.add_marker(pytest.mark.rate_loops)
                 item.add_marker(pytest.mark.xdist_group("ros"))
 
 

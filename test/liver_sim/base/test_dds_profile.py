@@ -10,6 +10,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 from liver_sim.base.process_settings import DDS_PROFILE_VARIABLE, config_dir, use_dds_profile
 
 #: A participant that reports, for each shared-memory port it listens on in its domain's port range, the
@@ -72,6 +74,7 @@ def test_every_process_loads_the_product_profile_unless_the_environment_names_on
     assert env[DDS_PROFILE_VARIABLE] == "/etc/rig/dds.xml"
 
 
+@pytest.mark.no_rate_loops  # a participant in a process of its own or this one: no loop keeps a rate
 def test_shared_memory_ports_under_the_profile_hold_an_opener_33_ms_not_333(ros_env, tmp_path):
     """A participant's ports, read back from /dev/shm: 100/33 ms under the product profile; the same probe under
     Fast DDS's own defaults (a profile file without transports) finds 1000/333 ms, so the reading can fail."""
