@@ -162,10 +162,15 @@ def test_the_supervisor_thread_catches_a_real_stall():
 
 def test_gap_log_keeps_the_largest_with_its_time():
     log = GapLog(0.001, window_s=1.0)
-    for k in range(3000):
+    for k in range(700):
         log.record(k * 0.001, 0.001 if k != 500 else 0.02)
-    assert log.max_gap_s == 0.02 and log.max_gap_end_s == 0.5
-    assert log.recent(3.0) == (0.001, pytest.approx(log.recent(3.0)[1]))
+    assert log.recent(0.7) == (0.02, 0.5)  # within the last second
+    for k in range(700, 3000):
+        log.record(k * 0.001, 0.001)
+    assert log.max_gap_s == 0.02 and log.max_gap_end_s == 0.5  # since start
+    gap, end = log.recent(3.0)  # the long gap has left the last second
+    assert gap == 0.001 and 2.0 <= end <= 2.999
+    assert log.recent(5.0)[0] == 0.0  # nothing ended in the last second
 
 
 def test_soft_start_rises_over_its_time_after_start_and_after_restart():

@@ -10,11 +10,11 @@ import time
 from pathlib import Path
 
 import numpy as np
-import pytest
 import rclpy
 from geometry_msgs.msg import PoseStamped
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.signals import SignalHandlerOptions
+from waiting import wait_for
 
 from haptic_bridge.parameters import PARAMETERS as BRIDGE
 from liver_sim.base.geometry.device_map import DeviceMap
@@ -152,15 +152,12 @@ class Rig:
 
     def wait_until(self, condition, what: str, bridge: subprocess.Popen) -> None:
         """Spin (publishing and receiving) until `condition()`; fail if the bridge exits or WAIT_S passes."""
-        deadline = time.monotonic() + WAIT_S
-        while not condition():
-            if bridge.poll() is not None:
-                pytest.fail(f"the bridge exited ({bridge.returncode}) while waiting for {what}: "
-                            f"{bridge.stderr.read()}")
-            if time.monotonic() > deadline:
-                last = self.forces[-1].tolist() if self.forces else None
-                pytest.fail(f"timed out waiting for {what} (last force {last}, {len(self.forces)} received)")
-            self.executor.spin_once(timeout_sec=0.005)
+        wait_for(condition, WAIT_S, what,
+                 seen=lambda: f"last force {self.forces[-1].tolist() if self.forces else None}, "
+                              f"{len(self.forces)} received",
+                 between=lambda: self.executor.spin_once(timeout_sec=0.005),
+                 gone=lambda: None if bridge.poll() is None else
+                 f"the bridge exited ({bridge.returncode}): {bridge.stderr.read()}")
 
     def wait_for_force(self, expected, bridge: subprocess.Popen, count: int = 20) -> None:
         """Wait until the last `count` force commands equal `expected` (N) within 1 mN."""

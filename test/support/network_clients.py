@@ -10,6 +10,7 @@ import rclpy
 from rclpy.experimental import EventsExecutor
 from rosbags.rosbag2 import Reader
 from rosbags.typesys import Stores, get_typestore
+from waiting import wait_for
 
 from liver_sim.nodes.rcl_take import SerializedTake
 from liver_sim.nodes.run import spin
@@ -27,15 +28,6 @@ def read_bag(path) -> dict:
             read.setdefault(connection.topic, []).append(
                 (connection.msgtype, timestamp, store.deserialize_cdr(data, connection.msgtype)))
     return read
-
-
-def wait_for(condition, timeout_s: float, what: str, seen=lambda: "") -> None:
-    """Poll `condition()` until it holds; AssertionError naming `what` and `seen()` after `timeout_s`."""
-    deadline = time.monotonic() + timeout_s
-    while not condition():
-        if time.monotonic() > deadline:
-            raise AssertionError(f"{what} not within {timeout_s:g} s; seen: {seen()}")
-        time.sleep(0.05)
 
 
 class Tally:

@@ -10,6 +10,8 @@ import sys
 import time
 
 import rclpy
+from rclpy.duration import Duration
+from waiting import wait_for
 
 from liver_sim.mesh.liver_shape import default_liver
 from msg_defs.forces import force_message, force_message_type, wrench_stamped
@@ -43,18 +45,15 @@ def main(ticks: int, other: bool) -> None:
         if (k * 150) // 1000 != ((k - 1) * 150) // 1000 or k == 0:
             publishers["nodes"].publish(nodes_to_pointcloud2(nodes + k * 1e-6, t, "liver"))
             counts["nodes"] += 1
-    time.sleep(1.0)  # reliable messages still in flight reach the recorder before the publishers go
+    for publisher in publishers.values():  # reliable messages still in flight reach the recorder first
+        publisher.wait_for_all_acked(Duration(seconds=5.0))
     print(json.dumps({TOPICS[key].name: n for key, n in counts.items()}), flush=True)
     node.destroy_node()
     rclpy.shutdown()
 
 
 def wait_for_subscribers(publishers) -> None:
-    deadline = time.monotonic() + 60.0
-    while any(p.get_subscription_count() == 0 for p in publishers):
-        if time.monotonic() > deadline:
-            raise SystemExit("no recorder subscribed within 60 s")
-        time.sleep(0.05)
+    wait_for(lambda: all(p.get_subscription_count() > 0 for p in publishers), 60.0, "a recorder subscribed")
     time.sleep(0.5)  # both sides have matched: let the reliable handshakes finish
 
 
@@ -70,7 +69,8 @@ def publish_other(node, ticks: int) -> None:
         force.publish(force_message("vector3", [0.0, 0.0, k * 1e-3], 0.0, ""))
         text.publish(String(data=str(k)))
         time.sleep(0.001)
-    time.sleep(1.0)
+    for publisher in (force, text):
+        publisher.wait_for_all_acked(Duration(seconds=5.0))
     print(json.dumps({TOPICS["servo_cf"].name: ticks, "/custom/topic": ticks}), flush=True)
 
 

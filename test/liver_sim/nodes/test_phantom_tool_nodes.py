@@ -6,7 +6,6 @@ import math
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -14,6 +13,7 @@ import pytest
 import rclpy
 from geometry_msgs.msg import PoseStamped
 from rclpy.executors import SingleThreadedExecutor
+from waiting import wait_for
 
 from msg_defs.device_map import device_map_from_message
 from msg_defs.forces import force_message, force_message_type
@@ -87,14 +87,9 @@ class Ros:
         return received
 
     def wait_until(self, condition, what: str, process: subprocess.Popen | None = None) -> None:
-        deadline = time.monotonic() + WAIT_S
-        while not condition():
-            if process is not None and process.poll() is not None:
-                pytest.fail(f"the node exited ({process.returncode}) while waiting for {what}: "
-                            f"{process.stderr.read()}")
-            if time.monotonic() > deadline:
-                pytest.fail(f"timed out waiting for {what}")
-            self.executor.spin_once(timeout_sec=0.02)
+        wait_for(condition, WAIT_S, what, between=lambda: self.executor.spin_once(timeout_sec=0.02),
+                 gone=lambda: None if process is None or process.poll() is None else
+                 f"the node exited ({process.returncode}): {process.stderr.read()}")
 
     def close(self) -> None:
         self.executor.shutdown()

@@ -5,16 +5,17 @@ import signal
 import stat
 import subprocess
 import sys
-import time
 
 import pytest
+from waiting import wait_for
 
 from liver_sim.base.process_settings import cli_command_line
+from liver_sim.running import launcher
 from liver_sim.running.launcher import RunEntry, RunFile, _command_line, _process_start, run_dir, stop_leftovers
 from liver_sim.sessions.bag import BagError, BagWriter, _salvaged_mcap, bag_info, check_bag
 from liver_sim.sessions.gaps import SequenceGaps
 
-from network_clients import Tally, wait_for
+from network_clients import Tally
 
 GID_A, GID_B = bytes(range(16)), bytes(range(1, 17))
 
@@ -113,17 +114,20 @@ def test_leftovers_of_a_dead_run_are_stopped_and_a_live_run_is_refused(tmp_path)
         leftover.wait()
 
 
-def test_a_process_is_signalled_only_when_pid_start_and_command_line_match(tmp_path):
+def test_a_process_is_signalled_only_when_pid_start_and_command_line_match(tmp_path, monkeypatch):
     other = sleeping_process(start_new_session=True)
     run_file = RunFile("8", tmp_path)
+    signalled = []
     try:
         with run_file.edit() as runs:  # the pid and start time of `other`, but the command line of a node
             runs.append({"owner": [dead_pid(), 1], "log_dir": "old", "processes": [
                 RunEntry("liver_physics", other.pid, _process_start(other.pid), False, "liver_physics\0--ros-args\0"),
                 ["haptic_bridge", other.pid, _process_start(other.pid), False]]})  # an older entry: no command line
-        assert stop_leftovers(run_file, lambda line: None) == []
-        time.sleep(0.2)
-        assert other.poll() is None, "a process that is not the one noted is never signalled"
+        with monkeypatch.context() as patch:  # every signal the launcher sends, kept instead of sent
+            patch.setattr(launcher.os, "kill", lambda pid, signum: signalled.append((pid, signum)))
+            assert stop_leftovers(run_file, lambda line: None) == []
+        assert signalled == [], "a process that is not the one noted is never signalled"
+        assert other.poll() is None
     finally:
         other.kill()
         other.wait()
@@ -202,6 +206,9 @@ def test_bench_record_never_replaces_an_existing_bag(tmp_path):
 DEMO_PROCESSES = {"recorder", "liver_physics", "haptic_bridge", "liver_tool", "phantom_sim"}
 #: How long (s) a demo may take to start its processes and move the hand, on a busy 2-core machine.
 START_TIMEOUT_S = 90.0
+#: How long (s) a killed demo's children may take to close (a bridge's zero, a recorder's bag) and end.
+CHILDREN_GONE_S = 10.0
+
 
 def start_demo(ros_env, out, duration_s=120, poses=500):
     """`liver-sim demo --record` as a separate process (its output in out/demo.out and out/demo.err), returned
@@ -268,10 +275,9 @@ def test_sigkill_of_the_demo_leaves_no_process_of_its_run(ros_env, tmp_path):
     assert set(children) == DEMO_PROCESSES
     demo.kill()
     demo.wait()
-    deadline = time.monotonic() + 2.0
-    while any(alive(pid) for pid in children.values()) and time.monotonic() < deadline:
-        time.sleep(0.05)
-    assert not {label for label, pid in children.items() if alive(pid)}
+    # each child dies with its parent (PR_SET_PDEATHSIG), the bridge's zero and the recorder's bag on the way
+    wait_for(lambda: not any(alive(pid) for pid in children.values()), CHILDREN_GONE_S, "every child of the run gone",
+             lambda: f"alive: {sorted(label for label, pid in children.items() if alive(pid))}")
     assert check_bag(tmp_path / "session")["/liver/nodes"] > 0  # the recorder closed its bag on the way
 
 

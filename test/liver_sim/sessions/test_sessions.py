@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 import rclpy
 from rclpy.serialization import serialize_message
+from waiting import wait_for
 
 from liver_sim.analysis import largest_force_jump_n
 from liver_sim.base.local_model import LocalModel
@@ -27,7 +28,7 @@ from msg_defs.forces import wrench_stamped
 from msg_defs.local_model import local_model_marker
 from msg_defs.poses import pose_stamped
 
-from network_clients import Tally, read_bag, wait_for
+from network_clients import Tally, read_bag
 
 PUBLISHER = Path(__file__).resolve().parents[2] / "support" / "session_publisher.py"
 POSE = "geometry_msgs/msg/PoseStamped"

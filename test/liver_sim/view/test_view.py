@@ -10,6 +10,7 @@ import time
 import numpy as np
 import pytest
 from foxglove_client import VIEW_TOPICS, field_numbers, fields, packed_count, schema_bytes
+from waiting import POLL_S, wait_for
 
 from liver_sim.base.local_model import LocalModel
 from liver_sim.base.process_settings import config_dir
@@ -154,16 +155,6 @@ def test_two_tools_show_each_with_its_local_model_and_force(tmp_path):
     assert draw_scene(scene, tmp_path / "two.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
-def wait_for(condition, timeout_s: float, what: str, every=None) -> None:
-    """Wait until `condition()` holds (calling `every()` between polls), or fail naming `what`."""
-    deadline = time.monotonic() + timeout_s
-    while not condition():
-        assert time.monotonic() < deadline, f"timed out waiting for {what}"
-        if every is not None:
-            every()
-        time.sleep(0.02)
-
-
 @pytest.mark.no_rate_loops
 def test_the_live_view_refuses_a_bad_mesh_and_goes_on_after_a_failing_tick(ros_domain_id):
     """A running view fed a shape_msgs/Mesh whose triangles index missing vertices refuses and counts it and keeps
@@ -200,16 +191,17 @@ def test_the_live_view_refuses_a_bad_mesh_and_goes_on_after_a_failing_tick(ros_d
 
         def publish_nodes():
             nodes.publish(nodes_to_pointcloud2(LIVER.points, (1, 0), "liver"))
+            time.sleep(POLL_S)
 
         surface.publish(skin_mesh_msg(LIVER.skin, LIVER.points))
         wait_for(lambda: view.scenes >= 5 and view.tick_errors == 1, 30.0, "scenes and the failing tick",
-                 publish_nodes)
+                 between=publish_nodes)
         bad = Mesh(triangles=[MeshTriangle(vertex_indices=[0, 1, 4000])],
                    vertices=[Point(x=0.0, y=0.0, z=0.0), Point(x=0.01, y=0.0, z=0.0)])
         surface.publish(bad)
-        wait_for(lambda: view.refused == 1, 30.0, "the bad Mesh refused", publish_nodes)
+        wait_for(lambda: view.refused == 1, 30.0, "the bad Mesh refused", between=publish_nodes)
         served = view.scenes
-        wait_for(lambda: view.scenes >= served + 10, 30.0, "scenes after the bad Mesh", publish_nodes)
+        wait_for(lambda: view.scenes >= served + 10, 30.0, "scenes after the bad Mesh", between=publish_nodes)
         assert view.tick_errors == 1 and view.refused == 1 and view._loop.is_alive()
     finally:
         view.close()
