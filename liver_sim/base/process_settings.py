@@ -9,6 +9,7 @@ from __future__ import annotations
 import os
 import shlex
 import sys
+from contextlib import contextmanager
 from pathlib import Path
 
 #: Discovery ranges of ROS 2 (ROS_AUTOMATIC_DISCOVERY_RANGE).
@@ -39,6 +40,44 @@ def set_realtime_priority(priority: int) -> str | None:
         return (f"realtime_priority {priority} refused ({exc.strerror}): normal scheduling; grant CAP_SYS_NICE "
                 f"or an rtprio limit to keep the rate under load")
     return None
+
+
+#: The nice value of every thread of a node process that does not keep a rate (DDS's threads, the executor's): a
+#: rate loop waits on them (a Fast DDS lock, the GIL), so an ordinary process must not starve them, while they take
+#: no more than the work they are given.
+SERVICE_NICE = -15
+
+
+def set_service_nice(nice: int = SERVICE_NICE) -> str | None:
+    """Give every thread of this process the nice value `nice` (SCHED_OTHER); threads they start afterwards inherit
+    it.
+
+    A node process calls it first thing, before rclpy starts DDS's threads: those threads and the executor's hold
+    what the rate loops wait for (a Fast DDS writer's or participant's lock, the GIL), and at nice 0 a core-bound
+    neighbour would take half their CPU while they hold it. A real-time loop is unaffected (SCHED_FIFO ignores
+    nice). Returns None when done, else why the system refused."""
+    try:
+        for thread_id in os.listdir("/proc/self/task"):  # the interpreter's and the libraries' threads so far
+            os.setpriority(os.PRIO_PROCESS, int(thread_id), nice)  # a thread id: that thread only, on Linux
+    except OSError as exc:
+        return (f"nice {nice} refused ({exc.strerror}): DDS's and the executor's threads stay at nice 0; grant "
+                f"CAP_SYS_NICE or a nice limit (RLIMIT_NICE) so that other processes cannot starve them")
+    return None
+
+
+@contextmanager
+def service_nice(nice: int = SERVICE_NICE):
+    """:func:`set_service_nice` while the block runs (it gets None or the refusal), the calling thread's nice value
+    back for every thread of the process after it."""
+    previous = os.getpriority(os.PRIO_PROCESS, 0)
+    try:
+        yield set_service_nice(nice)
+    finally:
+        for thread_id in os.listdir("/proc/self/task"):
+            try:
+                os.setpriority(os.PRIO_PROCESS, int(thread_id), previous)
+            except OSError:  # a thread that ended meanwhile
+                pass
 
 
 def keep_dds_local(discovery_range: str | None = None, environ=os.environ) -> str:

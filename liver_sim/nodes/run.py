@@ -12,12 +12,18 @@ from rclpy.executors import ExternalShutdownException
 from rclpy.experimental import EventsExecutor
 from rclpy.signals import SignalHandlerOptions
 
-from liver_sim.base.process_settings import use_dds_profile
+from liver_sim.base.process_settings import set_service_nice, use_dds_profile
 from liver_sim.base.stop_request import ENDING_SIGNALS, STOP_SIGNALS, StopRequest
 from liver_sim.realtime.garbage import FULL_COLLECTION_PERIOD_S, collect_garbage, freeze_garbage
+from liver_sim.realtime.rate_loop import RateLoop, warn
 
 #: How often (s) a thread holding the GIL is asked to hand it over.
 GIL_SWITCH_INTERVAL_S = 0.0002
+#: The rate (Hz) of a rate-keeping node's executor thread: each tick waits for its callbacks (timers, services,
+#: parameter and graph events) until the next tick's deadline and runs each as it comes.
+EXECUTOR_RATE_HZ = 10.0
+#: Callbacks one executor tick runs at most: a burst is spread over ticks, its CPU bounded per period.
+EXECUTOR_CALLBACKS_PER_TICK = 32
 #: How long (s) a closing node waits for its reliable subscribers to acknowledge what it published.
 CLOSE_ACK_TIMEOUT_S = 1.0
 #: The same for a node whose parent died (a killed `liver-sim demo` or bench): its listener, which was in the parent,
@@ -67,6 +73,39 @@ def spin(executor, context=None, stop=None) -> None:
         pass
 
 
+def executor_priority(loop_priority: int) -> int:
+    """The real-time priority of a node's executor thread: just below its rate loop's (0: normal scheduling)."""
+    return max(loop_priority - 1, 1) if loop_priority > 0 else 0
+
+
+def serve_executor(executor, node, stop: StopRequest) -> RateLoop:
+    """A RateLoop serving `executor` at EXECUTOR_RATE_HZ and :func:`executor_priority` of the node's
+    `realtime_priority`: the executor's callbacks hold the GIL that the node's loop takes, so the thread running them
+    keeps a rate at real-time priority, where no other process's ordinary or lower real-time threads can stop it
+    while it holds the GIL. A tick waits (the GIL released) for ready callbacks until its period ends and runs at
+    most EXECUTOR_CALLBACKS_PER_TICK of them; an error in one is logged and the node goes on; when the context shuts
+    down, `stop` is set."""
+    period_s = 1.0 / EXECUTOR_RATE_HZ
+
+    def serve(now: float) -> None:
+        try:
+            for _ in range(EXECUTOR_CALLBACKS_PER_TICK):
+                remaining = now + period_s - time.monotonic()
+                if remaining <= 0.0:
+                    return
+                executor.spin_once(timeout_sec=remaining)
+        except ExternalShutdownException:
+            stop.set()
+            raise
+
+    def on_error(_now: float, exc: Exception) -> None:
+        node.get_logger().error(f"executor callback failed: {exc!r}")
+
+    priority = executor_priority(int(node.get_parameter("realtime_priority").value))
+    return RateLoop(EXECUTOR_RATE_HZ, serve, "executor", on_error=on_error, freeze=False,
+                    realtime_priority=priority, on_refused=warn(node), context=node.context)
+
+
 def run_node(make_node, args=None) -> int:
     """Entry point of a node process: create it, spin an EventsExecutor until an ending signal, clean up.
 
@@ -80,12 +119,17 @@ def run_node(make_node, args=None) -> int:
     and these: a subscriber that died, as a killed run's listener, never acknowledges); only then does the
     context go.  A refused parameter ends
     the process with status 2 and a message naming it.  The process loads the product's Fast DDS profile
-    (:func:`use_dds_profile`) unless the environment names one.  The interpreter hands the GIL over every
+    (:func:`use_dds_profile`) unless the environment names one.  The executor of a node with a `realtime_priority`
+    runs in a rate loop of its own just below the node's loop (:func:`serve_executor`) while the main thread waits
+    for the signal; any other node's is spun by the main thread.  Every thread that keeps no rate (DDS's) runs at
+    SERVICE_NICE (:func:`set_service_nice`), so that no ordinary process starves a thread holding a lock a loop
+    waits for.  The interpreter hands the GIL over every
     GIL_SWITCH_INTERVAL_S so that a rate loop and the executor thread do not hold each other up for Python's
     default 5 ms.  Once the node is built, the garbage collector is frozen (:func:`freeze_garbage`) and the
     executor runs the full collection every FULL_COLLECTION_PERIOD_S.
     """
     sys.setswitchinterval(GIL_SWITCH_INTERVAL_S)
+    nice_refused = set_service_nice()  # before rclpy starts DDS's threads, which inherit it
     dds_profile = use_dds_profile()
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     stop = StopRequest()
@@ -97,11 +141,20 @@ def run_node(make_node, args=None) -> int:
     try:
         node = make_node()
         node.get_logger().info(f"DDS profile: {dds_profile}")
+        if nice_refused:
+            node.get_logger().warning(nice_refused)
         freeze_garbage()
         node.create_timer(FULL_COLLECTION_PERIOD_S, collect_garbage)
         executor = EventsExecutor()
         executor.add_node(node)
-        spin(executor, stop=stop)
+        if node.has_parameter("realtime_priority"):  # a node that keeps a rate
+            executor.spin_once(timeout_sec=0.0)  # the executor's own threads (its timers') start here, not real-time
+            served = serve_executor(executor, node, stop)
+            served.start()
+            stop.wait()
+            served.stop()
+        else:
+            spin(executor, stop=stop)
     except ValueError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

@@ -122,11 +122,13 @@ def _cpu_ticks(pid: int) -> int:
 
 def die_with_parent(parent_pid: int):
     """preexec_fn: SIGTERM this child when the thread that started it dies (prctl PR_SET_PDEATHSIG), and at
-    once if the parent is already gone."""
+    once if the parent is already gone. The child starts at nice 0 whatever its parent's (a node sets its own,
+    liver_sim.nodes.run)."""
     prctl = ctypes.CDLL(None, use_errno=True).prctl  # looked up before the fork
 
     def preexec() -> None:
         prctl(PR_SET_PDEATHSIG, int(signal.SIGTERM), 0, 0, 0)
+        os.setpriority(os.PRIO_PROCESS, 0, 0)
         if os.getppid() != parent_pid:
             os.kill(os.getpid(), signal.SIGTERM)
     return preexec

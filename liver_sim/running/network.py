@@ -19,13 +19,13 @@ import rclpy
 from rclpy.experimental import EventsExecutor
 
 from liver_sim.analysis import rate_figures
-from liver_sim.base.process_settings import command_line, printable
+from liver_sim.base.process_settings import command_line, printable, service_nice
 from liver_sim.base.topic_names import in_namespace, tool_namespace, tool_topic
 from liver_sim.mesh.landmarks import press_anchor
 from liver_sim.mesh.liver_shape import default_liver
 from liver_sim.nodes.occupants import refuse_occupied
 from liver_sim.nodes.run import spin
-from liver_sim.running.launcher import NodeProcesses, log_tail
+from liver_sim.running.launcher import NodeProcesses, die_with_parent, log_tail
 from liver_sim.running.listener import NetworkListener, NetworkSnapshot
 from liver_sim.running.machine_stalls import Sentinels, gaps_with_stalls
 from liver_sim.sessions.record import READY, RECORDER_NODE, default_topics
@@ -173,8 +173,19 @@ def run_network(plan: NetworkPlan, duration_s: float, log_dir: Path, progress=pr
 
     Raises NodeFailure naming any process that exited early or with a non-zero status at stop, with the tail
     of its log (in log_dir); RuntimeError if the network does not come up.
-    """
 
+    The listener measures the run: while it runs, this process's threads (its DDS threads included) are at
+    SERVICE_NICE, as a node's are, so that an ordinary process beside the run does not starve it.
+    """
+    with service_nice() as refused:
+        if refused:
+            progress(f"  {refused}")
+        return _listen_to(plan, duration_s, log_dir, progress, settle_s, extra_load, check_domain)
+
+
+def _listen_to(plan: NetworkPlan, duration_s: float, log_dir: Path, progress, settle_s: float, extra_load: int,
+               check_domain: bool) -> NetworkRun:
+    """run_network's run, at the nice value it chose."""
     progress(f"ROS_DOMAIN_ID={os.environ.get('ROS_DOMAIN_ID', '0')} "
              f"ROS_AUTOMATIC_DISCOVERY_RANGE={os.environ.get('ROS_AUTOMATIC_DISCOVERY_RANGE', '(default)')}")
     for label, args in {**plan.observers, **plan.commands}.items():
@@ -216,7 +227,7 @@ def run_network(plan: NetworkPlan, duration_s: float, log_dir: Path, progress=pr
             _wait_until(listener, processes, f"the device samples from {', '.join(late)}",
                         lambda heard: all(len(a) for a in heard.snapshot().device_arrival_s.values()))
         for k in range(extra_load):
-            loads.append(subprocess.Popen(CORE_BOUND_PROCESS))
+            loads.append(subprocess.Popen(CORE_BOUND_PROCESS, preexec_fn=die_with_parent(os.getpid())))
             progress(f"  extra load {k + 1}: pid {loads[-1].pid}, one core busy at normal priority")
         sentinels.start()  # once the network is up: they watch the window
         time.sleep(settle_s)
