@@ -5,7 +5,7 @@ relative: a bridge started in a namespace (`__ns:=/left`) takes them there, one 
 The device map is not among them: the bridge takes the one `liver_tool` publishes on device_map_topic
 (latched), so the map that places the tool and the map that turns the force can never differ."""
 from haptic_bridge.safety import DEFAULT_MAX_FORCE_N, PHANTOM_MAX_FORCE_N
-from liver_sim.base.link import LINK_PARAMETERS
+from liver_sim.base.emulated_link import LINK_PARAMETERS
 from liver_sim.base.parameters import Param, parameter_record, realtime_priority_parameter
 from liver_sim.base.topic_names import FORCE_OUTPUT_FORMATS, tool_topic
 

@@ -104,7 +104,8 @@ def test_the_cores_beside_the_physics_take_only_the_base_of_liver_sim(package):
 def test_the_ros_free_cores_import_no_ros_package():
     """Importing the cores and the parameter tables (what offline sessions and the docs test read) loads neither
     rclpy nor a message package."""
-    cores = ["haptic_bridge.tick", "haptic_bridge.parameters", "haptic_bridge.supervisor", "liver_sim.analysis",
+    cores = ["haptic_bridge.tick", "haptic_bridge.parameters", "haptic_bridge.supervisor",
+    "liver_sim.sessions.analysis",
              "liver_sim.physics.pipeline", "liver_sim.physics.parameters", "liver_sim.tool.parameters",
              "liver_sim.phantom.parameters", "liver_sim.studies.scenarios", "liver_sim.studies.demo_offline",
              "liver_sim.base.topic_names"]

@@ -20,7 +20,7 @@ import sys
 import time
 from pathlib import Path
 
-from liver_sim.base.link import LINK_PARAMETERS, LinkSettings
+from liver_sim.base.emulated_link import LINK_PARAMETERS, LinkSettings
 from liver_sim.base.parameters import check_parameter
 from liver_sim.base.process_settings import DISCOVERY_RANGES, keep_dds_local, use_dds_profile
 from liver_sim.cli.arguments import add_tools_argument, positive_float, positive_int
@@ -242,7 +242,8 @@ def add_demo_command(commands) -> None:
 
 
 def add_link_arguments(parser) -> None:
-    """--link-delay, --link-jitter, --link-loss, --link-seed: the emulated teleoperation link (liver_sim.base.link)."""
+    """--link-delay, --link-jitter, --link-loss, --link-seed: the emulated teleoperation link
+    (liver_sim.base.emulated_link)."""
     parser.add_argument("--link-delay", type=float, default=0.0, metavar="S",
                         help="one-way delay (s) between the operator's side (device, tool, bridge) and the physics, "
                              "both ways (default: 0, no link)")

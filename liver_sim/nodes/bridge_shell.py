@@ -14,7 +14,7 @@ from haptic_bridge.inputs import InputCheck
 from haptic_bridge.parameters import BridgeParameters
 from haptic_bridge.supervisor import Supervisor
 from haptic_bridge.tick import BridgeTick, check_passivity, checked_change
-from liver_sim.base.link import link_text
+from liver_sim.base.emulated_link import link_text
 from liver_sim.nodes.bridge_diagnostics import BridgeState, bridge_status
 from liver_sim.nodes.device_map_source import DeviceMapSource
 from liver_sim.nodes.diagnostics import loop_status_name, publish_diagnostics

@@ -7,7 +7,7 @@ import time
 import numpy as np
 import rclpy
 
-from liver_sim.base.link import EmulatedLink, LinkSettings
+from liver_sim.base.emulated_link import EmulatedLink, LinkSettings
 from msg_defs.stamps import stamp_s_from_bytes
 
 
@@ -85,7 +85,7 @@ class LoopInputs:
     rmw info (a dict with `source_timestamp` and `received_timestamp`, system-clock ns, and
     `publication_sequence_number`).
 
-    A subscription given an EmulatedLink (liver_sim.base.link) sends every message into it, timed by its
+    A subscription given an EmulatedLink (liver_sim.base.emulated_link) sends every message into it, timed by its
     reception, and hands the callback the newest one the link has released by the poll, with its release time
     as its reception (`received=True`): an input's age counts from its emulated arrival. The owner node's clock
     minus the header stamp of each released message is the delay a rig sees on the wire (`link_delay_s`).
@@ -157,7 +157,7 @@ class LoopInputs:
 
 
 def emulated_link(p) -> EmulatedLink | None:
-    """The EmulatedLink of the link parameters (liver_sim.base.link.LINK_PARAMETERS) in a node's record `p`, or
+    """The EmulatedLink of the link parameters (liver_sim.base.emulated_link.LINK_PARAMETERS) in a node's record `p`, or
     None when they emulate nothing: the inputs then bypass it at no cost."""
     settings = LinkSettings.from_parameters(p)
     return EmulatedLink(settings) if settings.emulated else None

@@ -16,7 +16,7 @@ import numpy as np
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 
-from liver_sim.base.link import link_text
+from liver_sim.base.emulated_link import link_text
 from liver_sim.base.parameters import check_parameter
 from liver_sim.nodes.diagnostics import loop_status, loop_status_name, publish_diagnostics
 from liver_sim.nodes.inputs import Latest, LoopInputs, emulated_link, link_report

@@ -2,9 +2,9 @@
 
 `LiverModel.step_frame(*poses)` advances one frame (1/frame_rate_hz s, `substeps` steps) with each tool at its
 pose, in one place: the tools' use before the frame (grasp or let go) → the tools over the frame (their probes and
-candidate triangles) → the integration with their contacts (linearised backward Euler, physics.implicit, one step
-per frame by default, every tool's contact rows in the same step (physics.contact_rows); or, for one tool, the
-explicit kernels, physics.explicit_kernels.run_frame: symplectic Euler, or Eq. 2) → the divergence guard → a tear
+candidate triangles) → the integration with their contacts (linearised backward Euler, physics.solver.implicit, one step
+per frame by default, every tool's contact rows in the same step (physics.contact.rows); or, for one tool, the
+explicit kernels, physics.solver.explicit_kernels.run_frame: symplectic Euler, or Eq. 2) → the divergence guard → a tear
 → each tool's local model for the haptic loop → a cut at the end of a stroke.  Tears and cuts take one path
 (`apply`): the new structure and state are built beside the old ones and replace them only when both are whole.
 
@@ -23,20 +23,19 @@ import numpy as np
 from liver_sim.base import kernel_cache
 from liver_sim.base.local_model import LocalModel
 from liver_sim.mesh.tetmesh import TetMesh
-from liver_sim.physics.contact import ToolPose, probe_contacts, surface_contacts
-from liver_sim.physics.contact_kernels import TOOL_NONE, ToolState
-from liver_sim.physics.contact_rows import contact_force_n, joined, pushing
-from liver_sim.physics.cutting import cut_along_path
-from liver_sim.physics.explicit_kernels import max_speed, run_frame
-from liver_sim.physics.implicit import Contacts
-from liver_sim.physics.model_params import ModelParams
-from liver_sim.physics.spring_kernels import spring_forces_serial, support_forces
-from liver_sim.physics.springs import estimate_stable_time_step
+from liver_sim.physics.contact.kernels import TOOL_NONE, ToolSweep
+from liver_sim.physics.contact.rows import Contacts, contact_force_n, joined, pushing
+from liver_sim.physics.contact.tool_geometry import ToolPose, contact_rows, probe_contacts
+from liver_sim.physics.settings import ModelParams
+from liver_sim.physics.solver.explicit_kernels import max_speed, run_frame
 from liver_sim.physics.state import State, carried_state, rest_state
 from liver_sim.physics.structure import Structure, build_structure, initial_structure
-from liver_sim.physics.tearing import tear
-from liver_sim.physics.tool_contact import ToolContact
-from liver_sim.physics.topology import NodeState, TopologyChange, carry_over, separate_faces
+from liver_sim.physics.tissue.spring_kernels import spring_forces_serial, support_forces
+from liver_sim.physics.tissue.springs import estimate_stable_time_step
+from liver_sim.physics.tools.tool import Tool
+from liver_sim.physics.topology.change import NodeState, TopologyChange, carry_over, separate_faces
+from liver_sim.physics.topology.cutting import cut_along_path
+from liver_sim.physics.topology.tearing import tear
 
 
 @dataclass(frozen=True)
@@ -83,7 +82,7 @@ def apply_change(structure: Structure, state: State, change: TopologyChange) -> 
     return changed, carried_state(changed, state, nodes)
 
 
-def integrate(structure: Structure, state: State, tools: Sequence[ToolState],
+def integrate(structure: Structure, state: State, tools: Sequence[ToolSweep],
               substeps: int) -> tuple[list[np.ndarray], list[Contacts]]:
     """`substeps` steps of the springs, support, loads and the tools' contacts (Eq. 1–3) by the structure's
     integrator, in place on the state; returns each tool's contact force on the liver at the end (N) and its
@@ -98,13 +97,13 @@ def integrate(structure: Structure, state: State, tools: Sequence[ToolState],
                       tools[0], structure.work)], [Contacts.none()]
 
 
-def implicit_frame(structure: Structure, state: State, tools: Sequence[ToolState],
+def implicit_frame(structure: Structure, state: State, tools: Sequence[ToolSweep],
                    substeps: int) -> tuple[list[np.ndarray], list[Contacts]]:
     """`substeps` backward-Euler steps, each with every tool's contacts with the skin triangles, taken where its
-    probes are at the end of the step (contact.surface_contacts), in one set of rows (contact_rows.joined); the
-    probes' geometry at the end is left in the tools' arrays (as run_frame does).  Returns each tool's contact
+    probes are at the end of the step (contact.tool_geometry.contact_rows), in one set of rows (contact.rows.joined);
+    the probes' geometry at the end is left in the tools' arrays (as run_frame does).  Returns each tool's contact
     force on the liver at the end (N: the step's own with one tool in contact, else each tool's rows' force at
-    the end state, contact_rows.contact_force_n) and its rows of the last step."""
+    the end state, contact.rows.contact_force_n) and its rows of the last step."""
     params = structure.params
     dt = params.dt_s
     gravity = np.asarray(params.gravity_m_s2, dtype=np.float64)
@@ -113,7 +112,7 @@ def implicit_frame(structure: Structure, state: State, tools: Sequence[ToolState
     rows = [Contacts.none() for _ in tools]
     liver_force = np.zeros(3)
     for step in range(substeps):
-        rows = [Contacts.none() if tool.kind == TOOL_NONE else surface_contacts(
+        rows = [Contacts.none() if tool.kind == TOOL_NONE else contact_rows(
             x, v, tool, tool.velocity_m_s * ((step + 1) * dt), dt, areas, params.contact_stiffness_per_area_n_per_m3)
             for tool in tools]
         touching = [r for r in rows if len(r)]
@@ -172,10 +171,10 @@ class LiverModel:
     """
 
     def __init__(self, mesh: TetMesh, params: ModelParams | None = None,
-                 tool: ToolContact | Sequence[ToolContact] | None = None):
+                 tool: Tool | Sequence[Tool] | None = None):
         self.structure = initial_structure(mesh, params)
         self.state = rest_state(self.structure)
-        self.tools = (tool,) if isinstance(tool, ToolContact) else tuple(tool) if tool is not None else (ToolContact(),)
+        self.tools = (tool,) if isinstance(tool, Tool) else tuple(tool) if tool is not None else (Tool(),)
         names = [t.name for t in self.tools]
         if not self.tools or len(set(names)) != len(names):
             raise ValueError(f"parameter tools must name one tool or more, each once, got {names}")
@@ -185,7 +184,7 @@ class LiverModel:
         self.divergences = 0
 
     @property
-    def tool(self) -> ToolContact:
+    def tool(self) -> Tool:
         """The first tool (the only one by default)."""
         return self.tools[0]
 
@@ -195,7 +194,8 @@ class LiverModel:
 
         Holding nodes (grasp), a tool moves them to where it holds them, at the speed that takes them there in
         one frame, instead of pushing: its force is the tissue's pull on them and its local model
-        contact.pull_local_model's.  With `params.tearing`, faces stretched beyond their threshold then open.
+        contact.tool_geometry.pull_local_model's.  With `params.tearing`, faces stretched beyond their
+        threshold then open.
         """
         poses = self._poses(poses)
         events = self.before_frame(*poses)

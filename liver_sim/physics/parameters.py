@@ -8,14 +8,14 @@ from collections.abc import Mapping
 from dataclasses import dataclass, replace
 
 from liver_sim.base import kernel_cache
-from liver_sim.base.link import LINK_PARAMETERS
+from liver_sim.base.emulated_link import LINK_PARAMETERS
 from liver_sim.base.parameters import Param, parameter_record, realtime_priority_parameter
 from liver_sim.base.topic_names import TOOL_NAME, TOPIC_NAMES, in_namespace, tool_namespace, tool_topic
 from liver_sim.mesh.io import load_mesh
 from liver_sim.mesh.liver_shape import default_liver
-from liver_sim.physics.contact import ToolShape
+from liver_sim.physics.contact.tool_geometry import ToolShape
 from liver_sim.physics.model import LiverModel
-from liver_sim.physics.model_params import (
+from liver_sim.physics.settings import (
     CONTACT_MODELS,
     INTEGRATOR_SUBSTEPS,
     INTEGRATORS,
@@ -27,8 +27,8 @@ from liver_sim.physics.model_params import (
     SpringLaw,
     TissueProperties,
 )
-from liver_sim.physics.tool_contact import LOCAL_MODELS, ToolContact
-from liver_sim.physics.tool_use import TOOL_MODES, ToolUse
+from liver_sim.physics.tools.tool import LOCAL_MODELS, Tool
+from liver_sim.physics.tools.use import TOOL_MODES, ToolUse
 
 DEFAULTS = ModelParams()
 TISSUE = DEFAULTS.tissue
@@ -248,10 +248,10 @@ def model_params(p: PhysicsParameters) -> ModelParams:
         tear_strain_capsule=p.tear_strain_capsule).validate()
 
 
-def tool_contact(tool: PhysicsTool) -> ToolContact:
-    """The model's ToolContact of a tool of the physics node: its shape, local model and use."""
+def tool_contact(tool: PhysicsTool) -> Tool:
+    """The model's Tool of a tool of the physics node: its shape, local model and use."""
     s = tool.settings
-    return ToolContact(ToolShape(s.tool_shape, s.tool_radius_m, s.tool_length_m, tuple(s.tool_half_extents_m)),
+    return Tool(ToolShape(s.tool_shape, s.tool_radius_m, s.tool_length_m, tuple(s.tool_half_extents_m)),
                        s.local_model, s.local_model_reach_m, ToolUse(s.tool_mode, s.grasp_margin_m, s.cut_depth_m),
                        name=tool.name)
 

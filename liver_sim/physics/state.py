@@ -2,7 +2,7 @@
 
 Positions (m) and velocities (m/s) per node, the external loads (N) applied at every step, the nodes a tool holds,
 the inverse masses the integrators use (0 for fixed and held nodes), the implicit integrator's warm start and BDF2
-history (physics.implicit.StepHistory) and the simulation clock.  A tear or a cut carries it onto the new
+history (physics.solver.implicit.StepHistory) and the simulation clock.  A tear or a cut carries it onto the new
 structure (`carried_state`); the old state is left as it was.
 """
 from __future__ import annotations
@@ -11,9 +11,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from liver_sim.physics.implicit import StepHistory
+from liver_sim.physics.solver.implicit import StepHistory
 from liver_sim.physics.structure import Structure
-from liver_sim.physics.topology import NodeState
+from liver_sim.physics.topology.change import NodeState
 
 
 @dataclass(eq=False)
@@ -65,8 +65,8 @@ def rest_state(structure: Structure) -> State:
 
 
 def carried_state(structure: Structure, state: State, nodes: NodeState) -> State:
-    """`state` on the new `structure`, its node state carried over (`nodes`: physics.topology.carry_over): the same
-    held nodes (a change keeps the numbers of the nodes it does not add) and clock, the implicit step from no
+    """`state` on the new `structure`, its node state carried over (`nodes`: physics.topology.change.carry_over): the
+    same held nodes (a change keeps the numbers of the nodes it does not add) and clock, the implicit step from no
     history (backward Euler from the carried state)."""
     return State(nodes.positions, nodes.velocities, nodes.external_forces_n, state.held_nodes,
                  inverse_masses(structure, state.held_nodes), StepHistory(structure.node_count), state.time_s)

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from liver_sim.physics.model import LiverModel
-from liver_sim.physics.model_params import ModelParams
+from liver_sim.physics.settings import ModelParams
 from liver_sim.studies.demo_liver import DemoMesh
 from liver_sim.studies.plots import plot_liver, plot_press_release
 from liver_sim.studies.scenarios import offline_press_release, press_release, recovery_time_s

@@ -26,9 +26,9 @@ import numpy as np
 
 from liver_sim.mesh.stuffing import tetrahedralize_to_target
 from liver_sim.mesh.tetmesh import TetMesh
-from liver_sim.physics.contact import ToolPose, ToolShape
+from liver_sim.physics.contact.tool_geometry import ToolPose, ToolShape
 from liver_sim.physics.model import LiverModel
-from liver_sim.physics.model_params import ModelParams
+from liver_sim.physics.settings import ModelParams
 from liver_sim.studies.indentation_reference import sphere_indentation
 
 #: The block (m): 12 × 12 cm wide, 6 cm thick, its bottom at z = 0.

@@ -25,13 +25,13 @@ import numpy as np
 
 from liver_sim.mesh.landmarks import press_anchor
 from liver_sim.mesh.tetmesh import TetMesh
-from liver_sim.physics.contact import ToolPose
+from liver_sim.physics.contact.tool_geometry import ToolPose
 from liver_sim.physics.model import LiverModel
 
 #: How to get the peer.
 INSTALL_HINT = "pip install .[peers]"
 #: Poisson's ratio of liver_sim's spring network: central springs make a Cauchy solid, ν = 1/4
-#: (liver_sim.physics.materials), so the peer gets the same value by default.
+#: (liver_sim.physics.tissue.materials), so the peer gets the same value by default.
 NETWORK_POISSON_RATIO = 0.25
 #: Name of the flex in the MJCF model (its bodies are `liver_<node>`).
 FLEX_NAME = "liver"

@@ -5,14 +5,15 @@ import pytest
 
 from liver_sim.mesh.landmarks import press_anchor
 from liver_sim.mesh.liver_shape import default_liver
-from liver_sim.physics import explicit_kernels, implicit_kernels, pcg, reference
-from liver_sim.physics.contact import ToolPose, ToolShape, surface_contacts, tool_state
-from liver_sim.physics.fem_kernels import TetArrays
-from liver_sim.physics.implicit import Contacts, ImplicitEuler, StepHistory
+from liver_sim.physics.contact.rows import Contacts
+from liver_sim.physics.contact.tool_geometry import ToolPose, ToolShape, contact_rows, tool_sweep
 from liver_sim.physics.model import LiverModel
-from liver_sim.physics.model_params import ModelParams
-from liver_sim.physics.springs import build_springs
-from liver_sim.physics.tool_contact import ToolContact
+from liver_sim.physics.settings import ModelParams
+from liver_sim.physics.solver import explicit_kernels, implicit_kernels, pcg, reference
+from liver_sim.physics.solver.implicit import ImplicitEuler, StepHistory
+from liver_sim.physics.tissue.fem_kernels import TetArrays
+from liver_sim.physics.tissue.springs import build_springs
+from liver_sim.physics.tools.tool import Tool
 from liver_sim.tool.scripts import ScriptSettings, make_script
 
 from meshes import box_mesh
@@ -142,7 +143,7 @@ def test_stable_at_one_step_per_frame_where_symplectic_euler_diverges(liver):
     assert np.abs(v).max() < 1e-3
     xe, ve = perturbed(liver)
     settings = explicit_kernels.StepSettings(FRAME_S, 30, p.environment_damping_per_s, np.zeros(3), True)
-    no_tool = tool_state(liver.tool.shape, None, None, p, 0.0, xe, liver.structure.mesh.skin)
+    no_tool = tool_sweep(liver.tool.shape, None, None, p, 0.0, xe, liver.structure.mesh.skin)
     work = explicit_kernels.WorkArrays(np.zeros_like(xe), np.zeros((1, len(xe), 3)), False)
     with np.errstate(all="ignore"):
         explicit_kernels.run_frame(xe, ve, liver.state.inv_mass, np.zeros_like(xe), liver.structure.spring_arrays,
@@ -240,10 +241,10 @@ def test_press_and_release_matches_symplectic_euler_at_72_substeps():
     for frame in range(int(round(script.duration_s / FRAME_S))):
         pose = ToolPose(script.position_at((frame + 1) * FRAME_S))
         expected = -explicit.step_frame(pose).tool_force_n
-        state = tool_state(tool, pose, previous, p, 0.02, x, skin)
+        state = tool_sweep(tool, pose, previous, p, 0.02, x, skin)
         previous = pose
         # the tool at the end of the frame, as the explicit kernel's last substep
-        contacts = surface_contacts(x, v, state, state.velocity_m_s * FRAME_S, FRAME_S)
+        contacts = contact_rows(x, v, state, state.velocity_m_s * FRAME_S, FRAME_S)
         force = solver.step(history, x, v, model.state.inv_mass, model.state.external_forces_n, FRAME_S,
                             p.environment_damping_per_s, np.zeros(3), contacts)
         worst_position = max(worst_position, np.abs(x - explicit.state.positions).max())
@@ -316,7 +317,7 @@ def test_demo_press_slide_and_release_matches_symplectic_euler_at_72_substeps():
 def test_capsule_and_box_tools_press_with_the_implicit_step(kind):
     mesh = default_liver()
     shape = ToolShape(kind, radius_m=0.01, length_m=0.04, half_extents_m=(0.015, 0.015, 0.01))
-    model, reference_model = (LiverModel(mesh, params, ToolContact(shape)) for params in
+    model, reference_model = (LiverModel(mesh, params, Tool(shape)) for params in
                               (ModelParams(), ModelParams(integrator="symplectic_euler")))
     top = press_anchor(mesh)
     reach = shape.half_extents_m[2] if kind == "box" else shape.radius_m

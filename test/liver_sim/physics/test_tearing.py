@@ -11,13 +11,13 @@ from liver_sim.mesh.landmarks import press_anchor
 from liver_sim.mesh.liver_shape import default_liver
 from liver_sim.mesh.tetmesh import TET_FACES, TetMesh
 from liver_sim.physics import structure as structure_module
-from liver_sim.physics.contact import ToolPose
+from liver_sim.physics.contact.tool_geometry import ToolPose
 from liver_sim.physics.model import LiverModel
-from liver_sim.physics.model_params import ModelParams
-from liver_sim.physics.tearing import TearDetector, duplication_change
-from liver_sim.physics.tool_contact import ToolContact
-from liver_sim.physics.tool_use import ToolUse
-from liver_sim.physics.topology import separate_faces
+from liver_sim.physics.settings import ModelParams
+from liver_sim.physics.tools.tool import Tool
+from liver_sim.physics.tools.use import ToolUse
+from liver_sim.physics.topology.change import separate_faces
+from liver_sim.physics.topology.tearing import TearDetector, duplication_change
 
 from meshes import assert_same_state, assert_sound, box_mesh, components, model_state
 
@@ -325,7 +325,7 @@ def pull_the_dome(tearing):
     """The default liver grasped at its dome and pulled 8 cm up over 400 frames; (model, tool use, results,
     tool tips)."""
     liver = default_liver()
-    model = LiverModel(liver, ModelParams(tearing=tearing), ToolContact(use=ToolUse("grasp", grasp_margin_m=0.005)))
+    model = LiverModel(liver, ModelParams(tearing=tearing), Tool(use=ToolUse("grasp", grasp_margin_m=0.005)))
     dome = press_anchor(liver)
     start = dome + [0.0, 0.0, model.tool.shape.radius_m - 0.004]
     assert model.grasp(ToolPose(start)) > 0

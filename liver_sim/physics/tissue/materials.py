@@ -34,7 +34,7 @@ from __future__ import annotations
 import numpy as np
 
 from liver_sim.mesh.tetmesh import TET_EDGES, TRIANGLE_EDGES, TetMesh, edge_keys, signed_volumes
-from liver_sim.physics.model_params import TissueProperties
+from liver_sim.physics.settings import TissueProperties
 
 #: The Poisson's ratio of a central-spring network (a Cauchy solid).
 NETWORK_POISSON_RATIO = 0.25

@@ -16,9 +16,9 @@ import scipy.sparse
 import scipy.sparse.linalg
 
 from liver_sim.mesh.tetmesh import TRIANGLE_EDGES, TetMesh, isin_keys, unique_edges
-from liver_sim.physics.materials import material_coefficients
-from liver_sim.physics.model_params import ModelParams
-from liver_sim.physics.support import SupportArrays
+from liver_sim.physics.settings import ModelParams
+from liver_sim.physics.tissue.materials import material_coefficients
+from liver_sim.physics.tissue.organ_support import SupportArrays
 
 
 @dataclass(frozen=True, eq=False)
@@ -53,7 +53,7 @@ def build_springs(mesh: TetMesh, params: ModelParams, rest_points: np.ndarray | 
     by a tear or a cut is parenchyma surface and carries none.  Their coefficients: from
     `params.tissue` and the mesh (materials.material_coefficients) with spring_constants 'material',
     else the paper's `params.parenchyma` on every edge plus `params.capsule` on capsule edges.  With
-    `params.tissue_law` 'fem' the parenchyma is the elements' (physics.fem_kernels): capsule edges only.
+    `params.tissue_law` 'fem' the parenchyma is the elements' (physics.tissue.fem_kernels): capsule edges only.
     """
     points = mesh.points if rest_points is None else rest_points
     edges = mesh.edges
@@ -101,7 +101,7 @@ def stable_time_step(springs: SpringNetwork, masses_kg: np.ndarray, environment_
     stable for h ≤ (√(c² + 4ω²) − c)/ω², taken at the largest ω and c together (conservative).
     Explicit Euler (Eq. 2) needs h < c/ω² on every mode, and c/ω² ≥ min over springs of
     μ·l0/λ2 (+ c_env/ω²max), with h·c ≤ 2: without damping it is unstable at any step.
-    The `support`'s ties (physics.support) add at most max k_n/m_n to ω² and c_n/m_n to c (Weyl), and
+    The `support`'s ties (physics.tissue.organ_support) add at most max k_n/m_n to ω² and c_n/m_n to c (Weyl), and
     their c_n/k_n to the explicit bound's minimum.
     """
     axis = positions[springs.node_j] - positions[springs.node_i]

@@ -1,4 +1,4 @@
-"""Several tools in one implicit step: their contact rows (implicit.Contacts) joined, and each tool's share.
+"""Several tools in one implicit step: their contact rows (Contacts) joined, and each tool's share.
 
 The tools' penalty contacts enter the same backward-Euler step as one set of rows (`joined`), so what one tool
 does to the tissue — a grasp moving nodes, a press — acts on the others within the frame.  The step returns the
@@ -9,10 +9,49 @@ force of all the rows together; each tool's own is the force of its rows at the 
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
 
-from liver_sim.physics.implicit import Contacts
+
+@dataclass(frozen=True, eq=False)
+class Contacts:
+    """Penalty contact elements (see physics.solver.implicit_kernels), one row each.
+
+    nodes (K, 3) int64 (−1 pads), weights (K, 3), normal (K, 3) unit vectors into the liver,
+    offset_m (K,) o, normal_speed_m_s (K,) s (the tool surface's speed along n),
+    stiffness_n_per_m (K,) k, damping_ns_per_m (K,) c.
+    """
+
+    nodes: np.ndarray
+    weights: np.ndarray
+    normal: np.ndarray
+    offset_m: np.ndarray
+    normal_speed_m_s: np.ndarray
+    stiffness_n_per_m: np.ndarray
+    damping_ns_per_m: np.ndarray
+
+    @classmethod
+    def none(cls) -> "Contacts":
+        """No contact."""
+        return cls(np.zeros((0, 3), np.int64), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0), np.zeros(0),
+                   np.zeros(0), np.zeros(0))
+
+    def __len__(self) -> int:
+        return len(self.offset_m)
+
+
+def node_contacts(nodes, normal, offset_m, normal_speed_m_s, stiffness_n_per_m, damping_ns_per_m) -> Contacts:
+    """1-node contact elements (weight 1): Eq. 3 on skin nodes."""
+    count = len(nodes)
+    padded = np.full((count, 3), -1, dtype=np.int64)
+    padded[:, 0] = nodes
+    weights = np.zeros((count, 3))
+    weights[:, 0] = 1.0
+    return Contacts(padded, weights, np.ascontiguousarray(normal, dtype=np.float64),
+                    np.asarray(offset_m, dtype=np.float64), np.asarray(normal_speed_m_s, dtype=np.float64),
+                    np.broadcast_to(np.asarray(stiffness_n_per_m, dtype=np.float64), (count,)).copy(),
+                    np.broadcast_to(np.asarray(damping_ns_per_m, dtype=np.float64), (count,)).copy())
 
 
 def joined(rows: Sequence[Contacts]) -> Contacts:

@@ -29,7 +29,7 @@ from typing import NamedTuple
 import numpy as np
 
 from liver_sim.mesh.tetmesh import TET_EDGES, TET_FACES, face_keys, isin_keys, skin_slots, unique_edges
-from liver_sim.physics.topology import TopologyChange, interior_face_pairs, separate_pairs, split_skin_slots
+from liver_sim.physics.topology.change import TopologyChange, interior_face_pairs, separate_pairs, split_skin_slots
 
 #: A crossing closer than this fraction of its edge to an end node is moved onto that node: no piece of a
 #: split tet is thinner than this, so no new spring is much shorter (stiffer) than the old ones.

@@ -1,5 +1,5 @@
-"""The coarse space of the implicit step's two-level preconditioner (physics.pcg): aggregates of nearby nodes, each
-moving rigidly, and the Cholesky factor of the step's system restricted to their motions.
+"""The coarse space of the implicit step's two-level preconditioner (physics.solver.pcg): aggregates of nearby nodes,
+each moving rigidly, and the Cholesky factor of the step's system restricted to their motions.
 
 Node n of aggregate a moves by t_a + ω_a × d_n (d_n its offset from the aggregate's centroid): T, the (3N × 6C) map
 from the C aggregates' translations and rotations to node displacements, T_n = [I | −[d_n]×].  With F the zeroing of
@@ -9,7 +9,8 @@ held nodes (inv_mass 0) and D⁻¹ the block-Jacobi inverse, the preconditioner 
 
 symmetric positive definite whatever SPD A_c is, so PCG stays conjugate gradients and its answer stays the one the
 tolerance allows; the nearer A_c is to the system's, the fewer iterations.  A_c is assembled from the system of the
-state it is first needed at (matrix-free arrays of physics.implicit_kernels and the tetrahedra of physics.fem_kernels;
+state it is first needed at (matrix-free arrays of physics.solver.implicit_kernels and the tetrahedra of
+physics.tissue.fem_kernels;
 contacts left out) and kept for the topology and step length: the system's values change little from step to step.
 Aggregates: from each node not yet taken, in node order, every node within `hops` edges not yet taken (a greedy
 graph aggregation); `hops` the least that leaves at most TARGET_AGGREGATES aggregates.

@@ -1,7 +1,7 @@
 """Figures of a run: rates and period errors of arrivals, force smoothness (Fig. 8)."""
 import numpy as np
 
-from liver_sim.analysis import contact_fraction, largest_force_jump_n, rate_figures
+from liver_sim.sessions.analysis import contact_fraction, largest_force_jump_n, rate_figures
 
 
 def test_rate_figures_of_a_regular_stream_with_one_gap():
@@ -35,7 +35,7 @@ def test_largest_jump_ignores_pairs_sent_further_apart_than_a_tick():
 
 def test_the_offline_baseline_holds_the_newest_physics_force_between_frames():
     from haptic_bridge.parameters import BridgeParameters
-    from liver_sim.analysis import held_wrench_baseline
+    from liver_sim.sessions.analysis import held_wrench_baseline
 
     p = BridgeParameters.defaults()
     ticks = 1.0 + np.arange(2000) * 1e-3
@@ -68,7 +68,7 @@ def test_process_costs_are_shares_of_a_core_and_switches_per_second():
 
 
 def test_fig8_figures_compare_the_held_force_with_the_rendered_one():
-    from liver_sim.analysis import fig8_figures
+    from liver_sim.sessions.analysis import fig8_figures
 
     t = np.arange(300) * 1e-3
     rendered = np.zeros((300, 3))

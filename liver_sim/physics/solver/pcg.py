@@ -1,12 +1,14 @@
 """Preconditioned conjugate gradients, matrix-free, on the implicit step's system A = M − h·D − h²·K
-(physics.implicit_kernels): A·p, the preconditioners, the solve.  The operator's parts: the springs (u, iso, axial per
-spring), the tetrahedra of the 'fem' law (physics.fem_kernels, none with the springs' law), the contacts.
+(physics.solver.implicit_kernels): A·p, the preconditioners, the solve.  The operator's parts: the springs (u, iso,
+axial per spring), the tetrahedra of the 'fem' law (physics.tissue.fem_kernels, none with the springs' law), the
+contacts.
 
 The solve starts from the previous step's Δv and stops at ‖r‖ ≤ cg_tolerance·‖b‖ (default 1e-3; the Newton residual
 check guards the result).  Preconditioner: block-Jacobi (the 3×3 diagonal blocks, contacts included), and on larger
 livers the additive two-level one, block-Jacobi plus a coarse correction on rigid aggregates of nodes
-(physics.coarse_space), which keeps the iterations nearly flat as the mesh is refined (README, "What to expect on a
-2-core machine", for the iterations and costs).  Why this solver: the values change at every step (the axes turn, the
+(physics.solver.coarse_space), which keeps the iterations nearly flat as the mesh is refined (README, "What to expect
+on a 2-core machine", for the iterations and costs).  Why this solver: the values change at every step (the axes turn,
+the
 cubic law stiffens, contacts come and go), so a sparse factorisation would be redone each step (SuperLU: 20–70× the
 cost of the solve), and matrix-free beats a block CSR pattern because it reads 5 numbers per spring instead of 36.
 The coarse matrix, small and dense, is factored once per topology and step length: a preconditioner need not follow
@@ -17,9 +19,9 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from liver_sim.physics.coarse_space import coarse_correction
-from liver_sim.physics.fem_kernels import tet_apply
-from liver_sim.physics.pairs import add_pair
+from liver_sim.physics.solver.coarse_space import coarse_correction
+from liver_sim.physics.tissue.fem_kernels import tet_apply
+from liver_sim.physics.tissue.pairs import add_pair
 
 #: The `partial` of a serial solve: no per-thread slices, one chunk.
 SERIAL = np.zeros((1, 0, 3))

@@ -6,7 +6,7 @@ has one source with weight 1, a node created on an edge by a cut has two.  The c
 capsule) keeps only the skin triangles that came from the original skin; faces opened by a tear or
 a cut are parenchyma surface.
 
-physics.tearing and physics.cutting build the changes; what both rely on is here: checking a change
+physics.topology.tearing and physics.topology.cutting build the changes; what both rely on is here: checking a change
 (`check_change`), carrying the node state and masses onto the new nodes (`carry_over`), and opening
 interior faces by node duplication while keeping the skin manifold (`separate_faces`, `separate_pairs`).
 """

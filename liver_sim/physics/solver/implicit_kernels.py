@@ -1,4 +1,4 @@
-"""The numba kernels of one implicit step (physics.implicit): forces f and K·y, the system matrix
+"""The numba kernels of one implicit step (physics.solver.implicit): forces f and K·y, the system matrix
 A = M − h·D − h²·K in matrix-free form, the Newton residual, the BDF2 start, the step itself.
 
 Blocks.  A spring i→j with unit axis u, length l, strain d = (l − l0)/l0 and elastic tension
@@ -11,7 +11,7 @@ The viscous tension's own x-derivative (non-symmetric) is omitted likewise.  Env
 a −= c_env·v gives D = −c_env·M.  Held nodes (inv_mass 0: fixed or grasped) keep Δv = 0 and do
 not move (as `explicit_kernels.integrate`): their rows and columns are replaced by the identity.
 
-Support (physics.support): a supported node n with stiffness k_n and damping c_n gets
+Support (physics.tissue.organ_support): a supported node n with stiffness k_n and damping c_n gets
 f_n = −k_n·(x_n − x_rest,n) − c_n·v_n, so K gets −k_n·I and D −c_n·I on its diagonal block, which
 adds h·c_n + h²·k_n to the node's shift (`support_terms`).
 
@@ -19,7 +19,7 @@ Contacts (`implicit.Contacts`): element e with nodes a (up to 3, padding −1), 
 (pushing the liver), stiffness k and damping c has depth δ = o − n·Σ w_a·x_a and depth rate
 δ̇ = s − n·Σ w_a·v_a, force F = max(0, k·δ + c·δ̇) and f_a = w_a·F·n; active, its Jacobian blocks
 are ∂f_a/∂x_b = −w_a·w_b·k·nnᵀ and ∂f_a/∂v_b = −w_a·w_b·c·nnᵀ.  Node contacts are the
-1-node case, the tool's contacts with the skin triangles (contact.surface_contacts) the 3-node case.  Contacts
+1-node case, the tool's contacts with the skin triangles (contact.tool_geometry.contact_rows) the 3-node case.  Contacts
 enter the solver matrix-free, so they need no slot in the sparse pattern.
 """
 from __future__ import annotations
@@ -29,9 +29,9 @@ import math
 import numba
 import numpy as np
 
-from liver_sim.physics.fem_kernels import tet_terms
-from liver_sim.physics.pairs import add_pair
-from liver_sim.physics.pcg import block_jacobi, pcg, pcg_parallel
+from liver_sim.physics.solver.pcg import block_jacobi, pcg, pcg_parallel
+from liver_sim.physics.tissue.fem_kernels import tet_terms
+from liver_sim.physics.tissue.pairs import add_pair
 
 
 @numba.njit(cache=True)
@@ -239,8 +239,8 @@ def implicit_step(x, v, inv_mass, external, gravity, c_env, h, node_i, node_j, i
                   max_newton, work, partial):
     """One linearised backward-Euler step of x, v in place (see the module docstring), then Newton
     iterations while the nonlinear residual exceeds `newton_tolerance` (N) on some node, up to
-    `max_newton`.  `tet_law`: the tetrahedra of the 'fem' law (physics.fem_kernels.TetArrays; none for the
-    springs').  `coarse`: the preconditioner's coarse space (physics.coarse_space; none: block-Jacobi alone).
+    `max_newton`.  `tet_law`: the tetrahedra of the 'fem' law (physics.tissue.fem_kernels.TetArrays; none for the
+    springs').  `coarse`: the preconditioner's coarse space (physics.solver.coarse_space; none: block-Jacobi alone).
     `warm` holds the previous Δv (start of the solve; overwritten).  `work` is
     (10, N, 3) scratch; `partial` pcg.SERIAL for one thread, else (threads, N, 3): the solve on the threads
     (pcg.pcg_parallel).  Returns (contact force on the liver at the new state (3,), CG iterations,

@@ -3,7 +3,7 @@
 Stretch across an interior face with rest unit normal n: s = ½·Σ_t |F_t·n| − 1 over its two tets t, F_t the
 tet's deformation gradient (0 at rest, > 0 opened; `TearDetector`).  A face with an edge on a capsule
 triangle tears above the capsule's threshold, any other above the parenchyma's.  `tear` opens the faces
-over their threshold (topology.separate_faces) and returns the physics.topology.TopologyChange the model
+over their threshold (topology.separate_faces) and returns the physics.topology.change.TopologyChange the model
 applies: every new node copies one old node (source its parent, weight 1), no element is removed, and the
 capsule keeps its triangles, renumbered; opened faces are parenchyma surface.
 """
@@ -15,7 +15,7 @@ import numba
 import numpy as np
 
 from liver_sim.mesh.tetmesh import TET_FACES, TRIANGLE_EDGES, edge_keys, face_keys, isin_keys, unique_edges
-from liver_sim.physics.topology import TopologyChange, interior_face_pairs, separate_faces
+from liver_sim.physics.topology.change import TopologyChange, interior_face_pairs, separate_faces
 
 
 @numba.njit(cache=True)

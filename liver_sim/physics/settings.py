@@ -13,31 +13,33 @@ import numpy as np
 
 #: The integrators and their steps per 150 Hz frame when `substeps` is not given: linearised backward
 #: Euler is stable at one step per frame; the explicit ones need steps under the parenchyma's viscous stability
-#: bound (physics.springs.stable_time_step), a fraction of a millisecond on the default liver.
+#: bound (physics.tissue.springs.stable_time_step), a fraction of a millisecond on the default liver.
 INTEGRATOR_SUBSTEPS = {"implicit_euler": 1, "symplectic_euler": 72, "explicit_euler": 72}
 INTEGRATORS = tuple(INTEGRATOR_SUBSTEPS)
-#: Where the springs' λ1, λ2, μ come from: the tissue's properties and the mesh (physics.materials), or the
+#: Where the springs' λ1, λ2, μ come from: the tissue's properties and the mesh (physics.tissue.materials), or the
 #: paper's per-spring constants (`capsule`, `parenchyma`; its figures and the traction test R1).
 SPRING_CONSTANTS = ("material", "paper")
-#: The parenchyma's law: 'springs', the paper's Eq. 1 springs on the tet edges (physics.springs, physics.materials);
-#: 'fem', co-rotational linear tetrahedra with the tissue's E, ν and η (physics.fem_kernels; implicit integrator
-#: and material constants only).  The capsule is Eq. 1 springs on the skin edges with either.
+#: The parenchyma's law: 'springs', the paper's Eq. 1 springs on the tet edges (physics.tissue.springs,
+#: physics.tissue.materials); 'fem', co-rotational linear tetrahedra with the tissue's E, ν and η
+#: (physics.tissue.fem_kernels; implicit integrator and material constants only).  The capsule is Eq. 1 springs on the
+#: skin edges with either.
 TISSUE_LAWS = ("springs", "fem")
-#: How the tool meets the skin (contact.surface_contacts): 'probe', Eq. 3 as the paper has it, one penalty λ per
-#: contact probe at its closest points; 'surface', a ball meets the skin as a surface, a penalty per unit area at
+#: How the tool meets the skin (contact.tool_geometry.contact_rows): 'probe', Eq. 3 as the paper has it, one penalty λ
+#: per contact probe at its closest points; 'surface', a ball meets the skin as a surface, a penalty per unit area at
 #: every skin node and face it presses (implicit integrator only).
 CONTACT_MODELS = ("probe", "surface")
-#: The preconditioners of the implicit step's PCG (physics.pcg): 'block_jacobi', 'two_level' (block-Jacobi plus the
-#: coarse correction of physics.coarse_space), or 'auto': two-level on livers of implicit.TWO_LEVEL_MIN_NODES nodes
-#: and more.  Each keeps the answer within the solver's tolerance; they differ in iterations.
+#: The preconditioners of the implicit step's PCG (physics.solver.pcg): 'block_jacobi', 'two_level' (block-Jacobi plus
+#: the coarse correction of physics.solver.coarse_space), or 'auto': two-level on livers of implicit.TWO_LEVEL_MIN_NODES
+#: nodes and more.  Each keeps the answer within the solver's tolerance; they differ in iterations.
 PRECONDITIONERS = ("auto", "block_jacobi", "two_level")
 #: The threads of the numba kernels of a frame (the explicit spring pass, the implicit step's PCG): 'auto', all of
 #: numba's from structure.PARALLEL_MIN_EDGES springs on (fastest alone on the machine); 'one' (beside 1 kHz loops on
 #: two cores, where the threads wait for each other); 'all'.
 SOLVER_THREADS = ("auto", "one", "all")
-#: How the liver is held (physics.support): 'organ' (anchored where a liver is held) or 'paper' (§3.1's scene).
+#: How the liver is held (physics.tissue.organ_support): 'organ' (anchored where a liver is held) or 'paper'
+#: (§3.1's scene).
 SUPPORTS = ("organ", "paper")
-#: The default liver's supports (physics.support), spheres (x, y, z, radius; m) with a stiffness per unit
+#: The default liver's supports (physics.tissue.organ_support), spheres (x, y, z, radius; m) with a stiffness per unit
 #: skin area (N/m³), LPS axes (+x left, +y posterior, +z superior; liver_sim.mesh.liver_shape): the bare area
 #: (posterior-superior face of the right lobe, fused to the diaphragm by the coronary ligament) and the
 #: inferior vena cava's groove (posterior, between the lobes), stiff; the left triangular ligament
@@ -76,7 +78,7 @@ CUBIC_RATIO = FIG2_LAW.lambda1_n / FIG2_LAW.lambda2_n
 
 @dataclass(frozen=True)
 class TissueProperties:
-    """Continuum properties of the liver; physics.materials derives every spring's Eq. 1 coefficients from
+    """Continuum properties of the liver; physics.tissue.materials derives every spring's Eq. 1 coefficients from
     them and the mesh.  Defaults and their sources: docs/materials.md.
 
     Parenchyma: Young's modulus (kPa), Poisson's ratio (the network matches the tissue's indentation
@@ -119,15 +121,15 @@ class ModelParams:
     `substeps` takes the new integrator's.
     `support` 'organ' (default): the capsule nodes inside `support_regions` (spheres x, y, z, radius in m,
     each with a stiffness per unit skin area in N/m³) are tied to their rest positions, with damping
-    `support_damping_s` × stiffness (physics.support); no node is fixed unless `fixed_nodes` says so;
+    `support_damping_s` × stiffness (physics.tissue.organ_support); no node is fixed unless `fixed_nodes` says so;
     'paper': §3.1's scene, `fixed_nodes` None fixes the central tet (as it does when the regions hold no
     capsule node).
     `tissue_law` 'springs' (default): the parenchyma is Eq. 1 springs on the tet edges; 'fem': co-rotational linear
-    tetrahedra with the tissue's E, ν (up to 0.499) and Kelvin–Voigt η (physics.fem_kernels), the capsule staying
+    tetrahedra with the tissue's E, ν (up to 0.499) and Kelvin–Voigt η (physics.tissue.fem_kernels), the capsule staying
     springs (implicit integrator and material constants only).
     `contact_model` 'probe' (default): Eq. 3 with one penalty `contact_stiffness_n_per_m` per contact probe;
     'surface': a ball tool (sphere, capsule) meets the skin as a surface, `contact_stiffness_per_area_n_per_m3` per
-    unit area of every node and face it presses (contact.surface_contacts; implicit integrator only).
+    unit area of every node and face it presses (contact.tool_geometry.contact_rows; implicit integrator only).
     `preconditioner`: the implicit step's PCG preconditioner (PRECONDITIONERS; 'auto' by default).
     `solver_threads`: the threads of a frame's kernels (SOLVER_THREADS; 'auto' by default).
     With `tearing`, an interior face whose stretch across it exceeds `tear_strain_parenchyma`

@@ -12,7 +12,7 @@ and Hooke's law σ(ε) = λ·tr(ε)·I + 2μ·ε (Lamé λ, μ from E and ν), K
 Its stiffness, the rotation held fixed (the usual co-rotational tangent), K_ab·y = −V·R·σ(sym(Rᵀ·y_b ⊗ g_b))·g_a,
 and D = τ·K; in the implicit system A = M − h·D − h²·K the element adds (h² + h·τ)·V·R·C_ab·Rᵀ, whose diagonal
 blocks are (h² + h·τ)·V·((λ + μ)·(R·g_a)(R·g_a)ᵀ + μ·|g_a|²·I).  Every block is symmetric positive semi-definite.
-Held nodes (inv_mass 0) keep y = 0 and get no block (their rows and columns are the identity, physics.implicit).
+Held nodes (inv_mass 0) keep y = 0 and get no block (their rows and columns are the identity, physics.solver.implicit).
 """
 from __future__ import annotations
 

@@ -13,21 +13,22 @@ from __future__ import annotations
 
 import numpy as np
 
-from liver_sim.physics.contact_kernels import ToolState
-from liver_sim.physics.implicit import Contacts, ImplicitEuler
+from liver_sim.physics.contact.kernels import ToolSweep
+from liver_sim.physics.contact.rows import Contacts
+from liver_sim.physics.solver.implicit import ImplicitEuler
 
 #: Frames between two solves of the tissue's compliance under the tool (10: 15 Hz at 150 Hz; K then stays
 #: within 10 % of a solve at every frame over the demo's press and slide, a test).
 REFRESH_FRAMES = 10
 
 
-def _rows(tool: ToolState) -> tuple[np.ndarray, np.ndarray]:
+def _rows(tool: ToolSweep) -> tuple[np.ndarray, np.ndarray]:
     """(rows within the candidates: finite depth, rows touching: penetrating with a share) of the tool's probes."""
     finite = np.isfinite(tool.depth)
     return finite, finite & (tool.depth > 0.0) & (tool.share > 0.0)
 
 
-def contact_load(tool: ToolState, n_nodes: int) -> np.ndarray:
+def contact_load(tool: ToolSweep, n_nodes: int) -> np.ndarray:
     """The pattern of the tool's push on the liver, scaled to a unit total, (N, 3): the touching rows'
     elastic pushes share·λ·δ·n spread by barycentric weights (as the last step left them); out of
     contact, a unit push at the nearest row's surface point (none within the candidates: zeros)."""
@@ -46,7 +47,7 @@ def contact_load(tool: ToolState, n_nodes: int) -> np.ndarray:
     return load
 
 
-def touching_probes(tool: ToolState) -> float:
+def touching_probes(tool: ToolSweep) -> float:
     """How many probes' worth of penalty carry the tool's push: the sum of the touching rows' shares;
     1 when none touches but one is within the candidates (the first touch), 0 when none is."""
     finite, touching = _rows(tool)
@@ -78,7 +79,7 @@ class LocalStiffness:
         self._compliance_m_per_n = None
         self._frames_since_solve = 0
 
-    def stiffness_n_per_m(self, tool: ToolState, positions: np.ndarray, inv_mass: np.ndarray,
+    def stiffness_n_per_m(self, tool: ToolSweep, positions: np.ndarray, inv_mass: np.ndarray,
                           penalty_n_per_m: float, environment_damping_per_s: float,
                           others: Contacts | None = None) -> float:
         """K (N/m) for this frame's tool (its probes' contact geometry as the step left it): the penalty of

@@ -1,20 +1,20 @@
 """numba kernels of one explicit frame (Eq. 2, or symplectic Euler): forces, then integration, per substep.
 
 Each of `settings.substeps` steps of Δt: f = f_ext + the Eq. 1 springs and the support
-(physics.spring_kernels) + the Eq. 3 contact of the tool's probes moved along its velocity
-(physics.contact_kernels.surface_contacts); a = f/m + g − c_env·v on every free node (inv_mass > 0;
+(physics.tissue.spring_kernels) + the Eq. 3 contact of the tool's probes moved along its velocity
+(physics.contact.kernels.add_contact_forces); a = f/m + g − c_env·v on every free node (inv_mass > 0;
 fixed and held nodes do not move).  Explicit Euler (Eq. 2): x ← x + Δt·v, v ← v + Δt·a; symplectic
 Euler: v ← v + Δt·a, x ← x + Δt·v_new.  `max_speed` is the divergence guard's measure of a state (the
-model checks it after every frame, whatever the integrator).  `liver_sim.physics.reference` is the
+model checks it after every frame, whatever the integrator).  `liver_sim.physics.solver.reference` is the
 plain-NumPy oracle of the integration.
 
 Array conventions: positions `x` and velocities `v` are (N, 3) float64 in m and m/s; forces accumulate
 in `f` (N, 3) in newtons.
 
 `run_frame` takes the state arrays and five named tuples (numba reads their fields as
-compile-time attributes, at no cost): the spring network (`physics.spring_kernels.SpringArrays`), the support
-(`physics.support.SupportArrays`), the integration settings (`StepSettings`), the tool and its
-contact candidates (`physics.contact_kernels.ToolState`) and the work arrays (`WorkArrays`).
+compile-time attributes, at no cost): the spring network (`physics.tissue.spring_kernels.SpringArrays`), the support
+(`physics.tissue.organ_support.SupportArrays`), the integration settings (`StepSettings`), the tool and its
+contact candidates (`physics.contact.kernels.ToolSweep`) and the work arrays (`WorkArrays`).
 """
 from __future__ import annotations
 
@@ -24,8 +24,8 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from liver_sim.physics.contact_kernels import TOOL_NONE, surface_contacts
-from liver_sim.physics.spring_kernels import spring_forces_parallel, spring_forces_serial, support_forces
+from liver_sim.physics.contact.kernels import TOOL_NONE, add_contact_forces
+from liver_sim.physics.tissue.spring_kernels import spring_forces_parallel, spring_forces_serial, support_forces
 
 
 class StepSettings(NamedTuple):
@@ -95,7 +95,7 @@ def add_forces(x, v, external_force, springs, support, tool, work, shift, dt, co
         spring_forces_serial(x, v, s.node_i, s.node_j, s.rest_m, s.lambda1_n, s.lambda2_n, s.mu_ns_per_m, f)
     support_forces(x, v, support.nodes, support.rest_m, support.stiffness_n_per_m, support.damping_ns_per_m, f)
     if tool.kind != TOOL_NONE:
-        contact[:] = surface_contacts(x, v, tool, shift, dt, f)
+        contact[:] = add_contact_forces(x, v, tool, shift, dt, f)
 
 
 @numba.njit(cache=True, nogil=True)

@@ -19,64 +19,22 @@ The previous state (StepHistory) is used only when the step starts from the stat
 last step left (same free nodes' x and v, same h); otherwise (first step, reset, topology change,
 state set from outside) the step is backward Euler.
 
-The numba kernels: physics.implicit_kernels (forces, the system's blocks, support and contact terms,
-the Newton residual, the BDF2 start, the step), physics.pcg (the solver).
+The numba kernels: physics.solver.implicit_kernels (forces, the system's blocks, support and contact terms,
+the Newton residual, the BDF2 start, the step), physics.solver.pcg (the solver).
 """
 from __future__ import annotations
-
-from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse
 
-from liver_sim.physics.coarse_space import CoarseSpace, aggregates, build_coarse_space, node_graph
-from liver_sim.physics.fem_kernels import TetArrays, tet_terms
-from liver_sim.physics.implicit_kernels import assemble, bdf2_start, implicit_step, support_terms
-from liver_sim.physics.model_params import PRECONDITIONERS
-from liver_sim.physics.pcg import SERIAL, block_jacobi, pcg, pcg_parallel
-from liver_sim.physics.springs import SpringNetwork
-from liver_sim.physics.support import SupportArrays
-
-
-@dataclass(frozen=True, eq=False)
-class Contacts:
-    """Penalty contact elements (see physics.implicit_kernels), one row each.
-
-    nodes (K, 3) int64 (−1 pads), weights (K, 3), normal (K, 3) unit vectors into the liver,
-    offset_m (K,) o, normal_speed_m_s (K,) s (the tool surface's speed along n),
-    stiffness_n_per_m (K,) k, damping_ns_per_m (K,) c.
-    """
-
-    nodes: np.ndarray
-    weights: np.ndarray
-    normal: np.ndarray
-    offset_m: np.ndarray
-    normal_speed_m_s: np.ndarray
-    stiffness_n_per_m: np.ndarray
-    damping_ns_per_m: np.ndarray
-
-    @classmethod
-    def none(cls) -> "Contacts":
-        """No contact."""
-        return cls(np.zeros((0, 3), np.int64), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0), np.zeros(0),
-                   np.zeros(0), np.zeros(0))
-
-    def __len__(self) -> int:
-        return len(self.offset_m)
-
-
-def node_contacts(nodes, normal, offset_m, normal_speed_m_s, stiffness_n_per_m, damping_ns_per_m) -> Contacts:
-    """1-node contact elements (weight 1): Eq. 3 on skin nodes."""
-    count = len(nodes)
-    padded = np.full((count, 3), -1, dtype=np.int64)
-    padded[:, 0] = nodes
-    weights = np.zeros((count, 3))
-    weights[:, 0] = 1.0
-    return Contacts(padded, weights, np.ascontiguousarray(normal, dtype=np.float64),
-                    np.asarray(offset_m, dtype=np.float64), np.asarray(normal_speed_m_s, dtype=np.float64),
-                    np.broadcast_to(np.asarray(stiffness_n_per_m, dtype=np.float64), (count,)).copy(),
-                    np.broadcast_to(np.asarray(damping_ns_per_m, dtype=np.float64), (count,)).copy())
-
+from liver_sim.physics.contact.rows import Contacts, node_contacts
+from liver_sim.physics.settings import PRECONDITIONERS
+from liver_sim.physics.solver.coarse_space import CoarseSpace, aggregates, build_coarse_space, node_graph
+from liver_sim.physics.solver.implicit_kernels import assemble, bdf2_start, implicit_step, support_terms
+from liver_sim.physics.solver.pcg import SERIAL, block_jacobi, pcg, pcg_parallel
+from liver_sim.physics.tissue.fem_kernels import TetArrays, tet_terms
+from liver_sim.physics.tissue.organ_support import SupportArrays
+from liver_sim.physics.tissue.springs import SpringNetwork
 
 #: From this many nodes on, 'auto' takes the two-level preconditioner.  It pays from about the default liver's size
 #: (334 nodes) on; the default liver keeps block-Jacobi, so that its steps stay those of before it, bit for bit.
@@ -112,12 +70,12 @@ class StepHistory:
 
 class ImplicitEuler:
     """Linearised backward Euler on one spring network, its support (none by default) and the tetrahedra of the
-    'fem' law (physics.fem_kernels; none by default): its per-spring matrix blocks, element rotations and work
+    'fem' law (physics.tissue.fem_kernels; none by default): its per-spring matrix blocks, element rotations and work
     arrays, which depend on the topology only; with `second_order`, BDF2 from the second step on (see the module
-    docstring), from the StepHistory each step is given; its PCG's `preconditioner` (model_params.PRECONDITIONERS:
+    docstring), from the StepHistory each step is given; its PCG's `preconditioner` (settings.PRECONDITIONERS:
     'auto' is two-level from TWO_LEVEL_MIN_NODES nodes on), with the
-    two-level one a coarse space per step length, built at its first step (physics.coarse_space).  Build a new one
-    after a topology change."""
+    two-level one a coarse space per step length, built at its first step (physics.solver.coarse_space).  Build a new
+    one after a topology change."""
 
     def __init__(self, springs: SpringNetwork, n_nodes: int, cg_tolerance: float = 1e-3,
                  max_cg_iterations: int = 500, newton_tolerance_n: float = 1e-2, max_newton: int = 2,
@@ -243,8 +201,8 @@ class ImplicitEuler:
     def compliance(self, x: np.ndarray, inv_mass: np.ndarray, load: np.ndarray, environment_damping: float,
                    guess: np.ndarray, contacts: Contacts | None = None) -> float:
         """Static compliance bᵀ·K⁻¹·b (m/N) of the network at x under the load pattern b = `load` (N, 3) N,
-        held nodes (inv_mass 0) fixed: the tangent stiffness K of the springs (physics.implicit_kernels) and of the
-        organ's supports at x, and of `contacts` (each row taken as active: another tool's penalty holding the
+        held nodes (inv_mass 0) fixed: the tangent stiffness K of the springs (physics.solver.implicit_kernels) and of
+        the organ's supports at x, and of `contacts` (each row taken as active: another tool's penalty holding the
         tissue), solved by the step's PCG as (M·(1 + H·c_env) + H·C + H²·K)·z = b with H = COMPLIANCE_HORIZON_S,
         so the mass and damping terms weigh ≲ 1 % against K; `guess` (N, 3), the previous solution ·H², starts
         the solve and is overwritten by this one."""
@@ -266,7 +224,7 @@ class ImplicitEuler:
         staying where x has them.  Newton's iterations (M + H·C + H²·K)·δx = H²·f(x), x ← x + δx, K the
         tangent stiffness at x: backward-Euler steps of H = STATIC_HORIZON_S from rest, whose mass and
         damping terms only regularise K.  K leaves out compressed springs' negative geometric stiffness
-        (physics.implicit_kernels), so where springs are compressed the iterations converge linearly.  Returns
+        (physics.solver.implicit_kernels), so where springs are compressed the iterations converge linearly.  Returns
         f(x) (N, 3): ≈ 0 on free nodes; on held nodes the pull of the network (and loads) that holding them
         resists.  Raises RuntimeError when not converged."""
         h = STATIC_HORIZON_S

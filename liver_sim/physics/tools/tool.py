@@ -1,9 +1,9 @@
 """One tool on the liver: what it is, where it was, what it touches and what it does (paper P9, P11; Eq. 3).
 
-A ToolContact holds everything of one tool — its shape (physics.contact.ToolShape), the local model it
+A Tool holds everything of one tool — its shape (physics.contact.tool_geometry.ToolShape), the local model it
 publishes for the haptic loop and how far from the skin, the previous pose (the frame's motion runs from it), the
-frame's contact arrays (physics.contact_kernels.ToolState), the stiffness it meets (physics.local_stiffness) and
-its use (physics.tool_use.ToolUse: press, grasp or cut): a second tool is a second ToolContact, with a `name` of
+frame's contact arrays (physics.contact.kernels.ToolSweep), the stiffness it meets (physics.tools.local_stiffness) and
+its use (physics.tools.use.ToolUse: press, grasp or cut): a second tool is a second Tool, with a `name` of
 its own (the ROS namespace of its topics; '' for a tool in the root namespace).
 """
 from __future__ import annotations
@@ -11,22 +11,22 @@ from __future__ import annotations
 import numpy as np
 
 from liver_sim.base.local_model import LocalModel
-from liver_sim.physics.contact import ToolPose, ToolShape, force_local_model, pull_local_model, tool_state
-from liver_sim.physics.contact_kernels import ToolState
-from liver_sim.physics.implicit import Contacts
-from liver_sim.physics.local_stiffness import REFRESH_FRAMES, LocalStiffness
+from liver_sim.physics.contact.kernels import ToolSweep
+from liver_sim.physics.contact.rows import Contacts
+from liver_sim.physics.contact.tool_geometry import ToolPose, ToolShape, force_local_model, pull_local_model, tool_sweep
 from liver_sim.physics.state import State
 from liver_sim.physics.structure import Structure
-from liver_sim.physics.tool_use import ToolUse
+from liver_sim.physics.tools.local_stiffness import REFRESH_FRAMES, LocalStiffness
+from liver_sim.physics.tools.use import ToolUse
 
 LOCAL_MODELS = ("plane", "sphere")
 
 
-class ToolContact:
+class Tool:
     """One tool: `shape`, `local_model_kind` ('plane' or 'sphere'), `local_model_reach_m` (a local model is
     published while the tool is this close to the skin, m), `use`, `stiffness_refresh_frames` (frames between two
     solves of the tissue's compliance under it: LocalStiffness), `name` (module docstring); `previous_pose` and
-    `contact` (the ToolState of the last frame: its probes, candidates and contact rows)."""
+    `contact` (the ToolSweep of the last frame: its probes, candidates and contact rows)."""
 
     def __init__(self, shape: ToolShape | None = None, local_model: str = "plane", local_model_reach_m: float = 0.02,
                  use: ToolUse | None = None, stiffness_refresh_frames: int = REFRESH_FRAMES, name: str = ""):
@@ -39,19 +39,20 @@ class ToolContact:
         self.use = use or ToolUse()
         self.stiffness_refresh_frames = int(stiffness_refresh_frames)
         self.previous_pose: ToolPose | None = None
-        self.contact: ToolState | None = None
+        self.contact: ToolSweep | None = None
         self._stiffness: tuple[Structure, LocalStiffness] | None = None
 
-    def over_frame(self, structure: Structure, state: State, pose: ToolPose | None) -> ToolState:
-        """The tool over the next frame (contact.tool_state: its probes moving from the previous pose to `pose`,
+    def over_frame(self, structure: Structure, state: State, pose: ToolPose | None) -> ToolSweep:
+        """The tool over the next frame (contact.tool_geometry.tool_sweep: its probes moving from the previous pose to
+        `pose`,
         its candidate skin triangles; None: no tool), kept as `contact`; `pose` becomes the previous pose."""
-        self.contact = tool_state(self.shape, pose, self.previous_pose, structure.params, self.local_model_reach_m,
+        self.contact = tool_sweep(self.shape, pose, self.previous_pose, structure.params, self.local_model_reach_m,
                                   state.positions, structure.skin)
         self.previous_pose = pose
         return self.contact
 
     def stiffness_n_per_m(self, structure: Structure, state: State, others: Contacts | None = None) -> float:
-        """K of the local model under the tool at the end of the frame (physics.local_stiffness), the tissue's
+        """K of the local model under the tool at the end of the frame (physics.tools.local_stiffness), the tissue's
         compliance solved on `structure`'s network (anew after a change), the other tools' pushing contact rows
         `others` holding it."""
         if self._stiffness is None or self._stiffness[0] is not structure:
@@ -65,8 +66,9 @@ class ToolContact:
     def local_model(self, structure: Structure, state: State, pose: ToolPose | None, force_on_tool_n: np.ndarray,
                     holding: bool, others: Contacts | None = None) -> LocalModel:
         """The local model for the haptic loop at the end of the frame: none without a tool; holding nodes, the
-        plane of their pull (contact.pull_local_model); else the one of the contact force
-        (contact.force_local_model), its stiffness with the other tools' pushing rows `others` in place."""
+        plane of their pull (contact.tool_geometry.pull_local_model); else the one of the contact force
+        (contact.tool_geometry.force_local_model), its stiffness with the other tools' pushing rows
+        `others` in place."""
         if pose is None:
             return LocalModel.invalid()
         if holding:

@@ -15,19 +15,19 @@ import numpy as np
 
 from liver_sim.base.geometry.rotations import quaternion_to_matrix
 from liver_sim.base.local_model import LocalModel
-from liver_sim.physics.contact_kernels import (
+from liver_sim.physics.contact.kernels import (
     TOOL_BOX,
     TOOL_CAPSULE,
     TOOL_NONE,
     TOOL_SPHERE,
-    ToolState,
+    ToolSweep,
     contact_elements,
     near_triangles,
     probe_geometry,
 )
-from liver_sim.physics.implicit import Contacts
-from liver_sim.physics.materials import triangle_areas
-from liver_sim.physics.model_params import ModelParams
+from liver_sim.physics.contact.rows import Contacts
+from liver_sim.physics.settings import ModelParams
+from liver_sim.physics.tissue.materials import triangle_areas
 
 TOOL_KINDS = {"sphere": TOOL_SPHERE, "capsule": TOOL_CAPSULE, "box": TOOL_BOX}
 
@@ -137,8 +137,8 @@ def tool_probes(shape: ToolShape, pose: ToolPose) -> tuple[np.ndarray, float]:
     return tip + grid[on_face] @ rotation.T, 0.0
 
 
-def tool_state(shape: ToolShape, pose: ToolPose | None, previous: ToolPose | None, params: ModelParams,
-               reach_m: float, positions: np.ndarray, skin: np.ndarray) -> ToolState:
+def tool_sweep(shape: ToolShape, pose: ToolPose | None, previous: ToolPose | None, params: ModelParams,
+               reach_m: float, positions: np.ndarray, skin: np.ndarray) -> ToolSweep:
     """The tool over one frame for explicit_kernels.run_frame (pose None: no tool).
 
     Its probes (tool_probes) move at constant velocity (tip − previous tip)/frame period from where
@@ -161,19 +161,19 @@ def tool_state(shape: ToolShape, pose: ToolPose | None, previous: ToolPose | Non
         triangles = candidate_triangles(positions, skin, shape, pose, reach_m + float(np.linalg.norm(velocity))
                                         / params.frame_rate_hz)
     rows = len(probes) * len(triangles)
-    return ToolState(kind, np.ascontiguousarray(probes), radius, velocity, params.contact_stiffness_n_per_m,
+    return ToolSweep(kind, np.ascontiguousarray(probes), radius, velocity, params.contact_stiffness_n_per_m,
                      params.contact_damping_ns_per_m, np.ascontiguousarray(skin, dtype=np.int64), triangles,
                      np.zeros((rows, 3), dtype=np.int64), np.zeros((rows, 3)), np.zeros((rows, 3)),
                      np.full(rows, -np.inf), np.zeros(rows), np.zeros((rows, 3)), np.zeros(rows))
 
 
-def probe_contacts(x: np.ndarray, v: np.ndarray, tool: ToolState, shift: np.ndarray, dt: float) -> None:
-    """The tool's contact rows (contact_kernels.probe_geometry) with its probes moved by `shift`, in its arrays."""
+def probe_contacts(x: np.ndarray, v: np.ndarray, tool: ToolSweep, shift: np.ndarray, dt: float) -> None:
+    """The tool's contact rows (kernels.probe_geometry) with its probes moved by `shift`, in its arrays."""
     probe_geometry(x, v, tool.skin, tool.triangles, tool.probes, shift, tool.radius_m, tool.velocity_m_s, dt,
                    tool.nodes, tool.weights, tool.normal, tool.depth, tool.share, tool.point, tool.surface_weight)
 
 
-def surface_contacts(x: np.ndarray, v: np.ndarray, tool: ToolState, shift: np.ndarray, dt: float,
+def contact_rows(x: np.ndarray, v: np.ndarray, tool: ToolSweep, shift: np.ndarray, dt: float,
                      node_area_m2: np.ndarray | None = None, stiffness_per_area_n_per_m3: float = 0.0) -> Contacts:
     """The tool's contacts with the skin for implicit.ImplicitEuler, its probes moved by `shift` (where they are at
     the end of the step), linearised about the skin where its velocity takes it in `dt` (x̂ = x + dt·v, so the
@@ -181,7 +181,7 @@ def surface_contacts(x: np.ndarray, v: np.ndarray, tool: ToolState, shift: np.nd
     o = δ(x̂) + n·Σ w_a·x̂_a so that δ = o − n·Σ w_a·x_a, s = n·v_tool.
 
     Without `node_area_m2` (contact_model 'probe', and always for a box, whose probes are points): the rows of
-    contact_kernels.probe_geometry with a share, k = share·λ, c = share·μ: one penalty per probe.
+    kernels.probe_geometry with a share, k = share·λ, c = share·μ: one penalty per probe.
     With it (contact_model 'surface'), a ball meets the skin as a surface, k = k_A·A per element (k_A
     `stiffness_per_area_n_per_m3`: a pressure per depth, the same on every mesh), c = k·μ/λ:
     * every skin node inside a probe's ball (node_depths), pushed out along n = (x̂ − p)/|x̂ − p|,
@@ -189,8 +189,7 @@ def surface_contacts(x: np.ndarray, v: np.ndarray, tool: ToolState, shift: np.nd
     * every face and edge the ball presses: the rows with a `surface_weight` (a face's interior, half an edge
       for each of its two faces; a corner is its node's), A that weight × the candidate triangles' mean area (one
       area for all, so that a closest point passing from a face to its edge does not change its stiffness), the
-      depth less
-      what the triangle's nodes carry, δ − Σ w_a·δ_a⁺ (a ball on a flat face sags into it between the nodes:
+      depth less what the triangle's nodes carry, δ − Σ w_a·δ_a⁺ (a ball on a flat face sags into it between the nodes:
       that much only), so that where the mesh resolves the contact the nodes carry it, and a face where the
       contact is smaller than the face."""
     ahead = x + dt * v
@@ -223,7 +222,7 @@ def surface_contacts(x: np.ndarray, v: np.ndarray, tool: ToolState, shift: np.nd
                     np.concatenate([face_c, node_k * ratio]))
 
 
-def node_depths(x: np.ndarray, tool: ToolState, shift: np.ndarray) -> tuple[np.ndarray, ...]:
+def node_depths(x: np.ndarray, tool: ToolSweep, shift: np.ndarray) -> tuple[np.ndarray, ...]:
     """The nodes of the tool's candidate triangles inside a probe's ball (probes moved by `shift`): (nodes,
     outward normals n = (x − p)/|x − p|, depths δ = r − |x − p| > 0, the probe of each), one row per node and
     probe it is inside; none for a box (its probes are points)."""
@@ -240,7 +239,7 @@ def node_depths(x: np.ndarray, tool: ToolState, shift: np.ndarray) -> tuple[np.n
             tool.radius_m - distance[probe, index], probe)
 
 
-def force_local_model(shape: ToolShape, pose: ToolPose, tool: ToolState, force_on_tool_n: np.ndarray,
+def force_local_model(shape: ToolShape, pose: ToolPose, tool: ToolSweep, force_on_tool_n: np.ndarray,
                       stiffness_n_per_m: float, reach_m: float, kind: str, positions: np.ndarray) -> LocalModel:
     """The local model of the end of a frame, consistent with its contact force F (paper §2.5, P11): in
     contact, the plane with normal F/|F| that the tool sphere (radius r) penetrates by |F|/K, so that the

@@ -3,8 +3,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from liver_sim.physics.springs import SpringNetwork
-from liver_sim.physics.support import SupportArrays
+from liver_sim.physics.tissue.organ_support import SupportArrays
+from liver_sim.physics.tissue.springs import SpringNetwork
 
 
 def spring_forces(x: np.ndarray, v: np.ndarray, springs: SpringNetwork) -> np.ndarray:
@@ -24,7 +24,7 @@ def spring_forces(x: np.ndarray, v: np.ndarray, springs: SpringNetwork) -> np.nd
 
 
 def support_forces(x: np.ndarray, v: np.ndarray, support: SupportArrays) -> np.ndarray:
-    """The support's −k_n·(x_n − rest_n) − c_n·v_n on each supported node (physics.support)."""
+    """The support's −k_n·(x_n − rest_n) − c_n·v_n on each supported node (physics.tissue.organ_support)."""
     f = np.zeros_like(x)
     n = support.nodes
     np.add.at(f, n, -support.stiffness_n_per_m[:, None] * (x[n] - support.rest_m)

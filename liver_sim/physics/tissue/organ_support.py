@@ -10,7 +10,8 @@ diaphragm, the inferior vena cava, its ligaments and the viscera it rests on:
 
 A_n a third of the area of the capsule triangles around node n at rest (m²), the sum over the regions
 holding n, and τ `support_damping_s` (the ties' Kelvin–Voigt time constant, s).  Its Jacobian
-is −k_n·I (∂f/∂x) and −c_n·I (∂f/∂v) on the node's diagonal block (physics.implicit_kernels, physics.spring_kernels).
+is −k_n·I (∂f/∂x) and −c_n·I (∂f/∂v) on the node's diagonal block (physics.solver.implicit_kernels,
+physics.tissue.spring_kernels).
 The default regions sit on the default liver (liver_sim.mesh.liver_shape, DICOM LPS axes); on a mesh
 where they hold no capsule node the scene is the paper's (physics.model).
 """
@@ -21,8 +22,8 @@ from typing import NamedTuple
 import numpy as np
 
 from liver_sim.mesh.tetmesh import TetMesh
-from liver_sim.physics.materials import triangle_areas
-from liver_sim.physics.model_params import ModelParams
+from liver_sim.physics.settings import ModelParams
+from liver_sim.physics.tissue.materials import triangle_areas
 
 
 class SupportArrays(NamedTuple):

@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from liver_sim.base.local_model import LocalModel
-from liver_sim.physics.contact import ToolPose, ToolShape, candidate_nodes
+from liver_sim.physics.contact.tool_geometry import ToolPose, ToolShape, candidate_nodes
 
 TOOL_MODES = ("press", "grasp", "cut")
 #: cut: a contact point joins the stroke's path when this far (m) from the last one.

@@ -1,13 +1,13 @@
 """numba kernels of the tool's contact with the skin triangles (Eq. 3), shared by both integrators.
 
-The tool over one frame (`ToolState`, kind TOOL_*) is a set of probes p, balls of radius r moving at v_tool;
+The tool over one frame (`ToolSweep`, kind TOOL_*) is a set of probes p, balls of radius r moving at v_tool;
 `near_triangles` picks its candidate skin triangles.  `probe_geometry` gives, per probe and candidate
 triangle, the closest point q of the triangle to p (Ericson), its barycentric weights w_a, the unit
 normal n pushing the liver, the depth δ = r − |p − q| (m, negative apart; a probe inside the liver exits
 through q) and the row's share of its probe's contact (shares of a probe sum to 1 or all vanish, so an
 edge or corner is never counted twice).  Eq. 3 per row: F = share·max(0, λ·δ + μ·δ̇)·n, δ̇ = n·(v_tool −
 Σ w_a·v_a), spread over the triangle's nodes as w_a·F; the tool feels the sum's opposite.
-`surface_contacts` applies it (the explicit frame: physics.explicit_kernels.add_forces);
+`add_contact_forces` applies it (the explicit frame: physics.solver.explicit_kernels.add_forces);
 `contact_elements` hands the same rows, linearised, to the implicit integrator (implicit.Contacts).
 
 Array conventions: positions `x` and velocities `v` are (N, 3) float64 in m and m/s; forces accumulate
@@ -29,16 +29,16 @@ TOOL_CAPSULE = 2
 TOOL_BOX = 3
 
 
-class ToolState(NamedTuple):
+class ToolSweep(NamedTuple):
     """The tool over one frame and its contact geometry (Eq. 3 on the skin triangles).
 
     kind: TOOL_NONE, TOOL_SPHERE, TOOL_CAPSULE or TOOL_BOX; `probes` (P, 3) m: the tool's contact probes
-    (contact.tool_probes: a sphere's centre, points along a capsule's shaft, a grid on a box's faces)
+    (tool_geometry.tool_probes: a sphere's centre, points along a capsule's shaft, a grid on a box's faces)
     where the frame starts, each a ball of `radius_m` (0 for a box), moving at `velocity_m_s`; penalty λ
     (N/m) and μ (N·s/m); `skin` (T, 3) the skin triangles and `triangles` the candidates near the tool;
     per probe and candidate (probe_geometry's rows), the contact geometry the last step left: `nodes`,
     `weights`, `normal`, `depth` (m), `share`, `point`, and `surface_weight`: the row's part of its triangle when a
-    ball meets the skin as a surface (contact.surface_contacts): γ where the closest point is the triangle's
+    ball meets the skin as a surface (contact.tool_geometry.contact_rows): γ where the closest point is the triangle's
     interior, γ/2 on an edge (the two triangles sharing it), 0 at a corner (a node's own contact), γ the
     local-minimum fade of probe_geometry.
     """
@@ -232,7 +232,7 @@ def probe_geometry(x, v, skin, triangles, probes, shift, radius, tool_velocity, 
 
 
 @numba.njit(cache=True)
-def surface_contacts(x, v, tool, shift, dt, f):
+def add_contact_forces(x, v, tool, shift, dt, f):
     """Eq. 3 between the tool's probes (moved by `shift`) and the skin triangles (probe_geometry, shares
     from a step of `dt`): each row pushes its closest point q with share·max(0, λ·δ + μ·δ̇)·n, δ̇ = n·(v_tool
     − Σ w_a·v_a), spread over the triangle's nodes as w_a times that.  Returns the total force on the liver

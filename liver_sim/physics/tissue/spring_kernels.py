@@ -2,15 +2,15 @@
 
 Eq. 1, per connector i→j of rest length l0 (`SpringArrays`, one per edge): length l, unit axis u = (x_j − x_i)/l,
 strain d = (l − l0)/l0, rate ḋ = (v_j − v_i)·u; tension T = λ1·d³ + λ2·d + μ·ḋ (N, 0 for a collapsed spring);
-+T·u on node i and −T·u on node j.  Support (physics.support): f_n −= k_n·(x_n − rest_n) + c_n·v_n on each
++T·u on node i and −T·u on node j.  Support (physics.tissue.organ_support): f_n −= k_n·(x_n − rest_n) + c_n·v_n on each
 supported node n.
 
 Array conventions: positions `x` and velocities `v` are (N, 3) float64 in m and m/s; the forces are added to
 `f` (N, 3) in newtons.  The serial and the parallel spring kernels are separate functions (a cached dispatcher
 must never be shared between a `parallel=True` and a serial build).  Users: the explicit frame
-(physics.explicit_kernels.add_forces, every substep) and the model's pull on held nodes with the implicit
-integrator (which assembles its own forces and Jacobians in physics.implicit_kernels).
-`liver_sim.physics.reference` is the plain-NumPy oracle of these kernels.
+(physics.solver.explicit_kernels.add_forces, every substep) and the model's pull on held nodes with the implicit
+integrator (which assembles its own forces and Jacobians in physics.solver.implicit_kernels).
+`liver_sim.physics.solver.reference` is the plain-NumPy oracle of these kernels.
 """
 from __future__ import annotations
 
@@ -20,7 +20,7 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from liver_sim.physics.pairs import add_pair
+from liver_sim.physics.tissue.pairs import add_pair
 
 
 class SpringArrays(NamedTuple):
@@ -87,7 +87,7 @@ def spring_forces_parallel(x, v, node_i, node_j, rest, lambda1, lambda2, mu, par
 @numba.njit(cache=True)
 def support_forces(x, v, nodes, rest, stiffness, damping, f):
     """Add the support's spring-dampers to f: −k_n·(x_n − rest_n) − c_n·v_n on each supported node n
-    (physics.support)."""
+    (physics.tissue.organ_support)."""
     for s in range(nodes.shape[0]):
         n = nodes[s]
         for a in range(3):
