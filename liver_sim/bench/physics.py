@@ -143,7 +143,7 @@ def _run_frames(model: LiverModel, poses, reference_positions=None) -> tuple[flo
         start = time.perf_counter()
         model.step_frame(pose)
         elapsed += time.perf_counter() - start
-        iterations += model.structure.solver.last_cg_iterations
+        iterations += model.state.history.cg_iterations
         if reference_positions is None:
             trajectory.append(model.state.positions.copy())
         else:

@@ -248,7 +248,7 @@ def model_params(p: PhysicsParameters) -> ModelParams:
         tear_strain_capsule=p.tear_strain_capsule).validate()
 
 
-def tool_contact(tool: PhysicsTool) -> Tool:
+def model_tool(tool: PhysicsTool) -> Tool:
     """The model's Tool of a tool of the physics node: its shape, local model and use."""
     s = tool.settings
     return Tool(ToolShape(s.tool_shape, s.tool_radius_m, s.tool_length_m, tuple(s.tool_half_extents_m)),
@@ -262,6 +262,6 @@ def build_model(p: PhysicsParameters, tools: tuple[PhysicsTool, ...] | None = No
     tools = physics_tools(p) if tools is None else tools
     with kernel_cache.compiling():  # meshing a surface compiles kernels too, not only the warm-up
         mesh = load_mesh(p.mesh_path, p.target_tets, p.mesh_scale) if p.mesh_path else default_liver()
-        model = LiverModel(mesh, model_params(p), [tool_contact(tool) for tool in tools])
+        model = LiverModel(mesh, model_params(p), [model_tool(tool) for tool in tools])
         model.warm_up()
     return model

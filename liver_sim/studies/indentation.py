@@ -126,7 +126,7 @@ def bottom_nodes(mesh: TetMesh) -> tuple:
 def _sink_m(model: LiverModel) -> float:
     """The deepest penetration of the tool by the skin (m): its contact rows' depths and the skin nodes inside its
     probes' balls."""
-    tool = model.tool.contact
+    tool = model.state.tools[0].sweep
     deepest = 0.0
     rows = np.isfinite(tool.depth) & (tool.share > 0.0)
     if rows.any():

@@ -53,19 +53,32 @@ NO_COARSE_SPACE = CoarseSpace.none()
 
 
 class StepHistory:
-    """What a step leaves the next one on the same nodes: `warm`, the Δv (N, 3) that starts its CG solve, and
-    BDF2's `states`, (x, v) of the last step and (x₋, v₋) of the one before, with its length `dt_s` (0: none,
-    the next step is backward Euler).  Part of the model's state; a new one after a topology change."""
+    """What a step leaves the next one on the same nodes and elements: `warm`, the Δv (N, 3) that starts its CG
+    solve; BDF2's `states`, (x, v) of the last step and (x₋, v₋) of the one before, with its length `dt_s` (0: none,
+    the next step is backward Euler); `rotations`, the unit quaternions (M, 4: x, y, z, w) of the 'fem' law's
+    elements that start the next extraction of their rotations (physics.tissue.fem_kernels; identity at rest); and
+    what the last step took: `cg_iterations`, `newton_iterations`, its final `residual_n` (N) and whether it was
+    BDF2 (`second_order`).  Part of the model's state; a new one (ImplicitEuler.new_history) after a topology
+    change."""
 
-    def __init__(self, n_nodes: int):
+    def __init__(self, n_nodes: int, n_tets: int = 0):
         self.warm = np.zeros((n_nodes, 3))
         self.states = np.zeros((4, n_nodes, 3))
         self.dt_s = 0.0
+        self.rotations = np.zeros((n_tets, 4))
+        self.rotations[:, 3] = 1.0
+        self.cg_iterations = 0
+        self.newton_iterations = 0
+        self.residual_n = 0.0
+        self.second_order = False
 
     def reset(self) -> None:
-        """Forget the previous Δv and the previous state: the next step is backward Euler from zero."""
+        """Forget the previous Δv, the previous state and the elements' rotations: the next step is backward Euler
+        from zero, its rotations extracted from the identity."""
         self.warm[:] = 0.0
         self.dt_s = 0.0
+        self.rotations[:] = 0.0
+        self.rotations[:, 3] = 1.0
 
 
 class ImplicitEuler:
@@ -116,18 +129,16 @@ class ImplicitEuler:
         self._coefficient = np.zeros(0)
         self._inv_mass = np.zeros(self.n_nodes)
         self._tet_weight = 0.0
-        #: CG iterations, Newton iterations and final residual (N) of the last step.
-        self.last_cg_iterations = 0
-        self.last_newton_iterations = 0
-        self.last_residual_n = 0.0
-        #: Whether the last step was BDF2 (else backward Euler).
-        self.last_second_order = False
 
     def step(self, history: StepHistory, x: np.ndarray, v: np.ndarray, inv_mass: np.ndarray,
              external_force: np.ndarray, dt: float, environment_damping: float, gravity: np.ndarray,
              contacts: Contacts | None = None) -> np.ndarray:
         """Advance x, v (N, 3, in place) by one step of `dt` s from `history` (updated for the next step);
         returns the contact force on the liver (N) at the new state (the tool feels its opposite)."""
+        if len(history.rotations) != len(self.tets.tets):
+            raise ValueError(f"a step history of {len(history.rotations)} elements for a solver of "
+                             f"{len(self.tets.tets)}: take ImplicitEuler.new_history")
+        tets = self.tets._replace(quaternion=history.rotations)
         contacts = contacts or Contacts.none()
         if len(self._coefficient) != len(contacts):
             self._coefficient = np.zeros(len(contacts))
@@ -137,21 +148,32 @@ class ImplicitEuler:
                             self.second_order and history.dt_s == dt)
         h = 2.0 * dt / 3.0 if second else float(dt)
         if self.two_level and h not in self._coarse:  # the system at x for the coarse space of this h
-            self._assemble_at_rest(x, inv_mass, np.zeros_like(x), environment_damping, h)
-        coarse = self._coarse_space(h, x, inv_mass)
+            self._assemble_at_rest(x, inv_mass, np.zeros_like(x), environment_damping, h, tets)
+        coarse = self._coarse_space(h, x, inv_mass, tets)
         s = self.springs
-        contact, self.last_cg_iterations, self.last_newton_iterations, self.last_residual_n = implicit_step(
+        contact, history.cg_iterations, history.newton_iterations, history.residual_n = implicit_step(
             x, v, inv_mass, external_force, np.asarray(gravity, dtype=np.float64), float(environment_damping),
             h, self._node_i, self._node_j, self._inv_rest, s.lambda1_n, s.lambda2_n, s.mu_ns_per_m,
-            self._unit, self._iso, self._axial, self._shift, self._diagonal, *self.support, self.tets, contacts.nodes,
+            self._unit, self._iso, self._axial, self._shift, self._diagonal, *self.support, tets, contacts.nodes,
             contacts.weights,
             contacts.normal, contacts.offset_m, contacts.normal_speed_m_s, contacts.stiffness_n_per_m,
             contacts.damping_ns_per_m, self._coefficient, self._preconditioner, coarse, history.warm, self.cg_tolerance,
             self.max_cg_iterations, self.newton_tolerance_n, self.max_newton, self._work, self._partial)
         x_last[:], v_last[:] = x, v
         history.dt_s = float(dt)
-        self.last_second_order = second
+        history.second_order = second
         return contact
+
+    def new_history(self) -> StepHistory:
+        """A StepHistory of this solver's nodes and elements, at rest."""
+        return StepHistory(self.n_nodes, len(self.tets.tets))
+
+    def _rotations(self, rotations: np.ndarray | None) -> TetArrays:
+        """The elements with the rotations' warm start `rotations` (a state's StepHistory.rotations, updated in
+        place), or from the identity when None."""
+        if rotations is None:
+            rotations = self.new_history().rotations
+        return self.tets._replace(quaternion=rotations)
 
     @property
     def solver(self) -> str:
@@ -163,7 +185,7 @@ class ImplicitEuler:
         built = {c.aggregates for c in self._coarse.values()}
         return f"pcg two-level{threads}" + (f", {built.pop()} aggregates" if len(built) == 1 else "")
 
-    def _coarse_space(self, h: float, x: np.ndarray, inv_mass: np.ndarray) -> CoarseSpace:
+    def _coarse_space(self, h: float, x: np.ndarray, inv_mass: np.ndarray, tets: TetArrays) -> CoarseSpace:
         """The coarse space of step length `h` (none without the two-level preconditioner); the first time, built
         from the system last assembled, which must be the one of `h` at `x`."""
         if not self.two_level:
@@ -174,7 +196,7 @@ class ImplicitEuler:
                 self._aggregate = aggregates(*node_graph(self.n_nodes, np.stack([self._node_i, self._node_j], axis=1),
                                                          self.tets.tets[:, [0, 1, 0, 2, 0, 3, 1, 2, 1, 3, 2, 3]]))
             coarse = build_coarse_space(x, self._aggregate, (
-                self._node_i, self._node_j, self._unit, self._iso, self._axial, self._shift, inv_mass, self.tets,
+                self._node_i, self._node_j, self._unit, self._iso, self._axial, self._shift, inv_mass, tets,
                 self._tet_weight))
             self._coarse[h] = coarse
         return coarse
@@ -199,26 +221,28 @@ class ImplicitEuler:
                                        shape=(size, size)).tocsr()
 
     def compliance(self, x: np.ndarray, inv_mass: np.ndarray, load: np.ndarray, environment_damping: float,
-                   guess: np.ndarray, contacts: Contacts | None = None) -> float:
+                   guess: np.ndarray, contacts: Contacts | None = None, rotations: np.ndarray | None = None) -> float:
         """Static compliance bᵀ·K⁻¹·b (m/N) of the network at x under the load pattern b = `load` (N, 3) N,
         held nodes (inv_mass 0) fixed: the tangent stiffness K of the springs (physics.solver.implicit_kernels) and of
         the organ's supports at x, and of `contacts` (each row taken as active: another tool's penalty holding the
         tissue), solved by the step's PCG as (M·(1 + H·c_env) + H·C + H²·K)·z = b with H = COMPLIANCE_HORIZON_S,
         so the mass and damping terms weigh ≲ 1 % against K; `guess` (N, 3), the previous solution ·H², starts
-        the solve and is overwritten by this one."""
+        the solve and is overwritten by this one; `rotations` the elements' warm start (StepHistory.rotations, None:
+        the identity)."""
         h = COMPLIANCE_HORIZON_S
+        tets = self._rotations(rotations)
         contacts = contacts or Contacts.none()
         coefficient = h * contacts.damping_ns_per_m + h * h * contacts.stiffness_n_per_m
-        self._assemble_at_rest(x, inv_mass, np.zeros_like(x), environment_damping, h, contacts, coefficient)
+        self._assemble_at_rest(x, inv_mass, np.zeros_like(x), environment_damping, h, tets, contacts, coefficient)
         b = np.where((inv_mass > 0.0)[:, None], load, 0.0)
         solution = np.where((inv_mass > 0.0)[:, None], guess / (h * h), 0.0)
-        self._solve(inv_mass, b, solution, COMPLIANCE_TOLERANCE, self._coarse_space(h, x, inv_mass), contacts,
-                    coefficient)
+        self._solve(inv_mass, b, solution, COMPLIANCE_TOLERANCE, self._coarse_space(h, x, inv_mass, tets), tets,
+                    contacts, coefficient)
         guess[:] = solution * (h * h)
         return float(np.einsum("ij,ij->", b, guess))
 
     def equilibrium(self, x: np.ndarray, inv_mass: np.ndarray, external_force: np.ndarray, tolerance_n: float,
-                    max_iterations: int = 500) -> np.ndarray:
+                    max_iterations: int = 500, rotations: np.ndarray | None = None) -> np.ndarray:
         """Static equilibrium of the network and its support under `external_force` (N, 3) N, no gravity:
         x (N, 3) m moves in place until |f(x)| ≤ `tolerance_n` on every free node, held nodes (inv_mass 0)
         staying where x has them.  Newton's iterations (M + H·C + H²·K)·δx = H²·f(x), x ← x + δx, K the
@@ -226,23 +250,24 @@ class ImplicitEuler:
         damping terms only regularise K.  K leaves out compressed springs' negative geometric stiffness
         (physics.solver.implicit_kernels), so where springs are compressed the iterations converge linearly.  Returns
         f(x) (N, 3): ≈ 0 on free nodes; on held nodes the pull of the network (and loads) that holding them
-        resists.  Raises RuntimeError when not converged."""
+        resists; `rotations` as in `compliance`.  Raises RuntimeError when not converged."""
         h = STATIC_HORIZON_S
+        tets = self._rotations(rotations)
         free = (inv_mass > 0.0)[:, None]
         for _ in range(max_iterations + 1):
-            f = self._assemble_at_rest(x, inv_mass, external_force, 0.0, h)
+            f = self._assemble_at_rest(x, inv_mass, external_force, 0.0, h, tets)
             residual = float(np.sqrt((np.where(free, f, 0.0) ** 2).sum(axis=1)).max(initial=0.0))
             if residual <= tolerance_n:
                 return f
             step = np.zeros_like(x)
             self._solve(inv_mass, np.where(free, f * (h * h), 0.0), step, STATIC_CG_TOLERANCE,
-                        self._coarse_space(h, x, inv_mass))
+                        self._coarse_space(h, x, inv_mass, tets), tets)
             x += step
         raise RuntimeError(f"no static equilibrium within {max_iterations} Newton iterations "
                            f"(largest residual force {residual:.3g} N)")
 
     def _assemble_at_rest(self, x: np.ndarray, inv_mass: np.ndarray, external_force: np.ndarray,
-                          environment_damping: float, h: float, contacts: Contacts | None = None,
+                          environment_damping: float, h: float, tets: TetArrays, contacts: Contacts | None = None,
                           coefficient: np.ndarray | None = None) -> np.ndarray:
         """Assemble the step's system at x, v = 0 (springs and support; `contacts` with their `coefficient`,
         h·c + h²·k each, in the preconditioner) and its preconditioner; returns the forces f(x) (N, 3)."""
@@ -254,21 +279,22 @@ class ImplicitEuler:
                  self._node_j, self._inv_rest, s.lambda1_n, s.lambda2_n, s.mu_ns_per_m, self._unit, self._iso,
                  self._axial, self._shift, self._diagonal, f, ky, True)
         support_terms(x, zero, zero, inv_mass, h, *self.support, f, ky, self._shift, self._diagonal, True)
-        tet_terms(x, zero, zero, inv_mass, h, self.tets, f, ky, self._diagonal, True)
-        self._tet_weight = h * h + h * self.tets.viscous_time_s
+        tet_terms(x, zero, zero, inv_mass, h, tets, f, ky, self._diagonal, True)
+        self._tet_weight = h * h + h * tets.viscous_time_s
         block_jacobi(self._diagonal, inv_mass, no.nodes, no.weights, no.normal,
                      np.zeros(0) if coefficient is None else coefficient, self._preconditioner)
         return f
 
     def _solve(self, inv_mass: np.ndarray, b: np.ndarray, solution: np.ndarray, tolerance: float,
-               coarse: CoarseSpace, contacts: Contacts | None = None, coefficient: np.ndarray | None = None) -> None:
+               coarse: CoarseSpace, tets: TetArrays, contacts: Contacts | None = None,
+               coefficient: np.ndarray | None = None) -> None:
         """solution ← A⁻¹·b by PCG from `solution` (the last assembled system, with `contacts` and their
         `coefficient` if given) with `coarse`."""
         r, z, p, q = (np.zeros_like(b) for _ in range(4))
         no = contacts or Contacts.none()
         solve = pcg_parallel if self.threads > 1 else pcg
         solve(self._node_i, self._node_j, self._unit, self._iso, self._axial, self._shift, inv_mass, no.nodes,
-              no.weights, no.normal, np.zeros(0) if coefficient is None else coefficient, self.tets, self._tet_weight,
+              no.weights, no.normal, np.zeros(0) if coefficient is None else coefficient, tets, self._tet_weight,
               self._preconditioner, coarse, b, solution, tolerance, self.max_cg_iterations, r, z, p, q, self._partial)
 
     def warm_up(self) -> None:
@@ -283,5 +309,5 @@ class ImplicitEuler:
                               tets=self.tets._replace(quaternion=self.tets.quaternion.copy(),
                                                       rotation=self.tets.rotation.copy(),
                                                       rotated_gradients=self.tets.rotated_gradients.copy()))
-        probe.step(StepHistory(self.n_nodes), x, v, np.ones(self.n_nodes), np.zeros_like(x), 1e-3, 0.0, np.zeros(3),
+        probe.step(probe.new_history(), x, v, np.ones(self.n_nodes), np.zeros_like(x), 1e-3, 0.0, np.zeros(3),
                    contacts)

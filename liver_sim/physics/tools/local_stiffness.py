@@ -16,6 +16,7 @@ import numpy as np
 from liver_sim.physics.contact.kernels import ToolSweep
 from liver_sim.physics.contact.rows import Contacts
 from liver_sim.physics.solver.implicit import ImplicitEuler
+from liver_sim.physics.state import ToolState
 
 #: Frames between two solves of the tissue's compliance under the tool (10: 15 Hz at 150 Hz; K then stays
 #: within 10 % of a solve at every frame over the demo's press and slide, a test).
@@ -62,36 +63,25 @@ def local_stiffness(penalty_n_per_m: float, probes: float, tissue_compliance_m_p
     return 1.0 / (1.0 / (probes * penalty_n_per_m) + max(tissue_compliance_m_per_n, 0.0))
 
 
-class LocalStiffness:
-    """K under the tool, frame after frame, for one spring network (build a new one after a topology
-    change): the tissue's compliance is solved every `refresh_frames` frames in which a probe is within
-    reach, and at the first such frame after `reset`."""
-
-    def __init__(self, solver: ImplicitEuler, n_nodes: int, refresh_frames: int = REFRESH_FRAMES):
-        self._solver = solver
-        self._guess = np.zeros((n_nodes, 3))
-        self.refresh_frames = int(refresh_frames)
-        self.reset()
-
-    def reset(self) -> None:
-        """Forget the compliance: the next frame near the surface solves it afresh."""
-        self._guess[:] = 0.0
-        self._compliance_m_per_n = None
-        self._frames_since_solve = 0
-
-    def stiffness_n_per_m(self, tool: ToolSweep, positions: np.ndarray, inv_mass: np.ndarray,
-                          penalty_n_per_m: float, environment_damping_per_s: float,
-                          others: Contacts | None = None) -> float:
-        """K (N/m) for this frame's tool (its probes' contact geometry as the step left it): the penalty of
-        the touching probes in series with the tissue's compliance under their push, from the tangent
-        stiffness at `positions` with the held nodes (inv_mass 0) fixed and the other tools' pushing rows
-        `others` holding the tissue; the penalty alone when no probe is within reach."""
-        probes = touching_probes(tool)
-        if probes == 0.0:
-            return penalty_n_per_m
-        self._frames_since_solve += 1
-        if self._compliance_m_per_n is None or self._frames_since_solve >= self.refresh_frames:
-            self._compliance_m_per_n = self._solver.compliance(positions, inv_mass, contact_load(tool, len(positions)),
-                                                               environment_damping_per_s, self._guess, others)
-            self._frames_since_solve = 0
-        return local_stiffness(penalty_n_per_m, probes, self._compliance_m_per_n)
+def stiffness_n_per_m(solver: ImplicitEuler, tool: ToolState, positions: np.ndarray, inv_mass: np.ndarray,
+                      penalty_n_per_m: float, environment_damping_per_s: float, others: Contacts | None = None,
+                      rotations: np.ndarray | None = None, refresh_frames: int = REFRESH_FRAMES) -> float:
+    """K (N/m) for this frame's tool (its sweep's contact geometry as the step left it): the penalty of the touching
+    probes in series with the tissue's compliance under their push, from the tangent stiffness of `solver`'s
+    network at `positions` with the held nodes (inv_mass 0) fixed and the other tools' pushing rows `others` holding
+    the tissue (`rotations`: the state's StepHistory.rotations); the penalty alone when no probe is within reach.
+    The compliance is solved every `refresh_frames` frames in which a probe is within reach, and at the first such
+    frame after a reset or a topology change (ToolState.compliance_m_per_n None), warm-started from the last
+    solution (ToolState.compliance_guess)."""
+    probes = touching_probes(tool.sweep)
+    if probes == 0.0:
+        return penalty_n_per_m
+    tool.frames_since_solve += 1
+    if tool.compliance_m_per_n is None or tool.frames_since_solve >= refresh_frames:
+        if tool.compliance_guess is None:
+            tool.compliance_guess = np.zeros((len(positions), 3))
+        tool.compliance_m_per_n = solver.compliance(positions, inv_mass, contact_load(tool.sweep, len(positions)),
+                                                    environment_damping_per_s, tool.compliance_guess, others,
+                                                    rotations)
+        tool.frames_since_solve = 0
+    return local_stiffness(penalty_n_per_m, probes, tool.compliance_m_per_n)

@@ -69,7 +69,6 @@ class TearDetector:
         on_capsule = isin_keys(face_edges, capsule_edges).any(axis=1)
         self.thresholds = np.where(on_capsule, float(capsule_threshold), float(parenchyma_threshold))
         self._stretch = np.zeros(len(self.faces))
-        self._futile: np.ndarray | None = None
 
     def stretches(self, positions: np.ndarray) -> np.ndarray:
         """Stretch (dimensionless) of every interior face at `positions` (N, 3) m."""
@@ -107,21 +106,21 @@ def tear(rest_points: np.ndarray, tets: np.ndarray, positions: np.ndarray, capsu
          parenchyma_threshold: float, capsule_threshold: float,
          detector: TearDetector | None = None) -> TopologyChange | None:
     """Open the faces stretched beyond their threshold (TearDetector, separate_faces); None if none opens.
-
-    `detector`, when given, must be the TearDetector of these rest_points, tets and capsule_triangles;
-    it remembers the last set of faces that opened nothing (no node to split) or whose separation
-    raised, so that the same set on the next frames costs no further separation attempt.
-    """
+    `detector`, when given, must be the TearDetector of these rest_points, tets and capsule_triangles."""
     detector = detector or TearDetector(rest_points, tets, capsule_triangles, parenchyma_threshold,
                                         capsule_threshold)
+    over = faces_to_tear(detector, positions, None)
+    return None if over is None else duplication_change(rest_points, tets, capsule_triangles, detector.faces[over])
+
+
+def faces_to_tear(detector: TearDetector, positions: np.ndarray, futile: np.ndarray | None) -> np.ndarray | None:
+    """The mask over `detector.faces` stretched beyond their threshold at `positions`, or None when none is, or
+    when it is `futile`: the last set that opened nothing (no node to split) or whose separation raised, which the
+    state keeps (State.futile_tear_faces) so that the same set costs no further separation attempt."""
     over = detector.over_threshold(positions)
-    if not over.any() or (detector._futile is not None and np.array_equal(over, detector._futile)):
+    if not over.any() or (futile is not None and np.array_equal(over, futile)):
         return None
-    detector._futile = over.copy()
-    change = duplication_change(rest_points, tets, capsule_triangles, detector.faces[over])
-    if change is not None:
-        detector._futile = None
-    return change
+    return over
 
 
 def _carry_triangles(tets: np.ndarray, new_tets: np.ndarray, triangles: np.ndarray, n: int) -> np.ndarray:

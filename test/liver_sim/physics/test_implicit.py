@@ -10,7 +10,7 @@ from liver_sim.physics.contact.tool_geometry import ToolPose, ToolShape, contact
 from liver_sim.physics.model import LiverModel
 from liver_sim.physics.settings import ModelParams
 from liver_sim.physics.solver import explicit_kernels, implicit_kernels, pcg, reference
-from liver_sim.physics.solver.implicit import ImplicitEuler, StepHistory
+from liver_sim.physics.solver.implicit import ImplicitEuler
 from liver_sim.physics.tissue.fem_kernels import TetArrays
 from liver_sim.physics.tissue.springs import build_springs
 from liver_sim.physics.tools.tool import Tool
@@ -96,7 +96,7 @@ def test_step_matches_dense_numpy_assembly():
     gravity = np.array([0.0, 0.0, -9.81])
     x_ref, v_ref = dense_reference_step(springs, x, v, inv_mass, contacts, external, FRAME_S, 3.0, gravity)
     solver = ImplicitEuler(springs, len(x), cg_tolerance=1e-13, max_newton=0)
-    history = StepHistory(solver.n_nodes)
+    history = solver.new_history()
     solver.step(history, x, v, inv_mass, external, FRAME_S, 3.0, gravity, contacts)
     np.testing.assert_allclose(v, v_ref, atol=1e-10)
     np.testing.assert_allclose(x, x_ref, atol=1e-12)
@@ -108,9 +108,9 @@ def test_newton_iterations_solve_the_nonlinear_step():
     mesh, springs, x, v, inv_mass, contacts, external = tiny_scene(offset_m=0.0002, speed_m_s=0.005)
     x0, v0 = x.copy(), v.copy()
     solver = ImplicitEuler(springs, len(x), cg_tolerance=1e-12, newton_tolerance_n=1e-9, max_newton=10)
-    history = StepHistory(solver.n_nodes)
+    history = solver.new_history()
     solver.step(history, x, v, inv_mass, external, FRAME_S, 3.0, np.zeros(3))
-    assert 1 <= solver.last_newton_iterations < 10 and solver.last_residual_n <= 1e-9
+    assert 1 <= history.newton_iterations < 10 and history.residual_n <= 1e-9
     # backward Euler: M·(v − v0) = h·f(x0 + h·v, v) on every free node
     free = inv_mass > 0.0
     f = reference.spring_forces(x, v, springs) + external - 3.0 * v / np.where(free, inv_mass, 1.0)[:, None]
@@ -135,7 +135,7 @@ def test_stable_at_one_step_per_frame_where_symplectic_euler_diverges(liver):
     p = liver.structure.params
     x, v = perturbed(liver)
     solver = ImplicitEuler(liver.structure.springs, len(x))
-    history = StepHistory(solver.n_nodes)
+    history = solver.new_history()
     for _ in range(150):
         solver.step(history, x, v, liver.state.inv_mass, np.zeros_like(x), FRAME_S, p.environment_damping_per_s,
                     np.zeros(3))
@@ -164,7 +164,7 @@ def test_energy_decreases_without_external_work(liver):
     v[:] = np.random.default_rng(2).normal(scale=0.05, size=v.shape)
     v[liver.structure.fixed_nodes] = 0.0
     solver = ImplicitEuler(liver.structure.springs, len(x))
-    history = StepHistory(solver.n_nodes)
+    history = solver.new_history()
     energies = [energy_j(liver, x, v)]
     for _ in range(60):
         solver.step(history, x, v, liver.state.inv_mass, np.zeros_like(x), FRAME_S, 0.0, np.zeros(3))
@@ -182,7 +182,7 @@ def test_held_nodes_stay_put(liver):
     v[held] = 0.01  # a kinematic node's velocity is the scene's: kept, and it does not move during the step
     before = x[held].copy()
     solver = ImplicitEuler(liver.structure.springs, len(x))
-    history = StepHistory(solver.n_nodes)
+    history = solver.new_history()
     for _ in range(5):
         solver.step(history, x, v, inv_mass, np.zeros_like(x), FRAME_S, 3.0, np.array([0.0, 0.0, -9.81]))
     np.testing.assert_array_equal(x[held], before)
@@ -233,7 +233,7 @@ def test_press_and_release_matches_symplectic_euler_at_72_substeps():
                               clearance_m=0.005, approach_s=0.1, press_s=0.3, hold_s=0.2, withdraw_s=0.1, rest_s=0.3)
     script = make_script("press_release", settings)
     solver = ImplicitEuler(model.structure.springs, len(mesh.points))
-    history = StepHistory(solver.n_nodes)
+    history = solver.new_history()
     x, v = model.state.positions, model.state.velocities
     skin = np.asarray(mesh.skin, dtype=np.int64)
     previous = None
@@ -263,7 +263,7 @@ def test_bdf2_is_second_order_and_falls_back_to_backward_euler(liver):
         v[liver.structure.fixed_nodes] = 0.0
         solver = ImplicitEuler(liver.structure.springs, len(x), cg_tolerance=1e-10, newton_tolerance_n=1e-9,
                                max_newton=10, second_order=second_order)
-        history = StepHistory(solver.n_nodes)
+        history = solver.new_history()
         for _ in range(steps):
             solver.step(history, x, v, liver.state.inv_mass, np.zeros_like(x), duration_s / steps, 0.0, np.zeros(3))
         return x, v, solver, history
@@ -273,10 +273,10 @@ def test_bdf2_is_second_order_and_falls_back_to_backward_euler(liver):
     assert 1.7 < errors[False][0] / errors[False][1] < 2.3
     assert errors[True][0] < errors[False][0] / 5
     x, v, solver, history = run(2, True)
-    assert solver.last_second_order
+    assert history.second_order
     x += 1e-6  # a state set from outside: the next step has no history
     solver.step(history, x, v, liver.state.inv_mass, np.zeros_like(x), 0.1, 0.0, np.zeros(3))
-    assert not solver.last_second_order
+    assert not history.second_order
 
 
 def test_the_default_is_one_implicit_step_per_frame_and_the_explicit_ones_keep_their_substeps():

@@ -51,7 +51,7 @@ def grasp_and_lift(liver, lift: bool, frames: int = 240):
 def test_lifting_with_one_tool_changes_the_force_on_the_other_in_the_same_frame(liver):
     model, lifted = grasp_and_lift(liver, lift=True)
     _, still = grasp_and_lift(liver, lift=False)
-    assert model.tools[0].use.holding and not model.tools[1].use.holding
+    assert model.state.tools[0].holding and not model.state.tools[1].holding
     assert lifted[1].tool_events == ("left: grasped 1 skin node(s)",)
     right = np.array([r.tool_forces_n[1] for r in lifted])
     right_still = np.array([r.tool_forces_n[1] for r in still])
@@ -95,13 +95,13 @@ def test_tools_away_a_node_held_twice_and_the_explicit_integrators_are_refused_o
     left = top(liver, -0.04, -0.055) + [0.0, 0.0, RADIUS_M - 0.004]
     for _ in range(3):  # both tools at the same place: the second grasps nothing the first holds
         model.step_frame(ToolPose(left), ToolPose(left))
-    held = [tool.use.held_nodes for tool in model.tools]
+    held = [tool.held_nodes for tool in model.state.tools]
     assert held[0].size and not np.intersect1d(held[0], held[1]).size
     assert np.array_equal(np.sort(model.state.held_nodes), np.sort(np.concatenate(held)))
     result = model.step_frame()  # every tool away
     assert all(not m.valid for m in result.local_models) and not np.any(result.tool_forces_n)
     model.release(1)
-    assert model.tools[0].use.holding and not model.tools[1].use.holding
+    assert model.state.tools[0].holding and not model.state.tools[1].holding
     with pytest.raises(ValueError, match="one pose per tool"):
         model.step_frame(ToolPose(left))
     with pytest.raises(ValueError, match="integrator='symplectic_euler'.*implicit_euler"):
