@@ -252,8 +252,8 @@ def model_tool(tool: PhysicsTool) -> Tool:
     """The model's Tool of a tool of the physics node: its shape, local model and use."""
     s = tool.settings
     return Tool(ToolShape(s.tool_shape, s.tool_radius_m, s.tool_length_m, tuple(s.tool_half_extents_m)),
-                       s.local_model, s.local_model_reach_m, ToolUse(s.tool_mode, s.grasp_margin_m, s.cut_depth_m),
-                       name=tool.name)
+                s.local_model, s.local_model_reach_m, ToolUse(s.tool_mode, s.grasp_margin_m, s.cut_depth_m),
+                name=tool.name)
 
 
 def build_model(p: PhysicsParameters, tools: tuple[PhysicsTool, ...] | None = None) -> LiverModel:
