@@ -143,6 +143,9 @@ PARAMETERS = {
                                "namespace"),
     "tool_pose_topic": Param(tool_topic("tool_pose"), "tool tip pose in the liver frame (PoseStamped), in the tool's "
                              "namespace"),
+    "tool_node": Param("liver_tool", "the only node whose tool poses on tool_pose_topic are taken, judged by each "
+                       "sample's writer (others are refused and counted); a relative name is the node of that name in "
+                       "the tool's namespace (/left/liver_tool for tool left); read at start"),
     **LINK_PARAMETERS,  # on the inputs from the other side of a teleoperation link
 }
 
@@ -153,7 +156,7 @@ PhysicsParameters = parameter_record("PhysicsParameters", PARAMETERS, "The param
 #: What each tool has of its own: tool NAME declares NAME.<name>, its default the node's <name>.
 TOOL_PARAMETERS = ("tool_shape", "tool_radius_m", "tool_length_m", "tool_half_extents_m", "tool_mode",
                    "grasp_margin_m", "cut_depth_m", "local_model", "local_model_reach_m", "tool_pose_topic",
-                   "contact_plane_topic", "tool_wrench_topic")
+                   "contact_plane_topic", "tool_wrench_topic", "tool_node")
 #: One tool's parameters (TOOL_PARAMETERS) as a typed record.
 ToolSettings = parameter_record("ToolSettings", {name: PARAMETERS[name] for name in TOOL_PARAMETERS},
                                 "One tool's parameters of liver_physics (TOOL_PARAMETERS).")
@@ -175,6 +178,11 @@ class PhysicsTool:
     def topic(self, parameter: str) -> str:
         """The absolute name of the topic parameter `parameter` (TOOL_TOPIC_PARAMETERS) in the tool's namespace."""
         return in_namespace(getattr(self.settings, parameter), self.namespace)
+
+    @property
+    def source_node(self) -> str:
+        """The fully qualified name of the node whose poses the tool takes (`tool_node` in its namespace)."""
+        return in_namespace(self.settings.tool_node, self.namespace)
 
     def parameter(self, name: str) -> str:
         """The node's name of the tool's parameter `name`: NAME.<name>, or <name> for the tool ''."""
