@@ -89,6 +89,7 @@ def add_mesh_command(commands) -> None:
     add_source_arguments(build)
     build.add_argument("--out", required=True, metavar="FILE",
                        help=f"output file, format by extension: {' '.join(WRITE_SUFFIXES)}")
+    build.add_argument("--json", action="store_true", help="print what was written as one JSON object")
     build.add_argument("--label", type=int, default=None, metavar="N",
                        help="segmentation: the organ's label (default: the only non-zero label)")
     build.add_argument("--support-label", type=int, default=None, metavar="M",
@@ -143,6 +144,9 @@ def mesh_build(args) -> int:
                          ".nii.gz .nrrd .seg.nrrd)")
     mesh = mesh_from_args(args)
     write_mesh(mesh, out)
+    if args.json:
+        print(json.dumps({**mesh.summary(), "out": str(out)}))
+        return 0
     print(f"wrote {out}: {len(mesh.points)} nodes, {len(mesh.tets)} tetrahedra (region "
           f"{PARENCHYMA_REGION} 'parenchyma'), {len(mesh.skin)} skin triangles (region "
           f"{CAPSULE_REGION} 'capsule'), sha256 {mesh.sha256}")
@@ -166,7 +170,7 @@ def segmentation_build(args) -> int:
         bar.close()
     for warning in summary["warnings"]:
         print(f"{PROG}: warning: {warning}", file=sys.stderr)
-    print(segmentation_summary(summary))
+    print(json.dumps(summary) if args.json else segmentation_summary(summary))
     return 0
 
 

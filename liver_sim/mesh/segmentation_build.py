@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import contextlib
 import os
-import tempfile
 import time
 from pathlib import Path
 
@@ -109,13 +108,8 @@ def _contact_points_m(volume: LabelVolume, built: LabelMesh, support_mask: np.nd
 
 def _write_both(built: LabelMesh, out: Path, support_file: Path, regions, how: str) -> None:
     """The mesh and its support file, each written to a temporary file beside it and renamed once both exist."""
-    temporary = []
+    temporary = [out.with_name(f".{out.stem}.{os.getpid()}.partial{suffix}") for suffix in (out.suffix, ".yaml")]
     try:
-        for suffix in (out.suffix, ".yaml"):
-            handle, name = tempfile.mkstemp(prefix=f".{out.stem}-", suffix=suffix, dir=out.parent if
-                                            str(out.parent) else ".")
-            os.close(handle)
-            temporary.append(Path(name))
         write_mesh(built.mesh, temporary[0])
         write_support(temporary[1], regions, how)
         os.replace(temporary[1], support_file)
