@@ -12,8 +12,8 @@ from liver_sim.mesh.io import load_mesh
 from liver_sim.mesh.landmarks import press_anchor
 from liver_sim.mesh.liver_shape import default_liver
 from liver_sim.mesh.tetmesh import TetMesh
-from liver_sim.physics.model_params import ModelParams
 from liver_sim.physics.parameters import PARAMETERS as PHYSICS_PARAMETERS
+from liver_sim.physics.settings import ModelParams
 from liver_sim.tool.scripts import ScriptSettings
 
 
