@@ -232,6 +232,28 @@ def test_documented_script_defaults_are_the_declared_ones():
     assert not wrong, f"docs/contract.md, Scripts: {wrong}"
 
 
+#: A value the prose gives a parameter, `name` (150 Hz), `name`, default 5 ms: a number with its unit, and the
+#: factor from that unit to the parameter's SI unit.
+PROSE_DEFAULT = re.compile(r"`([a-z][a-z0-9_]*)`,? \(?(?:default )?([−-]?[\d.]+(?:·10[⁰¹²³⁴⁵⁶⁷⁸⁹]+)?) "
+                           r"?(ms|mm|cm|s|m|Hz|N/m|N·s/m|N|m/s|kPa|Pa·s)(?=[ ,;)])")
+UNIT_FACTORS = {"ms": 1e-3, "mm": 1e-3, "cm": 1e-2}
+
+
+@pytest.mark.parametrize("doc", DOCS, ids=lambda d: d.name)
+def test_defaults_stated_in_prose_are_the_declared_ones(doc):
+    """`lifetime_s` (50 ms) in a sentence is the default of a node that declares `lifetime_s`."""
+    declared = {}
+    for table in NODES.values():
+        for name, spec in table.items():
+            declared.setdefault(name, []).append(spec.default)
+    wrong = []
+    for name, value, unit in PROSE_DEFAULT.findall(doc.read_text()):
+        stated = number(value) * UNIT_FACTORS.get(unit, 1.0)
+        if name in declared and not any(same_value(stated, default) for default in declared[name]):
+            wrong.append(f"`{name}` {value} {unit}, declared {declared[name]}")
+    assert not wrong, f"{doc.relative_to(ROOT)}: {wrong}"
+
+
 # -- command lines -------------------------------------------------------------------------------------------
 
 EXECUTABLES = (*NODES, "liver-sim")
@@ -377,6 +399,8 @@ def test_a_wrong_command_line_is_caught(command, problem):
 
 
 def test_a_wrong_default_is_caught():
+    assert [(n, v, u) for n, v, u in PROSE_DEFAULT.findall("the bridge's `lifetime_s` (40 ms) and")] == [
+        ("lifetime_s", "40", "ms")]
     assert not same_value(stated_value("0.45"), 0.4)
     assert not same_value(stated_value("`sphere`"), "plane")
     assert same_value(stated_value("3·10⁷"), 3e7) and same_value(stated_value("[0, 0, 0]"), [0.0, 0.0, 0.0])
