@@ -7,8 +7,8 @@ of the Green strain, Lamé constants from Young's modulus E and Poisson's ratio 
 β = η/E (MuJoCo's damping matrix β·K is the Kelvin–Voigt stress σ = E·ε + η·ε̇ of the parenchyma),
 and a rigid sphere of the tool's radius that presses the top of the liver as the tool does.
 
-Best stable setting (FlexSettings' defaults, tried on the default and ~10k-tet livers; README "Peers, side
-by side"): MuJoCo 4.0 integrates flex elasticity implicitly only with `integrator="discrete"` (implicit and
+Best stable setting (FlexSettings' defaults, tried on the default and ~10k-tet livers; docs/command-line.md, "Peers,
+side by side"): MuJoCo 4.0 integrates flex elasticity implicitly only with `integrator="discrete"` (implicit and
 implicitfast refuse it; explicit Euler diverges even at 20 steps per 150 Hz frame); of its two primal
 solvers CG gives Newton's forces in 1/2 (default liver) to 1/7 (~10k tets) of its time; with fewer than
 ~200 iterations the discrete step's solve ends under-converged on the ~10k liver in contact, so the cap is

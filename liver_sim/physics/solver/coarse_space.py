@@ -23,7 +23,7 @@ import numba
 import numpy as np
 
 #: The most aggregates a coarse space is built with: its dense solve costs (6C)² per iteration, and more aggregates
-#: save few iterations (README, "What to expect on a 2-core machine").
+#: save few iterations (docs/performance.md, "The physics").
 TARGET_AGGREGATES = 64
 #: Rigid motions per aggregate: three translations, three rotations.
 MODES = 6

@@ -11,7 +11,7 @@ iterations J·δ = −r with J re-assembled at the iterate.
 
 Second order (BDF2, default from the second step on).  Backward Euler damps the liver's slow
 oscillations (about its fixed nodes) by ~(ω·h)²/2 per step, which at h = 1/150 s shows beside symplectic
-Euler at 72 substeps (README, "A physics frame").  BDF2,
+Euler at 72 substeps (docs/performance.md, "The physics").  BDF2,
 x₊ = (4·x − x₋)/3 + (2h/3)·v₊ and M·(v₊ − (4·v − v₋)/3) = (2h/3)·f(x₊, v₊), is exactly the step
 above of length 2h/3 from the extrapolated state ((4·x − x₋)/3, (4·v − v₋)/3) (held nodes are not
 extrapolated), so the same solver makes it; it is A-stable, L-stable and its error is second order.
@@ -40,8 +40,8 @@ from liver_sim.physics.tissue.springs import SpringNetwork
 #: (334 nodes) on; the default liver keeps block-Jacobi, so that its steps stay those of before it, bit for bit.
 TWO_LEVEL_MIN_NODES = 500
 
-#: The step length (s) of the quasi-static solve in ImplicitEuler.compliance, and its CG tolerance (README, "A
-#: physics frame": what it costs in accuracy and iterations against a tighter one).
+#: The step length (s) of the quasi-static solve in ImplicitEuler.compliance, and its CG tolerance
+#: (docs/performance.md, "The physics": what it costs in accuracy and iterations against a tighter one).
 COMPLIANCE_HORIZON_S = 30.0
 COMPLIANCE_TOLERANCE = 3e-2
 #: The step length (s) of ImplicitEuler.equilibrium's backward-Euler iterations and their CG tolerance.

@@ -6,8 +6,8 @@ contacts.
 The solve starts from the previous step's Δv and stops at ‖r‖ ≤ cg_tolerance·‖b‖ (default 1e-3; the Newton residual
 check guards the result).  Preconditioner: block-Jacobi (the 3×3 diagonal blocks, contacts included), and on larger
 livers the additive two-level one, block-Jacobi plus a coarse correction on rigid aggregates of nodes
-(physics.solver.coarse_space), which keeps the iterations nearly flat as the mesh is refined (README, "What to expect
-on a 2-core machine", for the iterations and costs).  Why this solver: the values change at every step (the axes turn,
+(physics.solver.coarse_space), which keeps the iterations nearly flat as the mesh is refined (docs/performance.md, "The
+physics", for the iterations and costs).  Why this solver: the values change at every step (the axes turn,
 the
 cubic law stiffens, contacts come and go), so a sparse factorisation would be redone each step (SuperLU: 20–70× the
 cost of the solve), and matrix-free beats a block CSR pattern because it reads 5 numbers per spring instead of 36.
