@@ -71,6 +71,9 @@ setup(
         'rosbags>=0.11',  # sessions: rosbag2 bags (record, replay, resimulate, report)
         'PyYAML>=6.0',
         'foxglove-sdk>=0.30',  # liver-sim view: the live view's WebSocket server for the Foxglove app
+        'nibabel>=5.0',  # mesh build SEGMENTATION: NIfTI label volumes
+        'pynrrd>=1.0',  # ... NRRD and 3D Slicer .seg.nrrd
+        'scikit-image>=0.22',  # ... marching cubes
     ],
     extras_require={
         'test': ['pytest', 'websockets'],  # websockets: the tests' Foxglove client

@@ -1,11 +1,11 @@
 """The haptic bridge's parameters (no ROS): declared by the `haptic_bridge` node, read by BridgeTick and by
-the offline sessions (liver_sim.sessions), so both refuse the same values. Topic names and the map's node are
+the offline sessions (liver_sim.sessions), so both refuse the same values. Topic names and the source nodes are
 relative: a bridge started in a namespace (`__ns:=/left`) takes them there, one in the root namespace today's.
 
 The device map is not among them: the bridge takes the one `liver_tool` publishes on device_map_topic
 (latched), so the map that places the tool and the map that turns the force can never differ."""
 from haptic_bridge.safety import DEFAULT_MAX_FORCE_N, PHANTOM_MAX_FORCE_N
-from liver_sim.base.link import LINK_PARAMETERS
+from liver_sim.base.emulated_link import LINK_PARAMETERS
 from liver_sim.base.parameters import Param, parameter_record, realtime_priority_parameter
 from liver_sim.base.topic_names import FORCE_OUTPUT_FORMATS, tool_topic
 
@@ -75,6 +75,16 @@ PARAMETERS = {
     "device_map_node": Param("liver_tool", "the only node whose device map the bridge takes: maps on "
                              "device_map_topic from any other node are refused; a relative name is the node of that "
                              "name in the bridge's own namespace (/left/liver_tool for a bridge in /left)"),
+    "model_node": Param("/liver_physics", "the only node whose local model (or, with local_model none, contact "
+                        "wrench) the bridge takes, judged by each sample's writer; a relative name is the node of that "
+                        "name in the bridge's own namespace; read at start"),
+    "device_node": Param("phantom_sim", "the only node whose stylus samples on measured_cp_topic the bridge takes "
+                         "(the device's driver: set it to your driver's node name), judged by each sample's writer; a "
+                         "relative name is the node of that name in the bridge's own namespace (/left/phantom_sim for "
+                         "a bridge in /left); read at start"),
+    "stamp_lead_tolerance_s": Param(0.05, "a stylus sample stamped more than this (s) ahead of the bridge's clock is "
+                                    "refused (a device clock ahead of this host's, or a bad stamp); read at start",
+                                    0.001, 10.0),
     "force_output": Param("wrench_stamped", "message type of the force command", choices=FORCE_OUTPUT_FORMATS),
     "force_topic": Param(tool_topic("servo_cf"), "force command to the device driver"),
     "measured_cp_topic": Param(tool_topic("measured_cp"), "the device's stylus pose, device frame (PoseStamped, "

@@ -126,11 +126,15 @@ class PassivityObserver:
         self._velocity = (0.0, 0.0, 0.0)          # m/s, device frame, between the two newest samples
 
     def sample(self, stamp_s: float, arrival_s: float, position_m) -> None:
-        """A stylus sample: its stamp and arrival (s, one clock), its position (m, device frame)."""
+        """A stylus sample: its stamp and arrival (s, one clock), its position (m, device frame). A sample stamped
+        before the last one (the device's clock stepped back) starts a new reference: motion and latency anew."""
         x, y, z = position_m
         last = self._last
-        if last is not None and stamp_s <= last[0]:
-            return  # the same sample again, or an older one
+        if last is not None and stamp_s == last[0]:
+            return  # the same sample again
+        if last is not None and stamp_s < last[0]:  # the device's clock stepped back: a new reference, not a freeze
+            self.forget_motion()
+            self.latency_s = last = None
         latency = max(arrival_s - stamp_s, 0.0)
         self.latency_s = latency if self.latency_s is None else (
             self.latency_s + LATENCY_SMOOTHING * (latency - self.latency_s))

@@ -5,13 +5,13 @@ The loop calls :meth:`Supervisor.beat` at the start of each tick, sends its comm
 :meth:`Supervisor.send` and reports an exception of its step with :meth:`Supervisor.error`. A thread that is
 not the loop (:meth:`Supervisor.start`) checks, when the bound would run out, that the loop has ticked within `bound_s`;
 when it has not, or the loop has ended, it publishes a zero force and repeats it every `bound_s` until the
-loop is back. The zeros go through a publisher of their own (`publish_zero`): a publish of the loop held up in
-the middleware (a transient-local reader joining holds the writer while its history is sent) holds up neither the
-trip nor its zero; each zero then goes on the loop's writer too, so that each writer's newest sample is zero (DDS
-keeps order only within a writer). While tripped the loop's own commands are dropped, and a command the loop was
-publishing when the zero went is followed by other zeros once its publish returns, so the last word on the wire
-is zero; the loop's first tick after a trip is told to restart its output from zero (soft start). :meth:`close`
-sends the last zero and lets nothing after it but zero.
+loop is back. Commands and zeros go out on one writer: DDS keeps order within a writer only, so with one writer
+no retransmitted command can arrive after the last zero. The trip is decided under a lock and its zero published
+outside it: a publish of the loop held up in the middleware (a transient-local reader joining holds the writer while
+its history is sent) holds up the zero behind it on the wire, not the decision. While tripped the loop's own commands
+are dropped, and a command the loop was publishing when the trip came is followed by a zero once its publish
+returns, so the last word on the wire is zero; the loop's first tick after a trip is told to restart its output from
+zero (soft start). :meth:`close` sends the last zero and lets nothing after it.
 
 A supervisor in the loop's own interpreter cannot preempt a loop that holds the GIL: the device driver's own
 command timeout stays the last line of defence (docs/haptic-safety.md).
@@ -79,22 +79,19 @@ class GapLog:
 class Supervisor:
     """Holds the device at zero force while the loop is stalled, failing or gone (see the module doc).
 
-    `publish(message)` puts the loop's command on the wire; `publish_zero(message)` the supervisor's zeros (its
-    own writer on the same topic; default `publish`); `zero_message()` builds a zero-force command;
-    `loop_alive()` says whether the loop thread still runs; `period_s` is the loop's period (for the gap log).
+    `publish(message)` puts a message on the wire (the loop's commands and the supervisor's zeros, one writer);
+    `zero_message()` builds a zero-force command; `loop_alive()` says whether the loop thread still runs;
+    `period_s` is the loop's period (for the gap log).
     """
 
     def __init__(self, bound_s: float, period_s: float, publish, zero_message, loop_alive=lambda: True,
-                 clock=time.monotonic, realtime_priority: int = 0, publish_zero=None):
+                 clock=time.monotonic, realtime_priority: int = 0):
         self.bound_s = positive(bound_s, "bound_s")
         self._publish, self._zero_message, self._loop_alive, self._clock = publish, zero_message, loop_alive, clock
-        self._publish_zero = publish if publish_zero is None else publish_zero
         self._lock = threading.Lock()
         self._beat = clock()
         self._last_zero = -math.inf
         self._closed = False
-        self._publishing = False           # the loop is inside a publish of its own writer
-        self._loop_writer_zero_due = False  # a zero went on the supervisor's writer, not yet on the loop's
         self._stopping = threading.Event()
         self._thread = None
         self.realtime_priority = realtime_priority
@@ -126,27 +123,26 @@ class Supervisor:
 
     def send(self, message) -> bool:
         """Publish the loop's command unless the output is held at zero; whether it was published. The publish
-        runs outside the lock: if the output was tripped or closed meanwhile, zeros follow it on both writers."""
+        runs outside the lock: if the output was tripped or closed meanwhile, a zero follows it on the writer."""
         with self._lock:
             if self.tripped is not None or self._closed:
                 return False
-            self._publishing = True
         try:
             self._publish(message)
         finally:
             with self._lock:
-                self._publishing = False
-                if self.tripped is not None or self._closed:
-                    self._send_zero(self._clock())
-            self._zero_loop_writer()
+                zero_after = self.tripped is not None or self._closed
+            if zero_after:
+                self._send_zero()
         return True
 
     def error(self, now_s: float, exc: BaseException) -> None:
         """The loop's step raised `exc`: zero now; the next tick restarts from zero."""
         with self._lock:
-            if not self._closed:
-                self._trip("error", now_s, f"{type(exc).__name__}: {exc}")
-        self._zero_loop_writer()
+            if self._closed:
+                return
+            self._trip("error", now_s, f"{type(exc).__name__}: {exc}")
+        self._send_zero()
 
     # -- the supervisor's side
     def check(self, now_s: float) -> None:
@@ -160,9 +156,12 @@ class Supervisor:
                     self._trip("stop", now_s, "the loop thread ended")
                 elif now_s - self._beat > self.bound_s:
                     self._trip("stall", self._beat, f"no tick within {self.bound_s * 1e3:g} ms")
-            elif now_s - self._last_zero >= self.bound_s:
-                self._send_zero(now_s)
-        self._zero_loop_writer()
+                else:
+                    return
+            elif now_s - self._last_zero < self.bound_s:
+                return
+            self._last_zero = now_s
+        self._send_zero()
 
     def start(self) -> None:
         """Run :meth:`check` in a thread of its own, woken when the bound would run out (WAKE_SLACK_S after the
@@ -174,10 +173,12 @@ class Supervisor:
     def close(self, cause: str) -> None:
         """Send the last zero (`cause` recorded as a stop) and nothing after it; stop the thread."""
         with self._lock:
-            if not self._closed:
+            closing = not self._closed
+            if closing:
                 self._trip("stop", self._clock(), cause)
                 self._closed = True
-        self._zero_loop_writer()
+        if closing:
+            self._send_zero()
         self._stopping.set()
         if self._thread is not None and self._thread is not threading.current_thread():
             self._thread.join(timeout=1.0)
@@ -202,34 +203,19 @@ class Supervisor:
         return event
 
     def _trip(self, kind: str, start_s: float, cause: str) -> None:
+        """Under the lock: the output held at zero from now; the caller sends the zero once it has let go."""
         if self.tripped is not None:
             self.tripped.end_s = start_s
         self.tripped = self._record(kind, start_s, cause)
-        self._send_zero(self._clock())
+        self._last_zero = self._clock()
 
-    def _send_zero(self, now_s: float) -> None:
-        """A zero on the supervisor's writer (under the lock: no publish of the loop holds it up), and one due on
-        the loop's (:meth:`_zero_loop_writer`)."""
-        self._last_zero = now_s
-        try:
-            self._publish_zero(self._zero_message())
-            self.zeros_sent += 1
-        except Exception:  # the context is gone: nothing can be sent any more
-            self.publish_failures += 1
-        self._loop_writer_zero_due = self._publish_zero is not self._publish
-
-    def _zero_loop_writer(self) -> None:
-        """The zero due on the loop's writer, outside the lock: DDS keeps order only within one writer, so each
-        writer's newest sample must be zero for a retransmitted command of the loop never to arrive after the last
-        zero. Left to :meth:`send` while the loop publishes (its writer may be held up; send follows its command
-        with zeros)."""
-        with self._lock:
-            if not self._loop_writer_zero_due or self._publishing:
-                return
-            self._loop_writer_zero_due = False
+    def _send_zero(self) -> None:
+        """A zero on the writer, outside the lock: a publish of the loop that holds the writer delays it on the
+        wire, behind that command, and holds up no decision."""
         try:
             self._publish(self._zero_message())
-        except Exception:  # the context is gone
+            self.zeros_sent += 1
+        except Exception:  # the context is gone: nothing can be sent any more
             self.publish_failures += 1
 
     # -- diagnostics

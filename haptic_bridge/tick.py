@@ -14,8 +14,8 @@ from haptic_bridge.parameters import BridgeParameters
 from haptic_bridge.passivity import PassivityObserver
 from haptic_bridge.rendering import ModelGlide, PassiveModelUpdate, contact_force, max_passive_stiffness
 from haptic_bridge.safety import SafeForceOutput
+from liver_sim.base.emulated_link import LinkSettings
 from liver_sim.base.geometry.device_map import DeviceMap
-from liver_sim.base.link import LinkSettings
 from liver_sim.base.local_model import LocalModel, penetration
 
 _ZERO = np.zeros(3)

@@ -77,12 +77,23 @@ def batch_qos(topic: Topic, depth: int = 1000):
     return Topic(topic.name, topic.type, depth, topic.reliable, topic.transient_local).qos
 
 
-def loop_input_qos(topic: Topic):
+def loop_input_qos(topic: Topic, depth: int = 1):
     """The QoS a node takes an input with (the tool pose, the local model, the physics wrench, the device's
-    samples): best effort, volatile, the newest message only. It matches every publisher, one with ROS's default
-    QoS (reliable, volatile) included, and a publisher's transient-local history is never delivered when it
-    (re)matches: an old local model received now would look fresh to the watchdog."""
-    return Topic(topic.name, topic.type, 1, reliable=False, transient_local=False).qos
+    samples): best effort, volatile, keep last `depth` (the newest message only by default; deeper for a reader
+    that judges every sample by its writer, so that other writers' samples cannot displace its source's before it
+    reads them). It matches every publisher, one with ROS's default QoS (reliable, volatile) included, and a
+    publisher's transient-local history is never delivered when it (re)matches: an old local model received now
+    would look fresh to the watchdog."""
+    return Topic(topic.name, topic.type, depth, reliable=False, transient_local=False).qos
+
+
+def latched_reader_qos(topic: Topic):
+    """The QoS a node reads a latched input with (the device map): reliable, transient local, keep all. A keep-last
+    reader's history is replaced by whatever writer sends most, so a flood of foreign samples would displace the
+    source's one latched sample; a keep-all reader keeps every sample until it is taken (a full reader holds back
+    the reliable writers' next ones instead of dropping)."""
+    return QoSProfile(history=HistoryPolicy.KEEP_ALL, reliability=ReliabilityPolicy.RELIABLE,
+                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
 def device_command_qos(topic: Topic):

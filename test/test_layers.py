@@ -1,4 +1,4 @@
-"""The layers of the README's Architecture table hold in the code (no ROS): every folder of the packages (and
+"""The layers of the table of docs/architecture.md hold in the code (no ROS): every folder of the packages (and
 every module at liver_sim's root) has its row, every import between two of them runs to a lower layer, haptic_bridge
 and msg_defs take only liver_sim's base, and the ROS-free cores import no ROS package. Imports are read from the
 source (ast), those inside functions included, so a hidden call back up shows too."""
@@ -19,9 +19,9 @@ MAX_ROOT_MODULES = 6
 
 
 def readme_layers() -> dict[str, int]:
-    """{folder or root module, as the table writes it without the trailing slash: layer} of the README's
-    Architecture table."""
-    section = (ROOT / "README.md").read_text().split("## Architecture", 1)[1].split("\n## ", 1)[0]
+    """{folder or root module, as the table writes it without the trailing slash: layer} of the
+    table of docs/architecture.md."""
+    section = (ROOT / "docs" / "architecture.md").read_text().split("\n## ", 1)[0]
     rows = re.findall(r"^\| (\d+) \| `([\w/.]+?)/?` \|", section, flags=re.M)
     return {path: int(layer) for layer, path in rows}
 
@@ -68,8 +68,8 @@ def first_party_edges() -> set[tuple[str, str, str]]:
 def test_every_folder_and_root_module_has_its_row():
     layers = readme_layers()
     places = {place(name) for name in modules()} - {"liver_sim"}
-    assert places - set(layers) == set(), "README Architecture: no row for these"
-    assert set(layers) - places == set(), "README Architecture: rows for what does not exist"
+    assert places - set(layers) == set(), "docs/architecture.md: no row for these"
+    assert set(layers) - places == set(), "docs/architecture.md: rows for what does not exist"
 
 
 def test_liver_sims_root_holds_few_modules():
@@ -104,7 +104,8 @@ def test_the_cores_beside_the_physics_take_only_the_base_of_liver_sim(package):
 def test_the_ros_free_cores_import_no_ros_package():
     """Importing the cores and the parameter tables (what offline sessions and the docs test read) loads neither
     rclpy nor a message package."""
-    cores = ["haptic_bridge.tick", "haptic_bridge.parameters", "haptic_bridge.supervisor", "liver_sim.analysis",
+    cores = ["haptic_bridge.tick", "haptic_bridge.parameters", "haptic_bridge.supervisor",
+    "liver_sim.sessions.analysis",
              "liver_sim.physics.pipeline", "liver_sim.physics.parameters", "liver_sim.tool.parameters",
              "liver_sim.phantom.parameters", "liver_sim.studies.scenarios", "liver_sim.studies.demo_offline",
              "liver_sim.base.topic_names"]
@@ -117,7 +118,7 @@ def test_the_ros_free_cores_import_no_ros_package():
 def test_each_row_names_every_module_of_its_folder():
     """A newcomer finds each module in its folder's row: its file name in backticks (a subfolder may stand for
     its modules, as `geometry/` does)."""
-    section = (ROOT / "README.md").read_text().split("## Architecture", 1)[1].split("\n## ", 1)[0]
+    section = (ROOT / "docs" / "architecture.md").read_text().split("\n## ", 1)[0]
     rows = dict(re.findall(r"^\| \d+ \| `([\w/.]+?)/?` \|(.*)$", section, flags=re.M))
     unnamed = []
     for folder, text in rows.items():
@@ -127,4 +128,4 @@ def test_each_row_names_every_module_of_its_folder():
             relative = path.relative_to(ROOT / folder)
             if path.name != "__init__.py" and f"`{relative.parts[0]}" not in text:
                 unnamed.append(f"{folder}/{relative}")
-    assert not unnamed, f"README Architecture: modules no row names: {unnamed}"
+    assert not unnamed, f"docs/architecture.md: modules no row names: {unnamed}"

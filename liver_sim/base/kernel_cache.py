@@ -20,7 +20,8 @@ from contextlib import contextmanager
 from pathlib import Path
 
 #: The folders of liver_sim whose modules hold numba kernels that call one another.
-KERNEL_FOLDERS = ("physics", "base/geometry", "mesh")
+KERNEL_FOLDERS = ("physics", "physics/contact", "physics/solver", "physics/tissue", "physics/topology", "base/geometry",
+                  "mesh")
 #: The stored fingerprint, beside the physics kernels' cache.
 STAMP = Path("physics") / "__pycache__" / "kernel_sources.sha256"
 #: The lock of the kernels' cache (compiling), beside the stamp.

@@ -11,7 +11,6 @@ from pathlib import Path
 
 import numpy as np
 
-from liver_sim.analysis import contact_fraction, fig8_figures, held_wrench_baseline
 from liver_sim.base.process_settings import cli_command_line
 from liver_sim.bench.machine import machine
 from liver_sim.bench.physics import contact_frame_times
@@ -19,6 +18,7 @@ from liver_sim.mesh.landmarks import upper_skin_point
 from liver_sim.mesh.liver_shape import default_liver
 from liver_sim.running.machine_stalls import stall_summary
 from liver_sim.running.network import ROOT_LABEL, closed_loop_plan, run_network, wire_gaps, wire_rates
+from liver_sim.sessions.analysis import contact_fraction, fig8_figures, held_wrench_baseline
 from liver_sim.sessions.parameters import node_parameters
 
 LOOP_TARGETS = {"physics_rate_hz": (147.0, 153.0), "haptic_rate_hz_min": 995.0, "haptic_period_error_p99_s_max": 0.0005,

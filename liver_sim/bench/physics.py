@@ -23,12 +23,12 @@ import numpy as np
 from liver_sim.bench.machine import machine
 from liver_sim.mesh.landmarks import press_anchor
 from liver_sim.mesh.liver_shape import build_liver, default_liver
-from liver_sim.physics import reference
-from liver_sim.physics.contact import ToolPose
+from liver_sim.physics.contact.tool_geometry import ToolPose
 from liver_sim.physics.model import LiverModel
-from liver_sim.physics.model_params import ModelParams
+from liver_sim.physics.settings import ModelParams
+from liver_sim.physics.solver import reference
 from liver_sim.physics.structure import default_fixed_nodes
-from liver_sim.physics.tool_contact import ToolContact
+from liver_sim.physics.tools.tool import Tool
 from liver_sim.studies.peers import NETWORK_POISSON_RATIO, liver_sim_press_force_n, time_mujoco_flex
 from liver_sim.tool.scripts import ScriptSettings, make_script
 
@@ -115,7 +115,7 @@ def contact_frame_times(anchors, depth_m: float = 0.008, frames: int = 450, appr
     found in contact."""
     mesh, figures = default_liver(), {}
     for label, count in (("one_contact", 1), ("two_contacts", len(anchors))):
-        model = LiverModel(mesh, tool=[ToolContact(name=f"tool{k}") for k in range(count)])
+        model = LiverModel(mesh, tool=[Tool(name=f"tool{k}") for k in range(count)])
         model.warm_up()
         radius, elapsed = model.tool.shape.radius_m, []
         for frame in range(frames):
@@ -143,7 +143,7 @@ def _run_frames(model: LiverModel, poses, reference_positions=None) -> tuple[flo
         start = time.perf_counter()
         model.step_frame(pose)
         elapsed += time.perf_counter() - start
-        iterations += model.structure.solver.last_cg_iterations
+        iterations += model.state.history.cg_iterations
         if reference_positions is None:
             trajectory.append(model.state.positions.copy())
         else:

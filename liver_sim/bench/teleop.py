@@ -1,5 +1,5 @@
-"""`liver-sim bench teleop`: the closed loop over an emulated teleoperation link (liver_sim.base.link), each delay
-rendered with the local model (the default: passive model updates over a link; with direct updates; with direct
+"""`liver-sim bench teleop`: the closed loop over an emulated teleoperation link (liver_sim.base.emulated_link), each
+delay rendered with the local model (the default: passive model updates over a link; with direct updates; with direct
 updates and the passivity controller) and with direct force (`local_model: none`), as model-mediated teleoperation
 is compared with direct force feedback. Passivity is judged by the simulated device's own measure of the energy it
 gave the hand; the bridge's estimate of it is reported beside.
@@ -17,7 +17,7 @@ import numpy as np
 from scipy.signal import butter, sosfiltfilt
 
 from haptic_bridge.passivity import GENERATED_LIMIT_J, WINDOW_S
-from liver_sim.base.link import LinkSettings
+from liver_sim.base.emulated_link import LinkSettings
 from liver_sim.bench.machine import machine
 from liver_sim.running.network import closed_loop_plan, run_network
 from liver_sim.sessions.parameters import node_parameters

@@ -10,8 +10,8 @@ from liver_sim.bench.machine import machine
 from liver_sim.bench.physics import livers
 from liver_sim.mesh.landmarks import upper_skin_path
 from liver_sim.physics.model import LiverModel
-from liver_sim.physics.model_params import ModelParams
-from liver_sim.physics.tearing import TearDetector, tear
+from liver_sim.physics.settings import ModelParams
+from liver_sim.physics.topology.tearing import TearDetector, tear
 
 #: A topology change of the default liver should fit in one 150 Hz frame (s).
 TOPOLOGY_TARGETS = {"default_topology_change_s_max": 1.0 / 150.0}

@@ -1,4 +1,4 @@
-"""The benchmark subcommands of ``liver-sim bench``: physics, loop, teleop, topology, record (added by
+"""The benchmark subcommands of ``liver-sim bench``: physics, loop, teleop, topology, segmentation, record (added by
 liver_sim.cli.main's COMMANDS). Each handler imports its modules when it runs (liver_sim.cli.main says why);
 with --json a benchmark prints one JSON object, else a table, and reports each target as met or not."""
 from __future__ import annotations
@@ -61,6 +61,14 @@ def add_bench_command(commands) -> None:
                           help="target tet counts of the larger livers (default: 10000)")
     topology.add_argument("--repeats", type=positive_int, default=9, help="timed repetitions (default: 9)")
     topology.set_defaults(handler=bench_topology)
+    segmentation = kinds.add_parser("segmentation", help="a CT-sized label volume (512 x 512 x 130) to a ~30k-tet "
+                                                         "liver by `liver-sim mesh build`: time and peak memory")
+    segmentation.add_argument("--json", action="store_true", help="print one JSON object")
+    segmentation.add_argument("--target-tets", type=positive_int, default=30_000, metavar="N",
+                              help="tet count aimed at (default: %(default)s)")
+    segmentation.add_argument("--out", type=Path, default=Path("out/bench_segmentation"),
+                              help="folder for the volume, the mesh and summary.json")
+    segmentation.set_defaults(handler=bench_segmentation)
     record = kinds.add_parser("record", help="the closed loop while `liver-sim record` records it: recorder CPU "
                                              "share, haptic loop figures with and without it")
     record.add_argument("--json", action="store_true", help="print one JSON object")
@@ -133,6 +141,25 @@ def bench_topology(args) -> int:
               f"{r['tear_s'] * 1e3:>8.1f}ms{r['tear_faces_opened']:>7}{r['cut_s'] * 1e3:>8.1f}ms")
     for target, met in report["met"].items():
         print(f"target {target} = {report['targets'][target]:.4g}: {'met' if met else 'NOT met'}")
+    return 0
+
+
+def bench_segmentation(args) -> int:
+    # this command's own modules, loaded when it runs (module docstring)
+    from liver_sim.bench.segmentation import run_segmentation_bench
+
+    report = run_segmentation_bench(args.out, args.target_tets, None if args.json else print)
+    if args.json:
+        print(json.dumps(report))
+        return 0
+    results, build = report["results"], report["results"]["build"]
+    print(f"machine: {report['machine']['cpu']}, {report['machine']['cores']} cores")
+    print(f"{' x '.join(map(str, results['voxels']))} voxels -> {build['tetrahedra']} tets in "
+          f"{results['seconds']:.1f} s, "
+          f"peak memory {results['peak_memory_mb']:.0f} MB; surface within {build['max_surface_distance_mm']:.2f} mm "
+          f"({build['max_surface_distance_voxels']:.2f} voxels) of the label; {args.out / 'summary.json'}")
+    for target, met in report["met"].items():
+        print(f"target {target} = {report['targets'][target]:g}: {'met' if met else 'NOT met'}")
     return 0
 
 

@@ -20,7 +20,7 @@ import sys
 import time
 from pathlib import Path
 
-from liver_sim.base.link import LINK_PARAMETERS, LinkSettings
+from liver_sim.base.emulated_link import LINK_PARAMETERS, LinkSettings
 from liver_sim.base.parameters import check_parameter
 from liver_sim.base.process_settings import DISCOVERY_RANGES, keep_dds_local, use_dds_profile
 from liver_sim.cli.arguments import add_tools_argument, positive_float, positive_int
@@ -42,6 +42,7 @@ from liver_sim.mesh.io import (
     load_mesh,
     write_mesh,
 )
+from liver_sim.mesh.label_volume import is_segmentation_path
 from liver_sim.mesh.liver_shape import build_liver, default_liver
 from liver_sim.mesh.tetmesh import TetMesh
 from liver_sim.nodes.occupants import DomainOccupied
@@ -72,7 +73,8 @@ def add_mesh_command(commands) -> None:
     def add_source_arguments(parser) -> None:
         parser.add_argument("path", nargs="?", metavar="PATH",
                             help="volume mesh (.msh .vtu .vtk .mesh) or closed surface "
-                                 "(.stl .obj .ply .off); default: the built-in liver")
+                                 "(.stl .obj .ply .off); build also takes a segmentation (.nii .nii.gz .nrrd "
+                                 ".seg.nrrd, docs/segmentation.md); default: the built-in liver")
         parser.add_argument("--target-tets", type=positive_int, metavar="N",
                             help="tet count aimed at when tetrahedralising a surface or the "
                                  "built-in liver (volume meshes are used as they are)")
@@ -87,6 +89,15 @@ def add_mesh_command(commands) -> None:
     add_source_arguments(build)
     build.add_argument("--out", required=True, metavar="FILE",
                        help=f"output file, format by extension: {' '.join(WRITE_SUFFIXES)}")
+    build.add_argument("--json", action="store_true", help="print what was written as one JSON object")
+    build.add_argument("--label", type=int, default=None, metavar="N",
+                       help="segmentation: the organ's label (default: the only non-zero label)")
+    build.add_argument("--support-label", type=int, default=None, metavar="M",
+                       help="segmentation: hold the organ where label M (e.g. the vena cava) touches it, instead "
+                            "of the bare area")
+    build.add_argument("--support-regions", type=float, nargs="+", default=None, metavar="V",
+                       help="segmentation: hold the organ by these spheres instead, five numbers each: x y z "
+                            "radius (m, liver frame) and stiffness per skin area (N/m^3)")
     build.set_defaults(handler=mesh_build)
 
 
@@ -126,12 +137,82 @@ def mesh_info(args) -> int:
 def mesh_build(args) -> int:
     """Write the mesh to --out and say what was written."""
     out = checked_output_path(args.out)  # refuse a bad extension before building anything
+    if args.path is not None and is_segmentation_path(args.path):
+        return segmentation_build(args)
+    if args.label is not None or args.support_label is not None or args.support_regions is not None:
+        raise ValueError("--label, --support-label and --support-regions apply to a segmentation PATH (.nii "
+                         ".nii.gz .nrrd .seg.nrrd)")
     mesh = mesh_from_args(args)
     write_mesh(mesh, out)
+    if args.json:
+        print(json.dumps({**mesh.summary(), "out": str(out)}))
+        return 0
     print(f"wrote {out}: {len(mesh.points)} nodes, {len(mesh.tets)} tetrahedra (region "
           f"{PARENCHYMA_REGION} 'parenchyma'), {len(mesh.skin)} skin triangles (region "
           f"{CAPSULE_REGION} 'capsule'), sha256 {mesh.sha256}")
     return 0
+
+
+def segmentation_build(args) -> int:
+    """`mesh build SEGMENTATION`: the mesh and its support file, a progress bar on stderr, the summary."""
+    # this command's own modules, loaded when it runs (module docstring)
+    from liver_sim.mesh.anatomical_support import user_regions
+    from liver_sim.mesh.segmentation_build import build_from_segmentation
+
+    if args.scale != 1.0:
+        raise ValueError("--scale applies to mesh files; a segmentation's header gives its spacing in millimetres")
+    regions = user_regions(args.support_regions) if args.support_regions is not None else None
+    bar = ProgressBar(sys.stderr)
+    try:
+        summary = build_from_segmentation(args.path, args.out, args.label, args.target_tets, args.support_label,
+                                          regions, bar.show)
+    finally:
+        bar.close()
+    for warning in summary["warnings"]:
+        print(f"{PROG}: warning: {warning}", file=sys.stderr)
+    print(json.dumps(summary) if args.json else segmentation_summary(summary))
+    return 0
+
+
+def segmentation_summary(summary: dict) -> str:
+    """The lines `mesh build SEGMENTATION` prints."""
+    others = ", ".join(f"{v:.3g}" for v in summary["other_components_ml"]) or "none"
+    lines = [
+        f"read            {summary['source']}, label {summary['label']}, axes {summary['axes']}",
+        f"voxels          {' x '.join(map(str, summary['voxels']))}, spacing "
+        f"{' x '.join(f'{v:g}' for v in summary['spacing_mm'])} mm",
+        f"label           {summary['label_voxels']} voxels, {summary['label_volume_ml']:.4g} mL; kept "
+        f"{summary['kept_volume_ml']:.4g} mL (largest part, {summary['cavities_filled_ml']:.3g} mL of cavities "
+        f"filled); other parts dropped (mL): {others}",
+        f"mesh            {summary['tetrahedra']} tetrahedra, {summary['nodes']} nodes, {summary['mesh_volume_ml']:.4g}"
+        f" mL, min dihedral {summary['min_dihedral_deg']:.1f} deg",
+        f"surface         largest distance to the label's boundary {summary['max_surface_distance_voxels']:.2f} "
+        f"voxels ({summary['max_surface_distance_mm']:.2f} mm)",
+        f"placement       {summary['placement']}, at LPS "
+        f"({', '.join(f'{v:g}' for v in summary['lps_origin_mm'])}) mm in the scanner",
+        f"{summary['support']}: {summary['support_skin_nodes']} skin nodes held",
+        f"wrote           {summary['out']} and {summary['support_file']} in {summary['seconds']:.1f} s",
+    ]
+    return "\n".join(lines)
+
+
+class ProgressBar:
+    """A one-line bar of a build's stages on a terminal (stage lines elsewhere): show(step, total, text)."""
+
+    WIDTH = 24
+
+    def __init__(self, stream):
+        self.stream = stream
+        self.live = stream.isatty()
+
+    def show(self, step: int, total: int, text: str) -> None:
+        done = self.WIDTH * (step - 1) // total
+        line = f"[{'#' * done}{'.' * (self.WIDTH - done)}] {step}/{total} {text}"
+        print(f"\r{line:<60}" if self.live else line, end="" if self.live else "\n", file=self.stream, flush=True)
+
+    def close(self) -> None:
+        if self.live:
+            print(file=self.stream, flush=True)
 
 
 def add_validate_command(commands) -> None:
@@ -242,7 +323,8 @@ def add_demo_command(commands) -> None:
 
 
 def add_link_arguments(parser) -> None:
-    """--link-delay, --link-jitter, --link-loss, --link-seed: the emulated teleoperation link (liver_sim.base.link)."""
+    """--link-delay, --link-jitter, --link-loss, --link-seed: the emulated teleoperation link
+    (liver_sim.base.emulated_link)."""
     parser.add_argument("--link-delay", type=float, default=0.0, metavar="S",
                         help="one-way delay (s) between the operator's side (device, tool, bridge) and the physics, "
                              "both ways (default: 0, no link)")

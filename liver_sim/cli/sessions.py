@@ -113,7 +113,7 @@ def add_fig8_command(commands) -> None:
 
 def fig8(args) -> int:
     # this command's own modules, loaded when it runs (module docstring)
-    from liver_sim.analysis import fig8_line
+    from liver_sim.sessions.analysis import fig8_line
     from liver_sim.studies.fig8 import exploration_fig8
 
     figures = exploration_fig8(args.out, args.overrides, progress=(lambda line: None) if args.json else _progress)

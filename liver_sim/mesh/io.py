@@ -246,9 +246,15 @@ def _load_surface(path: Path, target_tets: int, scale: float) -> TetMesh:
     vertices, faces = _read_closed_surface(path)
     vertices = vertices * scale
     check_organ_size(source, vertices, float(trimesh.Trimesh(vertices, faces, process=False).volume), scale)
+    return tetrahedralize_surface(vertices, faces, target_tets, source)
+
+
+def tetrahedralize_surface(vertices_m: np.ndarray, faces: np.ndarray, target_tets: int, source: str) -> TetMesh:
+    """The interior of a closed, outward-wound surface (vertices in m) stuffed to about `target_tets` tets;
+    MeshError naming `source` when the stuffing refuses."""
     try:
-        return tetrahedralize_to_target(SurfaceSignedDistance(vertices, faces), vertices.min(axis=0),
-                                        vertices.max(axis=0), target_tets, source)
+        return tetrahedralize_to_target(SurfaceSignedDistance(vertices_m, faces), vertices_m.min(axis=0),
+                                        vertices_m.max(axis=0), target_tets, source)
     except MeshError:
         raise
     except ValueError as exc:  # the stuffing's refusals, already prefixed with the source

@@ -2,19 +2,21 @@
 
 Each tick of a RateLoop (own thread) takes the newest stylus sample of the device (`measured_cp_topic`, device frame),
 places the tool tip in the liver frame with the device map `liver_tool` publishes (liver_sim.nodes.device_map_source:
-taken from `device_map_node` only, judged by each sample's writer; zero force before one arrives), turns it and the
+taken from `device_map_node` only; zero force before one arrives), turns it and the
 newest local model into a contact force (paper §2.5, P11 of docs/paper.md) — or, with `local_model: none`, holds the
 newest physics contact wrench (the "without local model" baseline of Fig. 8, R4) — turns that force into the device
 frame with the same map and sends it through SafeForceOutput (clamp, rate limit, watchdog, soft start) to the driver's
-force topic. The loop reads its inputs itself; each input's age counts from its reception by DDS, an input without
-a matched publisher is stale, and an implausible one is refused and counted. The command is stamped with the
+force topic. The loop reads its inputs itself, each only from its source node (`device_node`, `model_node`,
+`device_map_node`), judged by each sample's writer (haptic_bridge.sources); each input's age counts from the reception
+of its newest usable sample by DDS, and an implausible one is refused and counted (a device sample so refused is no
+sample: the watchdog zeroes the force). The command is stamped with the
 stamp of the input it was computed from (the device sample; the wrench in `none` mode), or the node's clock before
 any: a rig measures the device → force latency by it. One hop: the device's own samples are the loop's input.
 
-A Supervisor thread (haptic_bridge.supervisor) publishes zero whenever the loop stalls beyond stall_bound_s, raises,
-or ends, and holds it until the loop is back; on an ending signal (run_node) or close the last message on each of
-its writers is a zero force, acknowledged before the context goes. Run-time parameter changes are checked like
-start-up values and within the envelope fixed when the process started (haptic_bridge.tick.ENVELOPE), and applied
+A Supervisor thread (haptic_bridge.supervisor) publishes zero whenever the loop stalls beyond stall_bound_s, raises, or
+ends, and holds it until the loop is back; commands and zeros share one writer; on an ending signal (run_node) or close
+the last message on it is a zero force, acknowledged before the context goes. Run-time parameter changes are checked
+like start-up values and within the envelope fixed when the process started (haptic_bridge.tick.ENVELOPE), and applied
 from the next tick, or refused with the reason. `haptic_bridge --managed` runs the same bridge as a lifecycle node:
 activate starts the loop, deactivate and shutdown zero the force and stop it; its envelope is still the process's.
 The tick itself is haptic_bridge.tick.BridgeTick; the parameters are haptic_bridge.parameters.PARAMETERS.
@@ -53,7 +55,9 @@ class HapticBridge(Node):
 class ManagedHapticBridge(LifecycleNode):
     """The bridge as a lifecycle node: configure builds it, activate runs the loop, deactivate and shutdown leave
     zero force on the wire and stop it, cleanup removes it. The envelope is the one of the process's start, in
-    every state: a change while unconfigured is checked against it as a running bridge's would be."""
+    every state: a change while unconfigured is checked against it as a running bridge's would be. K·scale is checked
+    at every parameter change (with every device map the loop may render with once configured) and at activation,
+    which is refused while it is not passive."""
 
     def __init__(self):
         super().__init__("haptic_bridge")
@@ -77,7 +81,11 @@ class ManagedHapticBridge(LifecycleNode):
         return TransitionCallbackReturn.SUCCESS
 
     def on_activate(self, state) -> TransitionCallbackReturn:
-        self.shell.start()
+        try:
+            self.shell.start()  # checks K·scale with every map the loop may render with
+        except ValueError as exc:
+            self.get_logger().error(f"activate refused: {exc}")
+            return TransitionCallbackReturn.FAILURE
         return super().on_activate(state)
 
     def on_deactivate(self, state) -> TransitionCallbackReturn:

@@ -7,7 +7,9 @@ import time
 import numpy as np
 import rclpy
 
-from liver_sim.base.link import EmulatedLink, LinkSettings
+from haptic_bridge.sources import ACCEPT, WriterGate
+from liver_sim.base.emulated_link import EmulatedLink, LinkSettings
+from liver_sim.nodes.rcl_take import SerializedTake
 from msg_defs.stamps import stamp_s_from_bytes
 
 
@@ -85,7 +87,12 @@ class LoopInputs:
     rmw info (a dict with `source_timestamp` and `received_timestamp`, system-clock ns, and
     `publication_sequence_number`).
 
-    A subscription given an EmulatedLink (liver_sim.base.link) sends every message into it, timed by its
+    A subscription given a WriterGate (haptic_bridge.sources) takes every waiting message with its writer's GID and
+    hands on only the newest of the writer the gate accepts (the others are counted by the gate), as
+    callback(Taken, monotonic s of reception) (liver_sim.nodes.rcl_take.Taken: a message over `max_bytes` comes with
+    empty data and its size, never copied into Python).
+
+    A subscription given an EmulatedLink (liver_sim.base.emulated_link) sends every message into it, timed by its
     reception, and hands the callback the newest one the link has released by the poll, with its release time
     as its reception (`received=True`): an input's age counts from its emulated arrival. The owner node's clock
     minus the header stamp of each released message is the delay a rig sees on the wire (`link_delay_s`).
@@ -101,39 +108,67 @@ class LoopInputs:
         self.link_delay_s: dict[str, float] = {}
 
     def subscribe(self, msg_type, topic: str, qos, callback, raw: bool = False, every: bool = False,
-                  received: bool = False, link: EmulatedLink | None = None):
+                  received: bool = False, link: EmulatedLink | None = None, gate: WriterGate | None = None,
+                  max_bytes: int | None = None):
         """Subscribe to `topic` as the owning node names it (its namespace and remappings, `-r from:=to`,
         applied); returns the subscription (its get_publisher_count() tells whether anyone publishes).
-        With `link`, raw messages of a stamped type pass through it (class docstring)."""
+        With `link`, raw messages of a stamped type pass through it; with `gate`, only its writer's (class
+        docstring)."""
         resolved = self._owner.resolve_topic_name(topic)
-        subscription = self._node.create_subscription(msg_type, resolved, callback, qos, raw=raw)
+        subscription = self._node.create_subscription(msg_type, resolved, callback, qos, raw=raw or gate is not None)
+        if gate is not None:
+            self._inputs.append((subscription, callback, SerializedTake(subscription, max_bytes=max_bytes), gate,
+                                 link))
+            return subscription
         once = qos.depth == 1 and not every and link is None  # the reader keeps the newest message only: one take
         self._inputs.append((subscription, callback, every, received, link, once))
         return subscription
 
     def poll(self) -> None:
-        for subscription, callback, every, received, link, once in self._inputs:
-            newest = None
-            with subscription.handle:
-                if once:
-                    newest = subscription.handle.take_message(subscription.msg_type, subscription.raw)
-                else:
-                    while (taken := subscription.handle.take_message(subscription.msg_type, subscription.raw)):
-                        if link is not None:
-                            link.send(taken[0], received_monotonic(taken[1]))
-                        elif every:
-                            callback(*taken)
-                        else:
-                            newest = taken
-            if link is not None:
-                self._release(subscription, callback, received, link)
-                continue
-            if newest is None:
-                continue
-            if received:
-                callback(newest[0], received_monotonic(newest[1]))
+        for entry in self._inputs:
+            if isinstance(entry[3], WriterGate):
+                self._poll_gated(*entry)
             else:
-                callback(newest[0])
+                self._poll(*entry)
+
+    def _poll_gated(self, subscription, callback, take: SerializedTake, gate: WriterGate,
+                    link: EmulatedLink | None) -> None:
+        newest = None
+        while (taken := take()) is not None:
+            if gate.judge(taken.gid) != ACCEPT:
+                continue
+            if link is not None:
+                link.send(taken, monotonic_of(taken.received_ns))
+            else:
+                newest = taken
+        if link is not None:
+            self._release(subscription, callback, True, link)
+        elif newest is not None:
+            callback(newest, monotonic_of(newest.received_ns))
+
+    def _poll(self, subscription, callback, every: bool, received: bool, link: EmulatedLink | None,
+              once: bool) -> None:
+        newest = None
+        with subscription.handle:
+            if once:
+                newest = subscription.handle.take_message(subscription.msg_type, subscription.raw)
+            else:
+                while (taken := subscription.handle.take_message(subscription.msg_type, subscription.raw)):
+                    if link is not None:
+                        link.send(taken[0], received_monotonic(taken[1]))
+                    elif every:
+                        callback(*taken)
+                    else:
+                        newest = taken
+        if link is not None:
+            self._release(subscription, callback, received, link)
+            return
+        if newest is None:
+            return
+        if received:
+            callback(newest[0], received_monotonic(newest[1]))
+        else:
+            callback(newest[0])
 
     def _release(self, subscription, callback, received: bool, link: EmulatedLink) -> None:
         """Hand `callback` the newest message `link` has released by now, timed by its release."""
@@ -142,7 +177,7 @@ class LoopInputs:
             return
         data, release_s = released[-1]
         try:
-            stamp_s = stamp_s_from_bytes(data, subscription.msg_type.__name__)
+            stamp_s = stamp_s_from_bytes(getattr(data, "data", data), subscription.msg_type.__name__)
         except ValueError:
             pass  # the callback refuses it with the reason
         else:
@@ -153,11 +188,14 @@ class LoopInputs:
             callback(data)
 
     def destroy(self) -> None:
+        for entry in self._inputs:
+            if isinstance(entry[2], SerializedTake):
+                entry[2].close()
         self._node.destroy_node()
 
 
 def emulated_link(p) -> EmulatedLink | None:
-    """The EmulatedLink of the link parameters (liver_sim.base.link.LINK_PARAMETERS) in a node's record `p`, or
+    """The EmulatedLink of the link parameters (liver_sim.base.emulated_link.LINK_PARAMETERS) in a node's record `p`, or
     None when they emulate nothing: the inputs then bypass it at no cost."""
     settings = LinkSettings.from_parameters(p)
     return EmulatedLink(settings) if settings.emulated else None
@@ -177,7 +215,11 @@ def link_report(link: EmulatedLink | None, inputs: LoopInputs) -> dict:
 def received_monotonic(info: dict) -> float:
     """Monotonic time (s) at which DDS received a message, from its rmw info's `received_timestamp`
     (system clock ns); now when the middleware gives none."""
-    stamp = info.get("received_timestamp", 0) if info else 0
+    return monotonic_of(info.get("received_timestamp", 0) if info else 0)
+
+
+def monotonic_of(stamp: int) -> float:
+    """Monotonic time (s) of a reception `stamp` (system clock ns, 0: none given: now)."""
     now = time.monotonic_ns()
     if not stamp:
         return now * 1e-9

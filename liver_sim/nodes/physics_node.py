@@ -4,7 +4,8 @@ Publishes /liver/nodes (PointCloud2), /liver/surface (shape_msgs/Mesh, transient
 on every tear or cut, when /liver/nodes changes its node count too),
 /liver/marker (TRIANGLE_LIST at marker_rate_hz), and for each tool (parameter `tools`; one by default, in the root
 namespace) its local model (/liver/contact_plane) and the force on it (/liver/tool_wrench), in the tool's namespace
-(/left/liver/contact_plane for tool `left`); takes each tool's tip from its /tool/pose.  Stamps are the ROS time
+(/left/liver/contact_plane for tool `left`); takes each tool's tip from its /tool/pose, only from its `tool_node`
+(judged by each sample's writer, haptic_bridge.sources).  Stamps are the ROS time
 at which each frame starts.
 """
 from __future__ import annotations
@@ -16,12 +17,14 @@ import numpy as np
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 
-from liver_sim.base.link import link_text
+from haptic_bridge.sources import WriterGate
+from liver_sim.base.emulated_link import link_text
 from liver_sim.base.parameters import check_parameter
 from liver_sim.nodes.diagnostics import loop_status, loop_status_name, publish_diagnostics
 from liver_sim.nodes.inputs import Latest, LoopInputs, emulated_link, link_report
 from liver_sim.nodes.parameters import declare_parameters
 from liver_sim.nodes.run import run_node
+from liver_sim.nodes.source_graph import update_gates
 from liver_sim.physics.parameters import (
     PARAMETERS,
     PhysicsParameters,
@@ -31,12 +34,18 @@ from liver_sim.physics.parameters import (
 )
 from liver_sim.physics.pipeline import Frame, FramePipeline
 from liver_sim.realtime.rate_loop import RateLoop, warn
+from msg_defs.cdr import MAX_BYTES
 from msg_defs.forces import wrench_stamped_bytes
 from msg_defs.local_model import local_model_marker_bytes
 from msg_defs.point_cloud import nodes_pointcloud2_bytes
 from msg_defs.poses import pose_from_bytes
 from msg_defs.skin import skin_marker_serialized, skin_mesh_msg
 from msg_defs.topics import TOPICS, loop_input_qos
+
+#: How often (s) the node looks at the graph for the writers of its tools' poses (not in the 150 Hz loop).
+GRAPH_CHECK_S = 0.1
+#: Tool poses a reader keeps between two frames: 1 kHz devices for 1/150 s, and other writers' samples beside them.
+POSE_HISTORY = 100
 
 
 class PhysicsNode(Node):
@@ -65,10 +74,14 @@ class PhysicsNode(Node):
         self._inputs = LoopInputs(self)
         self._links = [emulated_link(p) for _ in self.tools]  # the teleoperation link from each operator, if emulated
         self._poses = [Latest() for _ in self.tools]
-        for tool, pose, link in zip(self.tools, self._poses, self._links):
+        # each tool's poses only from its tool_node's writer (haptic_bridge.sources), the graph looked at by a timer
+        self._gates = {tool.topic("tool_pose_topic"): WriterGate(tool.source_node, tool.parameter("tool_node"))
+                       for tool in self.tools}
+        for tool, pose, link, gate in zip(self.tools, self._poses, self._links, self._gates.values()):
             self._inputs.subscribe(TOPICS["tool_pose"].type, tool.topic("tool_pose_topic"),
-                                   loop_input_qos(TOPICS["tool_pose"]), pose.set, raw=True, received=link is not None,
-                                   link=link)
+                                   loop_input_qos(TOPICS["tool_pose"], POSE_HISTORY), pose.set, link=link, gate=gate,
+                                   max_bytes=MAX_BYTES["PoseStamped"])
+        self.create_timer(GRAPH_CHECK_S, lambda: update_gates(self, self._gates))
         self._last_pose_bytes = [None] * len(self.tools)
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.publish_surface()
@@ -117,12 +130,15 @@ class PhysicsNode(Node):
     def _receive_poses(self) -> None:
         """Hand the pipeline each tool's newest pose message, once (malformed bytes or a NaN pose: refused)."""
         for k, pose in enumerate(self._poses):
-            data, received = pose.get()
-            if data is None or data is self._last_pose_bytes[k]:
+            taken, received = pose.get()
+            if taken is None or taken is self._last_pose_bytes[k]:
                 continue
-            self._last_pose_bytes[k] = data
+            self._last_pose_bytes[k] = taken
             try:
-                position, orientation, _ = pose_from_bytes(data)
+                if not taken.data:
+                    raise ValueError(f"PoseStamped: {taken.size} bytes, more than the {MAX_BYTES['PoseStamped']} a "
+                                     "tool pose may have (msg_defs.cdr.MAX_BYTES): refused without reading it")
+                position, orientation, _ = pose_from_bytes(taken.data)
             except ValueError as exc:
                 self._pipeline.refuse(str(exc), received, k)
             else:
@@ -174,6 +190,11 @@ class PhysicsNode(Node):
         for tool, contact, pose, link in zip(self.tools, self.model.tools, self._poses, self._links):
             tools[tool.parameter("tool_mode")] = contact.use.mode
             tools[tool.parameter("tool_pose_age_s")] = float(now - pose.get()[1])
+            gate = self._gates[tool.topic("tool_pose_topic")]
+            tools[tool.parameter("tool_node")] = gate.source
+            tools[tool.parameter("refused_tool_poses")] = gate.refused
+            tools[tool.parameter("tool_pose_source")] = gate.problem() or "ok"
+            tools[tool.parameter("tool_pose_rivals")] = ", ".join(gate.rivals())
             tools.update({tool.parameter(k): v for k, v in link_report(link, self._inputs).items()})
         extra = {"frame_compute_p99_s": float(np.percentile(compute, 99)) if compute.size else 0.0,
                  "divergences": self.model.divergences, "bad_tool_poses": self._pipeline.refused_poses,

@@ -115,19 +115,22 @@ def _functions():
 @dataclass(frozen=True)
 class Taken:
     """One serialized message and what DDS says of it: publisher GID (16 bytes), its publication
-    sequence number, source and reception timestamps (system clock ns)."""
+    sequence number, source and reception timestamps (system clock ns), and its `size` (bytes); `data` is empty
+    when `size` is over the take's bound (the message was not copied into Python)."""
 
     data: bytes
     gid: bytes
     sequence: int
     source_ns: int
     received_ns: int
+    size: int
 
 
 class SerializedTake:
-    """Takes the serialized messages of one rclpy subscription (made with raw=True), with their info."""
+    """Takes the serialized messages of one rclpy subscription (made with raw=True), with their info; a message
+    longer than `max_bytes` is taken with empty `data` (its bytes are never copied into a Python object)."""
 
-    def __init__(self, subscription, initial_capacity: int = 4096):
+    def __init__(self, subscription, initial_capacity: int = 4096, max_bytes: int | None = None):
         self._take, allocator, init, self._fini, self._error, self._reset = _functions()
         self.subscription = subscription
         self._message = _Uint8Array()
@@ -135,6 +138,7 @@ class SerializedTake:
         if init(ctypes.byref(self._message), initial_capacity, ctypes.byref(self._allocator)) != RCL_RET_OK:
             raise MemoryError("rcutils_uint8_array_init failed")
         self._info = _MessageInfo()
+        self.max_bytes = max_bytes
 
     def __call__(self) -> Taken | None:
         """The next waiting message, or None."""
@@ -147,10 +151,11 @@ class SerializedTake:
             detail = self._error().value.decode(errors="replace")
             self._reset()
             raise RuntimeError(f"taking a message of {self.subscription.topic_name} failed ({status}: {detail})")
-        info = self._info
-        return Taken(ctypes.string_at(self._message.buffer, self._message.buffer_length),
-                     bytes(info.publisher_gid.data), int(info.publication_sequence_number),
-                     int(info.source_timestamp), int(info.received_timestamp))
+        info, size = self._info, self._message.buffer_length
+        data = b"" if self.max_bytes is not None and size > self.max_bytes else ctypes.string_at(
+            self._message.buffer, size)
+        return Taken(data, bytes(info.publisher_gid.data), int(info.publication_sequence_number),
+                     int(info.source_timestamp), int(info.received_timestamp), size)
 
     def close(self) -> None:
         if self._message.buffer:

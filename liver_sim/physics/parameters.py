@@ -8,14 +8,14 @@ from collections.abc import Mapping
 from dataclasses import dataclass, replace
 
 from liver_sim.base import kernel_cache
-from liver_sim.base.link import LINK_PARAMETERS
+from liver_sim.base.emulated_link import LINK_PARAMETERS
 from liver_sim.base.parameters import Param, parameter_record, realtime_priority_parameter
 from liver_sim.base.topic_names import TOOL_NAME, TOPIC_NAMES, in_namespace, tool_namespace, tool_topic
 from liver_sim.mesh.io import load_mesh
 from liver_sim.mesh.liver_shape import default_liver
-from liver_sim.physics.contact import ToolShape
+from liver_sim.physics.contact.tool_geometry import ToolShape
 from liver_sim.physics.model import LiverModel
-from liver_sim.physics.model_params import (
+from liver_sim.physics.settings import (
     CONTACT_MODELS,
     INTEGRATOR_SUBSTEPS,
     INTEGRATORS,
@@ -27,8 +27,8 @@ from liver_sim.physics.model_params import (
     SpringLaw,
     TissueProperties,
 )
-from liver_sim.physics.tool_contact import LOCAL_MODELS, ToolContact
-from liver_sim.physics.tool_use import TOOL_MODES, ToolUse
+from liver_sim.physics.tools.tool import LOCAL_MODELS, Tool
+from liver_sim.physics.tools.use import TOOL_MODES, ToolUse
 
 DEFAULTS = ModelParams()
 TISSUE = DEFAULTS.tissue
@@ -143,6 +143,9 @@ PARAMETERS = {
                                "namespace"),
     "tool_pose_topic": Param(tool_topic("tool_pose"), "tool tip pose in the liver frame (PoseStamped), in the tool's "
                              "namespace"),
+    "tool_node": Param("liver_tool", "the only node whose tool poses on tool_pose_topic are taken, judged by each "
+                       "sample's writer (others are refused and counted); a relative name is the node of that name in "
+                       "the tool's namespace (/left/liver_tool for tool left); read at start"),
     **LINK_PARAMETERS,  # on the inputs from the other side of a teleoperation link
 }
 
@@ -153,7 +156,7 @@ PhysicsParameters = parameter_record("PhysicsParameters", PARAMETERS, "The param
 #: What each tool has of its own: tool NAME declares NAME.<name>, its default the node's <name>.
 TOOL_PARAMETERS = ("tool_shape", "tool_radius_m", "tool_length_m", "tool_half_extents_m", "tool_mode",
                    "grasp_margin_m", "cut_depth_m", "local_model", "local_model_reach_m", "tool_pose_topic",
-                   "contact_plane_topic", "tool_wrench_topic")
+                   "contact_plane_topic", "tool_wrench_topic", "tool_node")
 #: One tool's parameters (TOOL_PARAMETERS) as a typed record.
 ToolSettings = parameter_record("ToolSettings", {name: PARAMETERS[name] for name in TOOL_PARAMETERS},
                                 "One tool's parameters of liver_physics (TOOL_PARAMETERS).")
@@ -175,6 +178,11 @@ class PhysicsTool:
     def topic(self, parameter: str) -> str:
         """The absolute name of the topic parameter `parameter` (TOOL_TOPIC_PARAMETERS) in the tool's namespace."""
         return in_namespace(getattr(self.settings, parameter), self.namespace)
+
+    @property
+    def source_node(self) -> str:
+        """The fully qualified name of the node whose poses the tool takes (`tool_node` in its namespace)."""
+        return in_namespace(self.settings.tool_node, self.namespace)
 
     def parameter(self, name: str) -> str:
         """The node's name of the tool's parameter `name`: NAME.<name>, or <name> for the tool ''."""
@@ -248,12 +256,12 @@ def model_params(p: PhysicsParameters) -> ModelParams:
         tear_strain_capsule=p.tear_strain_capsule).validate()
 
 
-def tool_contact(tool: PhysicsTool) -> ToolContact:
-    """The model's ToolContact of a tool of the physics node: its shape, local model and use."""
+def model_tool(tool: PhysicsTool) -> Tool:
+    """The model's Tool of a tool of the physics node: its shape, local model and use."""
     s = tool.settings
-    return ToolContact(ToolShape(s.tool_shape, s.tool_radius_m, s.tool_length_m, tuple(s.tool_half_extents_m)),
-                       s.local_model, s.local_model_reach_m, ToolUse(s.tool_mode, s.grasp_margin_m, s.cut_depth_m),
-                       name=tool.name)
+    return Tool(ToolShape(s.tool_shape, s.tool_radius_m, s.tool_length_m, tuple(s.tool_half_extents_m)),
+                s.local_model, s.local_model_reach_m, ToolUse(s.tool_mode, s.grasp_margin_m, s.cut_depth_m),
+                name=tool.name)
 
 
 def build_model(p: PhysicsParameters, tools: tuple[PhysicsTool, ...] | None = None) -> LiverModel:
@@ -262,6 +270,6 @@ def build_model(p: PhysicsParameters, tools: tuple[PhysicsTool, ...] | None = No
     tools = physics_tools(p) if tools is None else tools
     with kernel_cache.compiling():  # meshing a surface compiles kernels too, not only the warm-up
         mesh = load_mesh(p.mesh_path, p.target_tets, p.mesh_scale) if p.mesh_path else default_liver()
-        model = LiverModel(mesh, model_params(p), [tool_contact(tool) for tool in tools])
+        model = LiverModel(mesh, model_params(p), [model_tool(tool) for tool in tools])
         model.warm_up()
     return model

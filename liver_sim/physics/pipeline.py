@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from liver_sim.physics.contact import ToolPose
+from liver_sim.physics.contact.tool_geometry import ToolPose
 from liver_sim.physics.model import FrameResult, LiverModel
 from liver_sim.physics.parameters import PhysicsParameters
 

@@ -15,14 +15,14 @@ import numba
 import numpy as np
 
 from liver_sim.mesh.tetmesh import TetMesh
-from liver_sim.physics.explicit_kernels import StepSettings, WorkArrays
-from liver_sim.physics.fem_kernels import build_tets
-from liver_sim.physics.implicit import ImplicitEuler
-from liver_sim.physics.model_params import ModelParams
-from liver_sim.physics.spring_kernels import SpringArrays
-from liver_sim.physics.springs import SpringNetwork, build_springs, estimate_stable_time_step, stable_time_step
-from liver_sim.physics.support import SupportArrays, build_support, node_areas_m2
-from liver_sim.physics.tearing import TearDetector
+from liver_sim.physics.settings import ModelParams
+from liver_sim.physics.solver.explicit_kernels import StepSettings, WorkArrays
+from liver_sim.physics.solver.implicit import ImplicitEuler
+from liver_sim.physics.tissue.fem_kernels import build_tets
+from liver_sim.physics.tissue.organ_support import SupportArrays, build_support, node_areas_m2
+from liver_sim.physics.tissue.spring_kernels import SpringArrays
+from liver_sim.physics.tissue.springs import SpringNetwork, build_springs, estimate_stable_time_step, stable_time_step
+from liver_sim.physics.topology.tearing import TearDetector
 
 #: Above this many springs the parallel kernel is used (below it thread start-up costs more).
 PARALLEL_MIN_EDGES = 20_000
@@ -55,8 +55,9 @@ class Structure:
 
     `mesh` (its rest points, m), `capsule_triangles` (the skin triangles carrying capsule springs: the whole skin
     until a tear or a cut opens faces), lumped `masses_kg` (N,), sorted `fixed_nodes`, the Eq. 1 `springs` (and
-    `spring_arrays`, their kernel form), the `support` ties (physics.support), the `params` (their `substeps`
-    raised after a change when an explicit integrator needs it), `parallel` (the explicit kernel and the implicit
+    `spring_arrays`, their kernel form), the `support` ties (physics.tissue.organ_support), the `params` (their
+    `substeps` raised after a change when an explicit integrator needs it), `parallel` (the explicit kernel and the
+    implicit
     step's PCG on all threads),
     `stable_dt_s` (the explicit step's bound; inf for the implicit integrator), `version` (0, then one more per
     change); the work arrays of the explicit kernels (`work`) and the implicit integrator (`solver`), whose
@@ -103,7 +104,7 @@ class Structure:
     @cached_property
     def skin_node_area_m2(self) -> np.ndarray:
         """Per node, a third of the area of the skin triangles around it at rest (m², 0 off the skin): its share of
-        the tool's contact (contact.surface_contacts)."""
+        the tool's contact (contact.tool_geometry.contact_rows)."""
         return node_areas_m2(self.mesh.points, self.mesh.skin)
 
     @cached_property
@@ -115,7 +116,7 @@ class Structure:
 
     @cached_property
     def tear_detector(self) -> TearDetector:
-        """The interior faces of this mesh and their tearing thresholds (physics.tearing)."""
+        """The interior faces of this mesh and their tearing thresholds (physics.topology.tearing)."""
         p = self.params
         return TearDetector(self.mesh.points, self.mesh.tets, self.capsule_triangles, p.tear_strain_parenchyma,
                             p.tear_strain_capsule)

@@ -1,7 +1,7 @@
 """Machine stalls: spans in which this machine ran none of its threads that were due, measured by a sentinel,
 so that a gap in a loop can be told from the product's own doing.
 
-On a virtual machine the host may not run a virtual CPU for milliseconds (the README gives what was seen here),
+On a virtual machine the host may not run a virtual CPU for milliseconds (docs/performance.md gives what was seen here),
 often on both CPUs at once, on an idle VM as beside busy loops. The guest's clocks go on, so every loop on that CPU
 misses its deadlines and nothing inside the guest can tell why but a thread that should have run there: a sentinel,
 one process per CPU, pinned to it at SCHED_FIFO 99 (above every loop), which sleeps to absolute deadlines

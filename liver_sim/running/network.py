@@ -18,7 +18,6 @@ import numpy as np
 import rclpy
 from rclpy.experimental import EventsExecutor
 
-from liver_sim.analysis import rate_figures
 from liver_sim.base.process_settings import command_line, printable, service_nice
 from liver_sim.base.topic_names import in_namespace, tool_namespace, tool_topic
 from liver_sim.mesh.landmarks import press_anchor
@@ -28,6 +27,7 @@ from liver_sim.nodes.run import spin
 from liver_sim.running.launcher import NodeProcesses, die_with_parent, log_tail
 from liver_sim.running.listener import NetworkListener, NetworkSnapshot
 from liver_sim.running.machine_stalls import Sentinels, gaps_with_stalls
+from liver_sim.sessions.analysis import rate_figures
 from liver_sim.sessions.record import READY, RECORDER_NODE, default_topics
 
 #: How often (s) the listener decodes what it received during a run (and lets the bytes go).

@@ -15,7 +15,9 @@ from pathlib import Path
 import numpy as np
 from rclpy.serialization import deserialize_message
 
-from liver_sim.analysis import (
+from liver_sim.base.local_model import penetration
+from liver_sim.base.topic_names import BASELINE_FORCE_TOPIC, in_namespace, tool_namespace
+from liver_sim.sessions.analysis import (
     CONTACT_FORCE_N,
     contact_fraction,
     fig8_figures,
@@ -23,8 +25,6 @@ from liver_sim.analysis import (
     largest_force_jump_n,
     rate_figures,
 )
-from liver_sim.base.local_model import penetration
-from liver_sim.base.topic_names import BASELINE_FORCE_TOPIC, in_namespace, tool_namespace
 from liver_sim.sessions.bag import BagError, bag_info, read_messages
 from liver_sim.sessions.parameters import node_parameters
 from liver_sim.sessions.record import message_class, type_name

@@ -12,11 +12,11 @@ from pathlib import Path
 
 import numpy as np
 
-from liver_sim.analysis import largest_force_jump_n
-from liver_sim.base.link import LinkSettings
+from liver_sim.base.emulated_link import LinkSettings
 from liver_sim.base.process_settings import cli_command_line
 from liver_sim.running.machine_stalls import stall_summary
 from liver_sim.running.network import ROOT_LABEL, NetworkRun, closed_loop_plan, run_network, wire_gaps, wire_rates
+from liver_sim.sessions.analysis import largest_force_jump_n
 from liver_sim.sessions.record import recorder_command
 from liver_sim.sessions.report import plot_force
 from liver_sim.studies.demo_liver import DemoMesh

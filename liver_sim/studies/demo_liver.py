@@ -7,11 +7,13 @@ from pathlib import Path
 
 import numpy as np
 
+from liver_sim.mesh.anatomical_support import read_support, support_path
 from liver_sim.mesh.io import load_mesh
 from liver_sim.mesh.landmarks import press_anchor
 from liver_sim.mesh.liver_shape import default_liver
 from liver_sim.mesh.tetmesh import TetMesh
 from liver_sim.physics.parameters import PARAMETERS as PHYSICS_PARAMETERS
+from liver_sim.physics.settings import ModelParams
 from liver_sim.tool.scripts import ScriptSettings
 
 
@@ -39,11 +41,27 @@ class DemoMesh:
             return default_liver()
         return load_mesh(self.path, PHYSICS_PARAMETERS["target_tets"].default, self.scale)
 
+    def support(self) -> dict:
+        """The physics' `support` and `support_regions` from the support file beside the mesh (one built from a
+        segmentation has one: mesh.anatomical_support), or none (the defaults)."""
+        if self.path is None or not support_path(self.path).is_file():
+            return {}
+        return read_support(support_path(self.path))
+
+    def model_params(self) -> ModelParams:
+        """The model's settings for this mesh: the defaults, with the support file's regions when it has one."""
+        support = self.support()
+        if not support:
+            return ModelParams()
+        regions = support["support_regions"]
+        return ModelParams(support=support["support"],
+                           support_regions=tuple(tuple(regions[i:i + 5]) for i in range(0, len(regions), 5)))
+
     def physics_parameters(self, mesh: TetMesh) -> dict:
-        """The physics node's parameters that load this mesh (none for the default liver)."""
+        """The physics node's parameters that load this mesh and its support file (none for the default liver)."""
         if self.path is None:
             return {}
-        return {"mesh_path": str(self.path.resolve()), "mesh_scale": self.scale}
+        return {"mesh_path": str(self.path.resolve()), "mesh_scale": self.scale, **self.support()}
 
     def device_parameters(self, mesh: TetMesh) -> dict:
         """The script anchor and device map that make the simulated hand press the top of `mesh` with the

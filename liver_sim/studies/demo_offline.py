@@ -14,7 +14,6 @@ from pathlib import Path
 import numpy as np
 
 from liver_sim.physics.model import LiverModel
-from liver_sim.physics.model_params import ModelParams
 from liver_sim.studies.demo_liver import DemoMesh
 from liver_sim.studies.plots import plot_liver, plot_press_release
 from liver_sim.studies.scenarios import offline_press_release, press_release, recovery_time_s
@@ -27,7 +26,7 @@ def run_offline_demo(out_dir: Path, duration_s: float | None = None, progress=pr
                      liver: DemoMesh = DemoMesh()) -> dict:
     """Run the press-and-release on `liver`, write the summary and pictures into out_dir, return the summary."""
     mesh = liver.load()
-    model = LiverModel(mesh, ModelParams())  # implicit: no stability bound, whatever the mesh's elements
+    model = LiverModel(mesh, liver.model_params())  # implicit: no stability bound, whatever the mesh's elements
     script = offline_press_release(mesh, model.tool.shape.radius_m)
     if duration_s is not None:
         active = script.approach_s + script.press_s + script.hold_s + script.withdraw_s

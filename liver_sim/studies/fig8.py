@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from liver_sim.analysis import fig8_figures
+from liver_sim.sessions.analysis import fig8_figures
 from liver_sim.sessions.report import plot_fig8, plot_force
 from liver_sim.sessions.resimulate import play_script
 from liver_sim.tool.scripts import ScriptSettings, make_script

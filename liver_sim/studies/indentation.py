@@ -26,9 +26,9 @@ import numpy as np
 
 from liver_sim.mesh.stuffing import tetrahedralize_to_target
 from liver_sim.mesh.tetmesh import TetMesh
-from liver_sim.physics.contact import ToolPose, ToolShape
+from liver_sim.physics.contact.tool_geometry import ToolPose, ToolShape
 from liver_sim.physics.model import LiverModel
-from liver_sim.physics.model_params import ModelParams
+from liver_sim.physics.settings import ModelParams
 from liver_sim.studies.indentation_reference import sphere_indentation
 
 #: The block (m): 12 × 12 cm wide, 6 cm thick, its bottom at z = 0.
@@ -126,7 +126,7 @@ def bottom_nodes(mesh: TetMesh) -> tuple:
 def _sink_m(model: LiverModel) -> float:
     """The deepest penetration of the tool by the skin (m): its contact rows' depths and the skin nodes inside its
     probes' balls."""
-    tool = model.tool.contact
+    tool = model.state.tools[0].sweep
     deepest = 0.0
     rows = np.isfinite(tool.depth) & (tool.share > 0.0)
     if rows.any():

@@ -2,7 +2,7 @@
 
 The textbook model the check's set-up must reproduce before the product is held to it: small-strain linear
 elasticity on the block's own tetrahedra (the element stiffness K_ab = V·(λ·g_a⊗g_b + μ·(g_b⊗g_a + (g_a·g_b)·I)),
-g the shape-function gradients of physics.fem_kernels.build_tets), the bottom bonded, solved statically; the
+g the shape-function gradients of physics.tissue.fem_kernels.build_tets), the bottom bonded, solved statically; the
 sphere an ideal rigid contact: every top-face node under it held on its surface in z (free to slide in x and y),
 the set of held nodes found by the active-set rule — a node that would rise into the sphere is held, a held node
 the sphere would pull is let go.  The force on the sphere is the sum of the held nodes' reactions.  No contact
@@ -15,7 +15,7 @@ import scipy.sparse
 import scipy.sparse.linalg
 
 from liver_sim.mesh.tetmesh import TetMesh
-from liver_sim.physics.fem_kernels import build_tets
+from liver_sim.physics.tissue.fem_kernels import build_tets
 
 #: The active set is final when no node enters or leaves it; at most this many solves per depth.
 MAX_ACTIVE_SET_ROUNDS = 30

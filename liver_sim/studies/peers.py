@@ -7,8 +7,8 @@ of the Green strain, Lamé constants from Young's modulus E and Poisson's ratio 
 β = η/E (MuJoCo's damping matrix β·K is the Kelvin–Voigt stress σ = E·ε + η·ε̇ of the parenchyma),
 and a rigid sphere of the tool's radius that presses the top of the liver as the tool does.
 
-Best stable setting (FlexSettings' defaults, tried on the default and ~10k-tet livers; README "Peers, side
-by side"): MuJoCo 4.0 integrates flex elasticity implicitly only with `integrator="discrete"` (implicit and
+Best stable setting (FlexSettings' defaults, tried on the default and ~10k-tet livers; docs/command-line.md, "Peers,
+side by side"): MuJoCo 4.0 integrates flex elasticity implicitly only with `integrator="discrete"` (implicit and
 implicitfast refuse it; explicit Euler diverges even at 20 steps per 150 Hz frame); of its two primal
 solvers CG gives Newton's forces in 1/2 (default liver) to 1/7 (~10k tets) of its time; with fewer than
 ~200 iterations the discrete step's solve ends under-converged on the ~10k liver in contact, so the cap is
@@ -25,13 +25,13 @@ import numpy as np
 
 from liver_sim.mesh.landmarks import press_anchor
 from liver_sim.mesh.tetmesh import TetMesh
-from liver_sim.physics.contact import ToolPose
+from liver_sim.physics.contact.tool_geometry import ToolPose
 from liver_sim.physics.model import LiverModel
 
 #: How to get the peer.
 INSTALL_HINT = "pip install .[peers]"
 #: Poisson's ratio of liver_sim's spring network: central springs make a Cauchy solid, ν = 1/4
-#: (liver_sim.physics.materials), so the peer gets the same value by default.
+#: (liver_sim.physics.tissue.materials), so the peer gets the same value by default.
 NETWORK_POISSON_RATIO = 0.25
 #: Name of the flex in the MJCF model (its bodies are `liver_<node>`).
 FLEX_NAME = "liver"

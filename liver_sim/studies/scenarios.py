@@ -12,7 +12,7 @@ import numpy as np
 
 from liver_sim.mesh.landmarks import press_anchor
 from liver_sim.mesh.tetmesh import TetMesh
-from liver_sim.physics.contact import ToolPose
+from liver_sim.physics.contact.tool_geometry import ToolPose
 from liver_sim.physics.model import LiverModel
 from liver_sim.tool.scripts import ScriptSettings, make_script
 

@@ -15,10 +15,10 @@ import numpy as np
 
 from liver_sim.mesh.stuffing import tetrahedralize_implicit
 from liver_sim.mesh.tetmesh import TetMesh
-from liver_sim.physics.implicit import ImplicitEuler
-from liver_sim.physics.materials import network_young_modulus_pa
-from liver_sim.physics.model_params import FIG2_LAW, ModelParams, SpringLaw, TissueProperties
-from liver_sim.physics.springs import build_springs
+from liver_sim.physics.settings import FIG2_LAW, ModelParams, SpringLaw, TissueProperties
+from liver_sim.physics.solver.implicit import ImplicitEuler
+from liver_sim.physics.tissue.materials import network_young_modulus_pa
+from liver_sim.physics.tissue.springs import build_springs
 
 CYLINDER_RADIUS_M = 0.02
 CYLINDER_LENGTH_M = 0.10
@@ -86,7 +86,7 @@ def run_traction(law: SpringLaw = FIG2_LAW, mesh: TetMesh | None = None, progres
     small-strain stiffness K.
 
     Every spring follows `law` (Fig. 2's by default: the paper's per-spring constants); with `tissue`, the
-    springs get the liver's materials instead (physics.materials: parenchyma on the tet edges, capsule on the
+    springs get the liver's materials instead (physics.tissue.materials: parenchyma on the tet edges, capsule on the
     skin), whose law has Fig. 2's shape with the tissue's cubic_ratio (`law` is then that shape, scaled).
     Set-up with `clamp_length_m` 0, the paper's (Fig. 4): top face fixed, equal axial forces on the bottom
     face's nodes, chosen as K·(d + λ1/λ2·d³) for the target strains d; elongation: their mean displacement over

@@ -34,9 +34,9 @@ from haptic_bridge.tick import BridgeTick
 from liver_sim.mesh.landmarks import press_anchor
 from liver_sim.mesh.liver_shape import default_liver
 from liver_sim.mesh.tetmesh import TetMesh
-from liver_sim.physics.contact import ToolPose
+from liver_sim.physics.contact.tool_geometry import ToolPose
 from liver_sim.physics.model import LiverModel
-from liver_sim.physics.model_params import ModelParams
+from liver_sim.physics.settings import ModelParams
 from liver_sim.sessions.parameters import node_parameters
 from liver_sim.studies.scenarios import (
     deformation_m,

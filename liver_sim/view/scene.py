@@ -77,7 +77,7 @@ TWIN_TOLERANCE_M = 1e-7
 
 def opened_triangles(rest_m: np.ndarray, skin: np.ndarray) -> np.ndarray:
     """Mask of the skin triangles a tear or a cut opened: the two lips of an opening lie on each other at rest (a
-    separation duplicates nodes in place, physics.topology), so such a triangle has a twin with the same rest
+    separation duplicates nodes in place, physics.topology.change), so such a triangle has a twin with the same rest
     corners (to TWIN_TOLERANCE_M); the skin of the original surface has none."""
     skin = np.asarray(skin, dtype=np.int64).reshape(-1, 3)
     if not len(skin):

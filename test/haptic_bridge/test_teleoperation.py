@@ -17,7 +17,7 @@ from haptic_bridge.passivity import (
     max_generated_energy,
 )
 from haptic_bridge.tick import BridgeTick, passive_model_update_on
-from liver_sim.base.link import LINK_PARAMETERS, EmulatedLink, LinkSettings
+from liver_sim.base.emulated_link import LINK_PARAMETERS, EmulatedLink, LinkSettings
 from liver_sim.base.local_model import LocalModel, penetration
 from liver_sim.bench import teleop
 from liver_sim.physics.parameters import PARAMETERS as PHYSICS

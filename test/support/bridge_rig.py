@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 import rclpy
 from geometry_msgs.msg import PoseStamped
+from rclpy.duration import Duration
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.signals import SignalHandlerOptions
 from waiting import wait_for
@@ -67,7 +68,8 @@ def local_model(kind: str) -> LocalModel:
 def start_bridge(env: dict, program: list[str] | None = None, **params) -> subprocess.Popen:
     args = (program or [sys.executable, "-m", "liver_sim.nodes.bridge_node"]) + ["--ros-args", "--params-file",
                                                                                str(CONFIG)]
-    params = {"device_map_node": "/test_haptic_bridge", **params}  # the Rig publishes the device map
+    params = {"device_map_node": "/test_haptic_bridge", "model_node": "/test_haptic_bridge",
+              "device_node": "/test_haptic_bridge", **params}  # the Rig publishes every input
     for name, v in params.items():
         text = ("[" + ",".join(repr(float(x)) for x in v) + "]" if isinstance(v, list)
                 else str(v).lower() if isinstance(v, bool) else str(v))
@@ -103,6 +105,7 @@ class Rig:
         self.forces, self.stamps, self.pose_stamps, self.diagnostics = [], [], set(), []
         self.tool = None      # tool tip (m, liver frame), published as the stylus sample that places it, or None
         self.nan_pose = False
+        self.pose_lead_s = 0.0  # the stylus samples' stamps this far ahead of the clock (s)
         self.model = None     # a LocalModel published as the contact marker, or None
         self.zero_quaternion = False
         self.huge_marker = False  # a local model whose text makes the Marker 100 kB
@@ -119,10 +122,10 @@ class Rig:
                                                TOPICS["device_map"].qos)
         self.publish_map(rotation_xyzw)
 
-    def publish_map(self, rotation_xyzw) -> None:
-        """Latch a device map of this rotation (no translation, scale 1) on the map topic; the stylus samples place
+    def publish_map(self, rotation_xyzw, scale: float = 1.0) -> None:
+        """Latch a device map of this rotation and scale (no translation) on the map topic; the stylus samples place
         the tool through it from now on."""
-        self.device_map = DeviceMap(rotation_xyzw)
+        self.device_map = DeviceMap(rotation_xyzw, scale=scale)
         self._map.publish(device_map_message(self.device_map))
 
     def _on_force(self, message) -> None:
@@ -133,12 +136,13 @@ class Rig:
     def _publish(self) -> None:
         stamp = self.node.get_clock().now().to_msg()
         if self.tool is not None:
+            pose_stamp = (self.node.get_clock().now() + Duration(seconds=self.pose_lead_s)).to_msg()
             pose = pose_stamped(self.device_map.liver_to_device(np.asarray(self.tool, dtype=float)),
-                                (0.0, 0.0, 0.0, 1.0), stamp, "phantom_base")
+                                (0.0, 0.0, 0.0, 1.0), pose_stamp, "phantom_base")
             if self.nan_pose:
                 pose = PoseStamped(header=pose.header)
                 pose.pose.position.z = math.nan
-            self.pose_stamps.add((stamp.sec, stamp.nanosec))
+            self.pose_stamps.add((pose_stamp.sec, pose_stamp.nanosec))
             self._publishers["measured_cp"].publish(pose)
         if self.model is not None:
             marker = local_model_marker(self.model, stamp, "liver", 0.05)

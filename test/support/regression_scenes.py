@@ -9,11 +9,11 @@ import numpy as np
 
 from liver_sim.mesh.landmarks import press_anchor
 from liver_sim.mesh.liver_shape import default_liver
-from liver_sim.physics.contact import ToolPose
+from liver_sim.physics.contact.tool_geometry import ToolPose
 from liver_sim.physics.model import LiverModel
-from liver_sim.physics.model_params import ModelParams
-from liver_sim.physics.tool_contact import ToolContact
-from liver_sim.physics.tool_use import ToolUse
+from liver_sim.physics.settings import ModelParams
+from liver_sim.physics.tools.tool import Tool
+from liver_sim.physics.tools.use import ToolUse
 from liver_sim.tool.scripts import ScriptSettings, make_script
 
 
@@ -29,7 +29,7 @@ def _play(model: LiverModel, poses) -> dict:
 
 def _scripted(mode: str, script: str, frames: int, params: ModelParams, **settings) -> dict:
     liver = default_liver()
-    model = LiverModel(liver, params, ToolContact(use=ToolUse(mode, cut_depth_m=0.008)))
+    model = LiverModel(liver, params, Tool(use=ToolUse(mode, cut_depth_m=0.008)))
     trajectory = make_script(script, ScriptSettings(anchor_m=tuple(press_anchor(liver)), **settings))
     period = model.structure.frame_period_s
     return _play(model, [ToolPose(trajectory.position_at(k * period)) for k in range(frames)])
@@ -54,7 +54,7 @@ def grasp(params: ModelParams) -> dict:
     """The dome grasped and pulled 8 cm up over 400 frames, tearing on."""
     liver = default_liver()
     model = LiverModel(liver, params.with_changes(tearing=True),
-                       ToolContact(use=ToolUse("grasp", grasp_margin_m=0.005)))
+                       Tool(use=ToolUse("grasp", grasp_margin_m=0.005)))
     start = press_anchor(liver) + [0.0, 0.0, model.tool.shape.radius_m - 0.004]
     model.grasp(ToolPose(start))
     return _play(model, [ToolPose(start + [0.0, 0.0, 0.08 * min(1.0, k / 400)]) for k in range(450)])
@@ -91,7 +91,7 @@ def flatten(figures: dict) -> dict:
 def tight_solves(tolerance: float = 1e-9):
     """A context in which every ImplicitEuler solves its steps, and the tool's compliance, to `tolerance`: the
     scenes' exact answer (the compliance's path into the physics: a cut follows the local model's contact)."""
-    from liver_sim.physics import implicit
+    from liver_sim.physics.solver import implicit
 
     init = implicit.ImplicitEuler.__init__
 

@@ -5,6 +5,7 @@ import os
 import subprocess
 import sys
 from contextlib import contextmanager
+from pathlib import Path
 
 from liver_sim.base import kernel_cache
 
@@ -68,3 +69,10 @@ def test_a_warm_up_compiles_under_the_cache_lock(monkeypatch):
     monkeypatch.setattr(kernel_cache, "compiling", recording)
     LiverModel(default_liver()).warm_up()
     assert held == [True]
+
+
+def test_every_folder_of_numba_kernels_is_fingerprinted():
+    """A kernel in a folder the fingerprint misses would keep a stale cache after its source changed."""
+    root = Path(kernel_cache.__file__).resolve().parents[1]
+    folders = {str(path.parent.relative_to(root)) for path in root.rglob("*.py") if "numba.njit" in path.read_text()}
+    assert folders and folders <= set(kernel_cache.KERNEL_FOLDERS), folders - set(kernel_cache.KERNEL_FOLDERS)

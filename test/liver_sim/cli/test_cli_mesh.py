@@ -182,7 +182,7 @@ def test_warm_compiles_the_kernels_the_physics_node_steps_with(capsys):
     """`liver-sim warm` (run by `make venv`) builds the default model with each integrator and warms it up:
     afterwards the kernels of an implicit and an explicit frame are compiled in this process, so a node started
     next finds them in numba's cache."""
-    from liver_sim.physics import explicit_kernels, implicit_kernels, pcg
+    from liver_sim.physics.solver import explicit_kernels, implicit_kernels, pcg
 
     assert main(["warm"]) == 0
     assert "compiled and cached" in capsys.readouterr().out

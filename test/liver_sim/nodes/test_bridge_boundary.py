@@ -229,7 +229,7 @@ def test_two_bridges_of_one_name_on_one_device_both_hold_zero(rig_factory, ros_e
         rig.wait_for_force(CONTACT, first)
         second = start_bridge(ros_env)
         rig.wait_for_force(np.zeros(3), first)
-        rig.wait_until(lambda: sum("another publisher on /phantom/servo_cf (/haptic_bridge, /haptic_bridge)" in
+        rig.wait_until(lambda: sum("another publisher on /phantom/servo_cf (/haptic_bridge)" in
                                    status.message for array in rig.diagnostics[-10:] for status in array.status
                                    if status.name == LOOP) >= 2, "both bridges naming the other", first)
         second.send_signal(signal.SIGTERM)

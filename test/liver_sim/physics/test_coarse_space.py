@@ -4,8 +4,10 @@ import numpy as np
 import pytest
 
 from liver_sim.mesh.liver_shape import build_liver
-from liver_sim.physics import pcg
-from liver_sim.physics.coarse_space import (
+from liver_sim.physics.contact.rows import Contacts
+from liver_sim.physics.settings import ModelParams
+from liver_sim.physics.solver import pcg
+from liver_sim.physics.solver.coarse_space import (
     MODES,
     CoarseSpace,
     aggregates,
@@ -15,11 +17,9 @@ from liver_sim.physics.coarse_space import (
     coarse_matrix,
     node_graph,
 )
-from liver_sim.physics.fem_kernels import TetArrays, build_tets, tet_terms
-from liver_sim.physics.implicit import Contacts
-from liver_sim.physics.implicit_kernels import assemble
-from liver_sim.physics.model_params import ModelParams
-from liver_sim.physics.springs import build_springs
+from liver_sim.physics.solver.implicit_kernels import assemble
+from liver_sim.physics.tissue.fem_kernels import TetArrays, build_tets, tet_terms
+from liver_sim.physics.tissue.springs import build_springs
 
 from meshes import box_mesh
 

@@ -5,10 +5,16 @@ import numpy as np
 import pytest
 
 from liver_sim.base.local_model import penetration
-from liver_sim.physics.contact import ToolPose, ToolShape, candidate_nodes, candidate_triangles, fit_sphere
+from liver_sim.physics.contact.tool_geometry import (
+    ToolPose,
+    ToolShape,
+    candidate_nodes,
+    candidate_triangles,
+    fit_sphere,
+)
 from liver_sim.physics.model import LiverModel
-from liver_sim.physics.model_params import ModelParams
-from liver_sim.physics.tool_contact import ToolContact
+from liver_sim.physics.settings import ModelParams
+from liver_sim.physics.tools.tool import Tool
 
 from meshes import box_mesh
 
@@ -29,7 +35,7 @@ def one_step_model(mesh, tool):
     params = ModelParams(integrator="symplectic_euler", substeps=1, frame_rate_hz=1e5,
                          contact_stiffness_n_per_m=STIFFNESS,
                          contact_damping_ns_per_m=0.0)
-    return LiverModel(mesh, params, ToolContact(tool))
+    return LiverModel(mesh, params, Tool(tool))
 
 
 Y_TO_X = (0.0, math.sin(math.pi / 4), 0.0, math.cos(math.pi / 4))  # tool +z along liver +x
@@ -78,7 +84,7 @@ def test_no_force_out_of_contact(slab):
 def test_penalty_damping_resists_approach(slab):
     params = ModelParams(integrator="symplectic_euler", substeps=1, frame_rate_hz=1e5,
                          contact_stiffness_n_per_m=STIFFNESS, contact_damping_ns_per_m=5.0)
-    model = LiverModel(slab, params, ToolContact(ToolShape("sphere", radius_m=0.01)))
+    model = LiverModel(slab, params, Tool(ToolShape("sphere", radius_m=0.01)))
     z0 = 0.04 + 0.01 - DEPTH
     model.step_frame(ToolPose(np.array([0.04, 0.04, z0 + 1e-6])))
     moving = model.step_frame(ToolPose(np.array([0.04, 0.04, z0]))).tool_force_n[2]
@@ -115,7 +121,7 @@ def test_local_model_in_contact_is_the_touched_plane(slab):
 
 
 def test_local_model_near_but_not_touching_and_out_of_reach(slab):
-    model = LiverModel(slab, tool=ToolContact(ToolShape("sphere", radius_m=0.01), local_model_reach_m=0.02))
+    model = LiverModel(slab, tool=Tool(ToolShape("sphere", radius_m=0.01), local_model_reach_m=0.02))
     near = model.step_frame(ToolPose(np.array([0.05, 0.05, 0.04 + 0.01 + 0.005]))).local_model
     assert near.valid and not near.in_contact and near.depth_m == 0.0
     np.testing.assert_allclose(near.normal, [0, 0, 1], atol=1e-6)
@@ -149,12 +155,12 @@ def test_the_local_stiffness_refreshed_every_few_frames_stays_near_a_fresh_solve
     default liver it stays within 10 % of K solved afresh at each frame (a twin model)."""
     from liver_sim.mesh.landmarks import press_anchor
     from liver_sim.mesh.liver_shape import default_liver
-    from liver_sim.physics.local_stiffness import REFRESH_FRAMES
+    from liver_sim.physics.tools.local_stiffness import REFRESH_FRAMES
     from liver_sim.tool.scripts import ScriptSettings, make_script
 
     mesh = default_liver()
     cached = LiverModel(mesh, ModelParams())
-    fresh = LiverModel(mesh, ModelParams(), ToolContact(stiffness_refresh_frames=1))
+    fresh = LiverModel(mesh, ModelParams(), Tool(stiffness_refresh_frames=1))
     script = make_script("press_slide_release", ScriptSettings(anchor_m=tuple(press_anchor(mesh)), rest_s=0.1))
     penalty = cached.structure.params.contact_stiffness_n_per_m
     compared = 0

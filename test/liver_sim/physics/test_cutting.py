@@ -14,12 +14,12 @@ from liver_sim.mesh import TetMesh
 from liver_sim.mesh.landmarks import upper_skin_path
 from liver_sim.mesh.liver_shape import default_liver
 from liver_sim.mesh.tetmesh import signed_volumes
-from liver_sim.physics.cutting import SNAP_FRACTION, Ribbon, cut_along_path, default_blade_direction
 from liver_sim.physics.model import LiverModel
-from liver_sim.physics.model_params import ModelParams
-from liver_sim.physics.springs import stable_time_step
-from liver_sim.physics.tool_contact import ToolContact
-from liver_sim.physics.tool_use import ToolUse
+from liver_sim.physics.settings import ModelParams
+from liver_sim.physics.tissue.springs import stable_time_step
+from liver_sim.physics.tools.tool import Tool
+from liver_sim.physics.tools.use import ToolUse
+from liver_sim.physics.topology.cutting import SNAP_FRACTION, Ribbon, cut_along_path, default_blade_direction
 
 from meshes import assert_sound, box_mesh, components, kinetic_energy_j
 
@@ -282,7 +282,7 @@ def test_many_random_cuts_never_raise_and_keep_the_mesh_sound(liver):
     # this seed makes strokes whose ribbon meets the mesh at nodes only (it raised IndexError)
     rng = np.random.default_rng(13)
     use = ToolUse("cut")
-    model = LiverModel(liver, ModelParams(), ToolContact(use=use))
+    model = LiverModel(liver, ModelParams(), Tool(use=use))
     mass_kg = model.structure.masses_kg.sum()
     previous = liver_top_path(liver, 0.08)
     changes = 0
@@ -335,7 +335,7 @@ import importlib, json, pkgutil
 import numba, numpy as np
 import liver_sim.physics as physics
 from liver_sim.physics.parameters import PhysicsParameters, build_model
-from liver_sim.physics.tearing import tear
+from liver_sim.physics.topology.tearing import tear
 from test_cutting import liver_top_path, mean_edge_m
 
 def versions():

@@ -1,16 +1,16 @@
-"""The co-rotational linear tetrahedra of tissue_law 'fem' (physics.fem_kernels): Hooke's law under an affine
+"""The co-rotational linear tetrahedra of tissue_law 'fem' (physics.tissue.fem_kernels): Hooke's law under an affine
 strain, invariance under rotation, the liver pressed, cut and torn with it."""
 import numpy as np
 import pytest
 
 from liver_sim.mesh.landmarks import press_anchor, upper_skin_path
 from liver_sim.mesh.liver_shape import default_liver
-from liver_sim.physics.contact import ToolPose
-from liver_sim.physics.fem_kernels import build_tets
-from liver_sim.physics.implicit import ImplicitEuler
+from liver_sim.physics.contact.tool_geometry import ToolPose
 from liver_sim.physics.model import LiverModel
-from liver_sim.physics.model_params import ModelParams, TissueProperties
-from liver_sim.physics.springs import build_springs
+from liver_sim.physics.settings import ModelParams, TissueProperties
+from liver_sim.physics.solver.implicit import ImplicitEuler
+from liver_sim.physics.tissue.fem_kernels import build_tets
+from liver_sim.physics.tissue.springs import build_springs
 
 from meshes import box_mesh
 

@@ -10,9 +10,9 @@ from haptic_bridge.tick import BridgeTick, rendered_stiffness
 from liver_sim.base.local_model import penetration
 from liver_sim.mesh.landmarks import press_anchor
 from liver_sim.mesh.liver_shape import default_liver
-from liver_sim.physics.contact import ToolPose
+from liver_sim.physics.contact.tool_geometry import ToolPose
 from liver_sim.physics.model import LiverModel
-from liver_sim.physics.model_params import ModelParams
+from liver_sim.physics.settings import ModelParams
 from liver_sim.tool.scripts import ScriptSettings, make_script
 from msg_defs.local_model import local_model_marker, marker_to_local_model
 from msg_defs.stamps import stamp_from_seconds

@@ -5,14 +5,15 @@ import pytest
 
 from liver_sim.mesh.landmarks import press_anchor
 from liver_sim.mesh.liver_shape import default_liver
-from liver_sim.physics import explicit_kernels, implicit_kernels, pcg, reference
-from liver_sim.physics.contact import ToolPose, ToolShape, surface_contacts, tool_state
-from liver_sim.physics.fem_kernels import TetArrays
-from liver_sim.physics.implicit import Contacts, ImplicitEuler, StepHistory
+from liver_sim.physics.contact.rows import Contacts
+from liver_sim.physics.contact.tool_geometry import ToolPose, ToolShape, contact_rows, tool_sweep
 from liver_sim.physics.model import LiverModel
-from liver_sim.physics.model_params import ModelParams
-from liver_sim.physics.springs import build_springs
-from liver_sim.physics.tool_contact import ToolContact
+from liver_sim.physics.settings import ModelParams
+from liver_sim.physics.solver import explicit_kernels, implicit_kernels, pcg, reference
+from liver_sim.physics.solver.implicit import ImplicitEuler
+from liver_sim.physics.tissue.fem_kernels import TetArrays
+from liver_sim.physics.tissue.springs import build_springs
+from liver_sim.physics.tools.tool import Tool
 from liver_sim.tool.scripts import ScriptSettings, make_script
 
 from meshes import box_mesh
@@ -95,7 +96,7 @@ def test_step_matches_dense_numpy_assembly():
     gravity = np.array([0.0, 0.0, -9.81])
     x_ref, v_ref = dense_reference_step(springs, x, v, inv_mass, contacts, external, FRAME_S, 3.0, gravity)
     solver = ImplicitEuler(springs, len(x), cg_tolerance=1e-13, max_newton=0)
-    history = StepHistory(solver.n_nodes)
+    history = solver.new_history()
     solver.step(history, x, v, inv_mass, external, FRAME_S, 3.0, gravity, contacts)
     np.testing.assert_allclose(v, v_ref, atol=1e-10)
     np.testing.assert_allclose(x, x_ref, atol=1e-12)
@@ -107,9 +108,9 @@ def test_newton_iterations_solve_the_nonlinear_step():
     mesh, springs, x, v, inv_mass, contacts, external = tiny_scene(offset_m=0.0002, speed_m_s=0.005)
     x0, v0 = x.copy(), v.copy()
     solver = ImplicitEuler(springs, len(x), cg_tolerance=1e-12, newton_tolerance_n=1e-9, max_newton=10)
-    history = StepHistory(solver.n_nodes)
+    history = solver.new_history()
     solver.step(history, x, v, inv_mass, external, FRAME_S, 3.0, np.zeros(3))
-    assert 1 <= solver.last_newton_iterations < 10 and solver.last_residual_n <= 1e-9
+    assert 1 <= history.newton_iterations < 10 and history.residual_n <= 1e-9
     # backward Euler: M·(v − v0) = h·f(x0 + h·v, v) on every free node
     free = inv_mass > 0.0
     f = reference.spring_forces(x, v, springs) + external - 3.0 * v / np.where(free, inv_mass, 1.0)[:, None]
@@ -134,7 +135,7 @@ def test_stable_at_one_step_per_frame_where_symplectic_euler_diverges(liver):
     p = liver.structure.params
     x, v = perturbed(liver)
     solver = ImplicitEuler(liver.structure.springs, len(x))
-    history = StepHistory(solver.n_nodes)
+    history = solver.new_history()
     for _ in range(150):
         solver.step(history, x, v, liver.state.inv_mass, np.zeros_like(x), FRAME_S, p.environment_damping_per_s,
                     np.zeros(3))
@@ -142,7 +143,7 @@ def test_stable_at_one_step_per_frame_where_symplectic_euler_diverges(liver):
     assert np.abs(v).max() < 1e-3
     xe, ve = perturbed(liver)
     settings = explicit_kernels.StepSettings(FRAME_S, 30, p.environment_damping_per_s, np.zeros(3), True)
-    no_tool = tool_state(liver.tool.shape, None, None, p, 0.0, xe, liver.structure.mesh.skin)
+    no_tool = tool_sweep(liver.tool.shape, None, None, p, 0.0, xe, liver.structure.mesh.skin)
     work = explicit_kernels.WorkArrays(np.zeros_like(xe), np.zeros((1, len(xe), 3)), False)
     with np.errstate(all="ignore"):
         explicit_kernels.run_frame(xe, ve, liver.state.inv_mass, np.zeros_like(xe), liver.structure.spring_arrays,
@@ -163,7 +164,7 @@ def test_energy_decreases_without_external_work(liver):
     v[:] = np.random.default_rng(2).normal(scale=0.05, size=v.shape)
     v[liver.structure.fixed_nodes] = 0.0
     solver = ImplicitEuler(liver.structure.springs, len(x))
-    history = StepHistory(solver.n_nodes)
+    history = solver.new_history()
     energies = [energy_j(liver, x, v)]
     for _ in range(60):
         solver.step(history, x, v, liver.state.inv_mass, np.zeros_like(x), FRAME_S, 0.0, np.zeros(3))
@@ -181,7 +182,7 @@ def test_held_nodes_stay_put(liver):
     v[held] = 0.01  # a kinematic node's velocity is the scene's: kept, and it does not move during the step
     before = x[held].copy()
     solver = ImplicitEuler(liver.structure.springs, len(x))
-    history = StepHistory(solver.n_nodes)
+    history = solver.new_history()
     for _ in range(5):
         solver.step(history, x, v, inv_mass, np.zeros_like(x), FRAME_S, 3.0, np.array([0.0, 0.0, -9.81]))
     np.testing.assert_array_equal(x[held], before)
@@ -232,7 +233,7 @@ def test_press_and_release_matches_symplectic_euler_at_72_substeps():
                               clearance_m=0.005, approach_s=0.1, press_s=0.3, hold_s=0.2, withdraw_s=0.1, rest_s=0.3)
     script = make_script("press_release", settings)
     solver = ImplicitEuler(model.structure.springs, len(mesh.points))
-    history = StepHistory(solver.n_nodes)
+    history = solver.new_history()
     x, v = model.state.positions, model.state.velocities
     skin = np.asarray(mesh.skin, dtype=np.int64)
     previous = None
@@ -240,10 +241,10 @@ def test_press_and_release_matches_symplectic_euler_at_72_substeps():
     for frame in range(int(round(script.duration_s / FRAME_S))):
         pose = ToolPose(script.position_at((frame + 1) * FRAME_S))
         expected = -explicit.step_frame(pose).tool_force_n
-        state = tool_state(tool, pose, previous, p, 0.02, x, skin)
+        state = tool_sweep(tool, pose, previous, p, 0.02, x, skin)
         previous = pose
         # the tool at the end of the frame, as the explicit kernel's last substep
-        contacts = surface_contacts(x, v, state, state.velocity_m_s * FRAME_S, FRAME_S)
+        contacts = contact_rows(x, v, state, state.velocity_m_s * FRAME_S, FRAME_S)
         force = solver.step(history, x, v, model.state.inv_mass, model.state.external_forces_n, FRAME_S,
                             p.environment_damping_per_s, np.zeros(3), contacts)
         worst_position = max(worst_position, np.abs(x - explicit.state.positions).max())
@@ -262,7 +263,7 @@ def test_bdf2_is_second_order_and_falls_back_to_backward_euler(liver):
         v[liver.structure.fixed_nodes] = 0.0
         solver = ImplicitEuler(liver.structure.springs, len(x), cg_tolerance=1e-10, newton_tolerance_n=1e-9,
                                max_newton=10, second_order=second_order)
-        history = StepHistory(solver.n_nodes)
+        history = solver.new_history()
         for _ in range(steps):
             solver.step(history, x, v, liver.state.inv_mass, np.zeros_like(x), duration_s / steps, 0.0, np.zeros(3))
         return x, v, solver, history
@@ -272,10 +273,10 @@ def test_bdf2_is_second_order_and_falls_back_to_backward_euler(liver):
     assert 1.7 < errors[False][0] / errors[False][1] < 2.3
     assert errors[True][0] < errors[False][0] / 5
     x, v, solver, history = run(2, True)
-    assert solver.last_second_order
+    assert history.second_order
     x += 1e-6  # a state set from outside: the next step has no history
     solver.step(history, x, v, liver.state.inv_mass, np.zeros_like(x), 0.1, 0.0, np.zeros(3))
-    assert not solver.last_second_order
+    assert not history.second_order
 
 
 def test_the_default_is_one_implicit_step_per_frame_and_the_explicit_ones_keep_their_substeps():
@@ -316,7 +317,7 @@ def test_demo_press_slide_and_release_matches_symplectic_euler_at_72_substeps():
 def test_capsule_and_box_tools_press_with_the_implicit_step(kind):
     mesh = default_liver()
     shape = ToolShape(kind, radius_m=0.01, length_m=0.04, half_extents_m=(0.015, 0.015, 0.01))
-    model, reference_model = (LiverModel(mesh, params, ToolContact(shape)) for params in
+    model, reference_model = (LiverModel(mesh, params, Tool(shape)) for params in
                               (ModelParams(), ModelParams(integrator="symplectic_euler")))
     top = press_anchor(mesh)
     reach = shape.half_extents_m[2] if kind == "box" else shape.radius_m

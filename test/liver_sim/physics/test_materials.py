@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 
 from liver_sim.mesh.liver_shape import build_liver, default_liver
-from liver_sim.physics import reference
-from liver_sim.physics.implicit import ImplicitEuler
-from liver_sim.physics.materials import edge_measures, equivalent_properties, network_young_modulus_pa
-from liver_sim.physics.model_params import CUBIC_RATIO, ModelParams, TissueProperties
-from liver_sim.physics.springs import build_springs
+from liver_sim.physics.settings import CUBIC_RATIO, ModelParams, TissueProperties
+from liver_sim.physics.solver import reference
+from liver_sim.physics.solver.implicit import ImplicitEuler
+from liver_sim.physics.tissue.materials import edge_measures, equivalent_properties, network_young_modulus_pa
+from liver_sim.physics.tissue.springs import build_springs
 from liver_sim.studies.traction import cylinder_mesh
 
 from meshes import box_mesh
@@ -141,7 +141,7 @@ def test_membrane_patch_has_capsule_modulus_and_poisson_third():
     from scipy.spatial import Delaunay
 
     from liver_sim.mesh.tetmesh import TRIANGLE_EDGES, unique_edges
-    from liver_sim.physics.materials import triangle_areas
+    from liver_sim.physics.tissue.materials import triangle_areas
 
     capsule = 500.0  # N/m
     cell = 0.005

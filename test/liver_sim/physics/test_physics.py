@@ -5,12 +5,13 @@ import numba
 import numpy as np
 import pytest
 
-from liver_sim.physics import explicit_kernels, reference, spring_kernels
-from liver_sim.physics.contact import ToolPose
+from liver_sim.physics.contact.tool_geometry import ToolPose
 from liver_sim.physics.model import LiverModel
-from liver_sim.physics.model_params import FIG2_LAW, ModelParams, SpringLaw
-from liver_sim.physics.springs import build_springs
+from liver_sim.physics.settings import FIG2_LAW, ModelParams, SpringLaw
+from liver_sim.physics.solver import explicit_kernels, reference
 from liver_sim.physics.structure import default_fixed_nodes
+from liver_sim.physics.tissue import spring_kernels
+from liver_sim.physics.tissue.springs import build_springs
 
 from meshes import box_mesh, kinetic_energy_j
 

@@ -1,6 +1,7 @@
 """The physics frame pipeline (no ROS): pose gate, pose timeout, tool use, surface flag, marker decimation."""
 import subprocess
 import sys
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -8,8 +9,8 @@ import pytest
 from liver_sim.mesh.io import load_mesh
 from liver_sim.mesh.landmarks import press_anchor
 from liver_sim.mesh.tetmesh import MeshError
+from liver_sim.physics import frame as frame_module
 from liver_sim.physics import structure as structure_module
-from liver_sim.physics.model import LiverModel
 from liver_sim.physics.parameters import PhysicsParameters, build_model
 from liver_sim.physics.pipeline import FramePipeline
 from liver_sim.tool.scripts import ScriptSettings, make_script
@@ -92,16 +93,16 @@ def test_a_cut_failing_midway_leaves_the_model_as_it_was_is_counted_and_the_fram
     pipeline = FramePipeline(build_model(cut), cut)
     model = pipeline.model
     before = []
-    apply = LiverModel.apply
+    apply = frame_module.apply_change
 
-    def record_then_apply(self, change):
-        before.append(model_state(self))
-        apply(self, change)
+    def record_then_apply(structure, state, change):
+        before.append(model_state(SimpleNamespace(structure=structure, state=state)))
+        return apply(structure, state, change)
 
     def broken(*args, **kwargs):  # build_structure calls it after carrying the node state over
         raise RuntimeError("injected")
 
-    monkeypatch.setattr(LiverModel, "apply", record_then_apply)
+    monkeypatch.setattr(frame_module, "apply_change", record_then_apply)
     monkeypatch.setattr(structure_module, "build_springs", broken)
     script = make_script("press_slide_release", ScriptSettings(
         anchor_m=tuple(press_anchor(model.structure.mesh)), depth_m=0.012, slide_m=0.03, approach_s=0.1, press_s=0.3,

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from regression_scenes import SCENES, tight_solves
 
-from liver_sim.physics.model_params import ModelParams
+from liver_sim.physics.settings import ModelParams
 
 STORED = Path(__file__).parent / "data" / "regression_scenes.npz"
 PRECONDITIONERS = ("block_jacobi", "two_level")

@@ -1,4 +1,4 @@
-"""The organ's support (physics.support) and `liver-sim validate` on the default liver (B1–B4, R1 with the
+"""The organ's support (physics.tissue.organ_support) and `liver-sim validate` on the default liver (B1–B4, R1 with the
 liver's materials, the local model's continuity)."""
 import json
 
@@ -7,12 +7,13 @@ import pytest
 
 from liver_sim.cli.main import main
 from liver_sim.mesh.liver_shape import default_liver
-from liver_sim.physics import implicit_kernels, reference, spring_kernels
 from liver_sim.physics.model import LiverModel
-from liver_sim.physics.model_params import ModelParams
 from liver_sim.physics.parameters import model_params
+from liver_sim.physics.settings import ModelParams
+from liver_sim.physics.solver import implicit_kernels, reference
 from liver_sim.physics.structure import default_fixed_nodes
-from liver_sim.physics.support import SupportArrays, build_support
+from liver_sim.physics.tissue import spring_kernels
+from liver_sim.physics.tissue.organ_support import SupportArrays, build_support
 from liver_sim.sessions.parameters import node_parameters
 from liver_sim.studies.validate import figures_json
 

@@ -5,11 +5,11 @@ import pytest
 
 from liver_sim.mesh.landmarks import press_anchor
 from liver_sim.mesh.liver_shape import build_liver, default_liver
-from liver_sim.physics.contact import ToolPose, ToolShape, probe_contacts, tool_state
+from liver_sim.physics.contact.tool_geometry import ToolPose, ToolShape, probe_contacts, tool_sweep
 from liver_sim.physics.model import LiverModel
-from liver_sim.physics.model_params import ModelParams
+from liver_sim.physics.settings import ModelParams
 from liver_sim.physics.structure import default_fixed_nodes
-from liver_sim.physics.tool_contact import ToolContact
+from liver_sim.physics.tools.tool import Tool
 
 FRAME_RATE_HZ = 150.0
 UP = np.array([0.0, 0.0, 1.0])
@@ -78,7 +78,7 @@ def penalty_along(liver, steps_m):
     anchor, shape, skin = press_anchor(liver), ToolShape(), np.asarray(liver.skin, np.int64)
     totals = []
     for s in steps_m:
-        tool = tool_state(shape, ToolPose(anchor + [s, 0.3 * s, shape.radius_m - 0.008]), None, params, 0.02,
+        tool = tool_sweep(shape, ToolPose(anchor + [s, 0.3 * s, shape.radius_m - 0.008]), None, params, 0.02,
                           liver.points, skin)
         probe_contacts(liver.points, np.zeros_like(liver.points), tool, np.zeros(3), 0.0)
         assert tool.share.sum() == pytest.approx(1.0) and (tool.depth > 0.0).any()
@@ -111,7 +111,7 @@ def test_pressing_deeper_never_lowers_the_force_even_between_nodes(liver, integr
 
 @pytest.mark.parametrize("kind", ["capsule", "box"])
 def test_capsule_and_box_pressed_deeper_push_harder(liver, kind):
-    model = LiverModel(liver, ModelParams(), ToolContact(TOOLS[kind]))
+    model = LiverModel(liver, ModelParams(), Tool(TOOLS[kind]))
     for name, xy in places(liver).items():
         forces = press_forces(model, xy, [0.002, 0.005, 0.008])
         assert forces[0] > 0.0 and (np.diff(forces) > 0.0).all(), (name, forces)
@@ -120,7 +120,7 @@ def test_capsule_and_box_pressed_deeper_push_harder(liver, kind):
 @pytest.mark.parametrize("kind", ["sphere", "capsule", "box"])
 def test_sliding_in_contact_never_drops_the_force_to_zero(liver, kind):
     shape = TOOLS[kind]
-    model = LiverModel(liver, ModelParams(), ToolContact(shape))
+    model = LiverModel(liver, ModelParams(), Tool(shape))
     anchor = press_anchor(liver)
     top = surface_height(liver, anchor[:2])
     start = np.array([anchor[0] - 0.015, anchor[1], top + tool_bottom_m(shape) - 0.008])

@@ -1,7 +1,9 @@
 """P13 of docs/paper.md: tearing (paper §2.6) by face separation and node duplication, and topology changes of the
 model."""
+import contextlib
 import dataclasses
 import math
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -10,14 +12,15 @@ from liver_sim.base.local_model import penetration
 from liver_sim.mesh.landmarks import press_anchor
 from liver_sim.mesh.liver_shape import default_liver
 from liver_sim.mesh.tetmesh import TET_FACES, TetMesh
+from liver_sim.physics import frame as frame_module
 from liver_sim.physics import structure as structure_module
-from liver_sim.physics.contact import ToolPose
+from liver_sim.physics.contact.tool_geometry import ToolPose
 from liver_sim.physics.model import LiverModel
-from liver_sim.physics.model_params import ModelParams
-from liver_sim.physics.tearing import TearDetector, duplication_change
-from liver_sim.physics.tool_contact import ToolContact
-from liver_sim.physics.tool_use import ToolUse
-from liver_sim.physics.topology import separate_faces
+from liver_sim.physics.settings import ModelParams
+from liver_sim.physics.tools.tool import Tool
+from liver_sim.physics.tools.use import ToolUse
+from liver_sim.physics.topology.change import separate_faces
+from liver_sim.physics.topology.tearing import TearDetector, duplication_change
 
 from meshes import assert_same_state, assert_sound, box_mesh, components, model_state
 
@@ -59,18 +62,20 @@ def pulled_bar(force_n, **changes):
     return model
 
 
-def record_changes(model):
-    """Wrap model.apply to keep (old mesh, positions, capsule, change) of every change."""
+@contextlib.contextmanager
+def recording_changes():
+    """Within it, every change a frame applies (physics.frame.apply_change) is kept as (old mesh, positions,
+    capsule, change)."""
     records = []
-    apply = model.apply
+    apply = frame_module.apply_change
 
-    def spy(change):
-        records.append((model.structure.mesh, model.state.positions.copy(), model.structure.capsule_triangles.copy(),
-                        change))
-        apply(change)
+    def spy(structure, state, change):
+        records.append((structure.mesh, state.positions.copy(), structure.capsule_triangles.copy(), change))
+        return apply(structure, state, change)
 
-    model.apply = spy
-    return records
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(frame_module, "apply_change", spy)
+        yield records
 
 
 # --- separate_faces -----------------------------------------------------------------------------
@@ -172,9 +177,9 @@ def test_tearing_parameters_are_validated():
 @pytest.fixture(scope="module")
 def torn_bar():
     model = pulled_bar(16.0, tearing=True, tear_strain_parenchyma=0.15, tear_strain_capsule=0.2)
-    records = record_changes(model)
     initial_mass = model.structure.masses_kg.sum()
-    results = [model.step_frame() for _ in range(300)]
+    with recording_changes() as records:
+        results = [model.step_frame() for _ in range(300)]
     return model, records, initial_mass, results
 
 
@@ -325,7 +330,7 @@ def pull_the_dome(tearing):
     """The default liver grasped at its dome and pulled 8 cm up over 400 frames; (model, tool use, results,
     tool tips)."""
     liver = default_liver()
-    model = LiverModel(liver, ModelParams(tearing=tearing), ToolContact(use=ToolUse("grasp", grasp_margin_m=0.005)))
+    model = LiverModel(liver, ModelParams(tearing=tearing), Tool(use=ToolUse("grasp", grasp_margin_m=0.005)))
     dome = press_anchor(liver)
     start = dome + [0.0, 0.0, model.tool.shape.radius_m - 0.004]
     assert model.grasp(ToolPose(start)) > 0
@@ -366,16 +371,16 @@ def test_a_grasped_and_pulled_liver_tears_and_stays_sound():
 def test_a_tear_failing_midway_leaves_the_model_as_it_was_and_the_bar_tears_once_it_can(monkeypatch):
     model = pulled_bar(16.0, tearing=True, tear_strain_parenchyma=0.15, tear_strain_capsule=0.2)
     before = []
-    apply = model.apply
+    apply = frame_module.apply_change
 
-    def record_then_apply(change):
-        before.append(model_state(model))
-        apply(change)
+    def record_then_apply(structure, state, change):
+        before.append(model_state(SimpleNamespace(structure=structure, state=state)))
+        return apply(structure, state, change)
 
     def broken(*args, **kwargs):  # build_structure calls it after carrying the node state over
         raise RuntimeError("injected")
 
-    model.apply = record_then_apply
+    monkeypatch.setattr(frame_module, "apply_change", record_then_apply)
     monkeypatch.setattr(structure_module, "build_springs", broken)
     for _ in range(300):
         result = model.step_frame()

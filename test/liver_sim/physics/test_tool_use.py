@@ -4,10 +4,10 @@ import pytest
 
 from liver_sim.mesh.landmarks import press_anchor
 from liver_sim.mesh.liver_shape import default_liver
-from liver_sim.physics.contact import ToolPose
+from liver_sim.physics.contact.tool_geometry import ToolPose
 from liver_sim.physics.model import LiverModel
-from liver_sim.physics.tool_contact import ToolContact
-from liver_sim.physics.tool_use import ToolUse
+from liver_sim.physics.tools.tool import Tool
+from liver_sim.physics.tools.use import ToolUse
 from liver_sim.tool.scripts import ScriptSettings, make_script
 
 
@@ -15,7 +15,7 @@ def play(mode, script_name="press_slide_release", **settings):
     """Play a script on the default liver with the tool in `mode`; (model, what the tool's use did, frames the mesh
     changed at, frames in contact)."""
     liver = default_liver()
-    model = LiverModel(liver, tool=ToolContact(use=ToolUse(mode, cut_depth_m=0.008)))
+    model = LiverModel(liver, tool=Tool(use=ToolUse(mode, cut_depth_m=0.008)))
     script = make_script(script_name, ScriptSettings(anchor_m=tuple(press_anchor(liver)), **settings))
     changed, contact, events = [], [], []
     for k in range(int(script.duration_s * model.structure.params.frame_rate_hz)):

@@ -8,11 +8,11 @@ import pytest
 from liver_sim.base.local_model import LocalModel
 from liver_sim.mesh.landmarks import upper_skin_path
 from liver_sim.mesh.liver_shape import default_liver
-from liver_sim.physics.contact import ToolPose
+from liver_sim.physics.contact.tool_geometry import ToolPose
 from liver_sim.physics.model import LiverModel
-from liver_sim.physics.model_params import ModelParams
-from liver_sim.physics.tool_contact import ToolContact
-from liver_sim.physics.tool_use import ToolUse
+from liver_sim.physics.settings import ModelParams
+from liver_sim.physics.tools.tool import Tool
+from liver_sim.physics.tools.use import ToolUse
 
 RADIUS_M = 0.015
 #: The lift starts at this frame (0.5 s at 150 Hz) and takes 150 frames.
@@ -31,8 +31,8 @@ def top(liver, x: float, y: float) -> np.ndarray:
 
 
 def two_hands(liver, left_mode="grasp", right_mode="press"):
-    return LiverModel(liver, tool=[ToolContact(use=ToolUse(left_mode), name="left"),
-                                   ToolContact(use=ToolUse(right_mode), name="right")])
+    return LiverModel(liver, tool=[Tool(use=ToolUse(left_mode), name="left"),
+                                   Tool(use=ToolUse(right_mode), name="right")])
 
 
 def grasp_and_lift(liver, lift: bool, frames: int = 240):
@@ -51,7 +51,7 @@ def grasp_and_lift(liver, lift: bool, frames: int = 240):
 def test_lifting_with_one_tool_changes_the_force_on_the_other_in_the_same_frame(liver):
     model, lifted = grasp_and_lift(liver, lift=True)
     _, still = grasp_and_lift(liver, lift=False)
-    assert model.tools[0].use.holding and not model.tools[1].use.holding
+    assert model.state.tools[0].holding and not model.state.tools[1].holding
     assert lifted[1].tool_events == ("left: grasped 1 skin node(s)",)
     right = np.array([r.tool_forces_n[1] for r in lifted])
     right_still = np.array([r.tool_forces_n[1] for r in still])
@@ -81,7 +81,7 @@ def test_each_local_model_is_stiffer_with_the_other_tool_holding_the_tissue(live
 def test_a_single_tool_in_a_list_is_the_default_tool_bit_for_bit(liver):
     anchor = top(liver, -0.046, 0.004)
     poses = [ToolPose(anchor + [0.0, 0.0, RADIUS_M - 0.008 * min(1.0, k / 60)]) for k in range(90)]
-    one, listed = LiverModel(liver), LiverModel(liver, tool=[ToolContact()])
+    one, listed = LiverModel(liver), LiverModel(liver, tool=[Tool()])
     for pose in poses:
         a, b = one.step_frame(pose), listed.step_frame(pose)
         np.testing.assert_array_equal(a.tool_force_n, b.tool_forces_n[0])
@@ -95,19 +95,19 @@ def test_tools_away_a_node_held_twice_and_the_explicit_integrators_are_refused_o
     left = top(liver, -0.04, -0.055) + [0.0, 0.0, RADIUS_M - 0.004]
     for _ in range(3):  # both tools at the same place: the second grasps nothing the first holds
         model.step_frame(ToolPose(left), ToolPose(left))
-    held = [tool.use.held_nodes for tool in model.tools]
+    held = [tool.held_nodes for tool in model.state.tools]
     assert held[0].size and not np.intersect1d(held[0], held[1]).size
     assert np.array_equal(np.sort(model.state.held_nodes), np.sort(np.concatenate(held)))
     result = model.step_frame()  # every tool away
     assert all(not m.valid for m in result.local_models) and not np.any(result.tool_forces_n)
     model.release(1)
-    assert model.tools[0].use.holding and not model.tools[1].use.holding
+    assert model.state.tools[0].holding and not model.state.tools[1].holding
     with pytest.raises(ValueError, match="one pose per tool"):
         model.step_frame(ToolPose(left))
     with pytest.raises(ValueError, match="integrator='symplectic_euler'.*implicit_euler"):
-        LiverModel(liver, ModelParams(integrator="symplectic_euler"), [ToolContact(name="a"), ToolContact(name="b")])
+        LiverModel(liver, ModelParams(integrator="symplectic_euler"), [Tool(name="a"), Tool(name="b")])
     with pytest.raises(ValueError, match="each once"):
-        LiverModel(liver, tool=[ToolContact(name="a"), ToolContact(name="a")])
+        LiverModel(liver, tool=[Tool(name="a"), Tool(name="a")])
 
 
 def test_two_tools_in_one_place_pass_through_each_other_and_both_press_the_tissue(liver):

@@ -14,10 +14,10 @@ import rclpy
 from rclpy.serialization import serialize_message
 from waiting import wait_for
 
-from liver_sim.analysis import largest_force_jump_n
 from liver_sim.base.local_model import LocalModel
 from liver_sim.base.process_settings import cli_command_line
 from liver_sim.cli.main import main
+from liver_sim.sessions.analysis import largest_force_jump_n
 from liver_sim.sessions.bag import BagWriter, QosSpec, bag_info, read_messages
 from liver_sim.sessions.parameters import node_parameters
 from liver_sim.sessions.record import RECORDER_NODE

@@ -7,7 +7,7 @@ import pytest
 from liver_sim.mesh.landmarks import press_anchor
 from liver_sim.mesh.liver_shape import default_liver
 from liver_sim.physics.model import LiverModel
-from liver_sim.physics.model_params import ModelParams
+from liver_sim.physics.settings import ModelParams
 from liver_sim.studies.scenarios import deformation_m, press_release, recovery_time_s
 
 

@@ -4,7 +4,7 @@ import math
 
 import pytest
 
-from liver_sim.physics.model_params import ModelParams
+from liver_sim.physics.settings import ModelParams
 from liver_sim.studies.indentation import block_mesh, bonded_layer_factor, hertz_force_n, indent, variants
 
 

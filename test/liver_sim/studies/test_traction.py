@@ -5,7 +5,7 @@ import csv
 import numpy as np
 import pytest
 
-from liver_sim.physics.model_params import TissueProperties
+from liver_sim.physics.settings import TissueProperties
 from liver_sim.studies.traction import (
     CLAMP_LENGTH_M,
     CLAMPED_SPACING_M,

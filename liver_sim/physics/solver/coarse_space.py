@@ -1,0 +1,267 @@
+"""The coarse space of the implicit step's two-level preconditioner (physics.solver.pcg): aggregates of nearby nodes,
+each moving rigidly, and the Cholesky factor of the step's system restricted to their motions.
+
+Node n of aggregate a moves by t_a + ω_a × d_n (d_n its offset from the aggregate's centroid): T, the (3N × 6C) map
+from the C aggregates' translations and rotations to node displacements, T_n = [I | −[d_n]×].  With F the zeroing of
+held nodes (inv_mass 0) and D⁻¹ the block-Jacobi inverse, the preconditioner is the additive two-level one
+
+    z = D⁻¹·r + F·T·A_c⁻¹·Tᵀ·F·r,   A_c = Tᵀ·F·A·F·T,
+
+symmetric positive definite whatever SPD A_c is, so PCG stays conjugate gradients and its answer stays the one the
+tolerance allows; the nearer A_c is to the system's, the fewer iterations.  A_c is assembled from the system of the
+state it is first needed at (matrix-free arrays of physics.solver.implicit_kernels and the tetrahedra of
+physics.tissue.fem_kernels;
+contacts left out) and kept for the topology and step length: the system's values change little from step to step.
+Aggregates: from each node not yet taken, in node order, every node within `hops` edges not yet taken (a greedy
+graph aggregation); `hops` the least that leaves at most TARGET_AGGREGATES aggregates.
+"""
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numba
+import numpy as np
+
+#: The most aggregates a coarse space is built with: its dense solve costs (6C)² per iteration, and more aggregates
+#: save few iterations (docs/performance.md, "The physics").
+TARGET_AGGREGATES = 64
+#: Rigid motions per aggregate: three translations, three rotations.
+MODES = 6
+
+
+class CoarseSpace(NamedTuple):
+    """The coarse space for the kernels: `aggregate` (N,) int64 per node, `offset_m` (N, 3) its offset from its
+    aggregate's centroid, `factor` (6C, 6C) the lower Cholesky factor of A_c ((0, 0): none, block-Jacobi alone), and
+    `work` (6C,) scratch."""
+
+    aggregate: np.ndarray
+    offset_m: np.ndarray
+    factor: np.ndarray
+    work: np.ndarray
+
+    @classmethod
+    def none(cls) -> "CoarseSpace":
+        """No coarse space: the preconditioner is block-Jacobi alone."""
+        return cls(np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros((0, 0)), np.zeros(0))
+
+    @property
+    def aggregates(self) -> int:
+        return self.factor.shape[0] // MODES
+
+
+def node_graph(n_nodes: int, *edge_lists: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(indptr, indices): the CSR adjacency of the nodes joined by the (E, 2) `edge_lists`, both ways."""
+    pairs = np.concatenate([np.asarray(e, np.int64).reshape(-1, 2) for e in edge_lists])
+    heads = np.concatenate([pairs[:, 0], pairs[:, 1]])
+    tails = np.concatenate([pairs[:, 1], pairs[:, 0]])
+    order = np.lexsort((tails, heads))
+    heads, tails = heads[order], tails[order]
+    indptr = np.zeros(n_nodes + 1, np.int64)
+    np.cumsum(np.bincount(heads, minlength=n_nodes), out=indptr[1:])
+    return indptr, np.ascontiguousarray(tails)
+
+
+@numba.njit(cache=True)
+def _aggregate(indptr, indices, hops):
+    """(aggregate per node, count): from each node not yet taken, in order, every node within `hops` edges of it
+    (through any node) not yet taken."""
+    n = indptr.shape[0] - 1
+    aggregate = np.full(n, -1, np.int64)
+    visited = np.full(n, -1, np.int64)
+    queue = np.empty(n, np.int64)
+    depth = np.empty(n, np.int64)
+    count = 0
+    for seed in range(n):
+        if aggregate[seed] >= 0:
+            continue
+        aggregate[seed] = count
+        visited[seed] = seed
+        queue[0], depth[0] = seed, 0
+        head, tail = 0, 1
+        while head < tail:
+            node, d = queue[head], depth[head]
+            head += 1
+            if d == hops:
+                continue
+            for k in range(indptr[node], indptr[node + 1]):
+                m = indices[k]
+                if visited[m] == seed:
+                    continue
+                visited[m] = seed
+                if aggregate[m] < 0:
+                    aggregate[m] = count
+                queue[tail], depth[tail] = m, d + 1
+                tail += 1
+        count += 1
+    return aggregate, count
+
+
+def aggregates(indptr: np.ndarray, indices: np.ndarray, target: int = TARGET_AGGREGATES) -> np.ndarray:
+    """The aggregate of each node (module docstring): the fewest hops leaving at most `target` aggregates."""
+    hops = 1
+    while True:
+        aggregate, count = _aggregate(indptr, indices, hops)
+        if count <= target or hops >= len(indptr):
+            return aggregate
+        hops += 1
+
+
+@numba.njit(cache=True, inline="always")
+def _modes(offset, n, t):
+    """t ← T_n (3 × 6): [I | −[d_n]×], column 3 + k the displacement e_k × d_n."""
+    dx, dy, dz = offset[n, 0], offset[n, 1], offset[n, 2]
+    for r in range(3):
+        for c in range(MODES):
+            t[r, c] = 0.0
+        t[r, r] = 1.0
+    t[1, 3], t[2, 3] = -dz, dy
+    t[0, 4], t[2, 4] = dz, -dx
+    t[0, 5], t[1, 5] = -dy, dx
+
+
+@numba.njit(cache=True, inline="always")
+def _add_block(matrix, a, ta, b, tb, block, scale):
+    """matrix[6a:6a+6, 6b:6b+6] += scale·T_aᵀ·block·T_b."""
+    for r in range(MODES):
+        for c in range(MODES):
+            total = 0.0
+            for i in range(3):
+                bt = block[i, 0] * tb[0, c] + block[i, 1] * tb[1, c] + block[i, 2] * tb[2, c]
+                total += ta[i, r] * bt
+            matrix[MODES * a + r, MODES * b + c] += scale * total
+
+
+@numba.njit(cache=True)
+def coarse_matrix(node_i, node_j, unit, iso, axial, shift, inv_mass, tet_law, tet_weight, aggregate, offset, count):
+    """A_c = Tᵀ·F·A·F·T (6·count square) of the system's matrix-free form (pcg.apply's arrays, contacts left out):
+    shift·I on free nodes, each spring's ±B = iso·I + axial·uuᵀ, each tetrahedron's weight·V·(λ·h_a·h_bᵀ +
+    μ·h_b·h_aᵀ + μ·(h_a·h_b)·I) between its free nodes a, b (h = R·g, fem_kernels)."""
+    matrix = np.zeros((MODES * count, MODES * count))
+    ta = np.empty((3, MODES))
+    tb = np.empty((3, MODES))
+    block = np.empty((3, 3))
+    for n in range(shift.shape[0]):
+        if inv_mass[n] > 0.0:
+            _modes(offset, n, ta)
+            block[:] = 0.0
+            for i in range(3):
+                block[i, i] = shift[n]
+            _add_block(matrix, aggregate[n], ta, aggregate[n], ta, block, 1.0)
+    for s in range(node_i.shape[0]):
+        i, j = node_i[s], node_j[s]
+        for r in range(3):
+            for c in range(3):
+                block[r, c] = axial[s] * unit[s, r] * unit[s, c]
+            block[r, r] += iso[s]
+        free_i, free_j = inv_mass[i] > 0.0, inv_mass[j] > 0.0
+        _modes(offset, i, ta)
+        _modes(offset, j, tb)
+        if free_i:
+            _add_block(matrix, aggregate[i], ta, aggregate[i], ta, block, 1.0)
+        if free_j:
+            _add_block(matrix, aggregate[j], tb, aggregate[j], tb, block, 1.0)
+        if free_i and free_j:
+            _add_block(matrix, aggregate[i], ta, aggregate[j], tb, block, -1.0)
+            _add_block(matrix, aggregate[j], tb, aggregate[i], ta, block, -1.0)
+    lam, mu = tet_law.lame_lambda_pa, tet_law.lame_mu_pa
+    for e in range(tet_law.tets.shape[0]):
+        tet, hg = tet_law.tets[e], tet_law.rotated_gradients[e]
+        scale = tet_weight * tet_law.volume_m3[e]
+        for a in range(4):
+            na = tet[a]
+            if inv_mass[na] == 0.0:
+                continue
+            _modes(offset, na, ta)
+            for b in range(4):
+                nb = tet[b]
+                if inv_mass[nb] == 0.0:
+                    continue
+                _modes(offset, nb, tb)
+                dot = hg[a, 0] * hg[b, 0] + hg[a, 1] * hg[b, 1] + hg[a, 2] * hg[b, 2]
+                for r in range(3):
+                    for c in range(3):
+                        block[r, c] = lam * hg[a, r] * hg[b, c] + mu * hg[b, r] * hg[a, c]
+                    block[r, r] += mu * dot
+                _add_block(matrix, aggregate[na], ta, aggregate[nb], tb, block, scale)
+    return matrix
+
+
+def build_coarse_space(positions: np.ndarray, aggregate: np.ndarray, matrix_arrays: tuple) -> CoarseSpace:
+    """The CoarseSpace of `aggregate` (per node) at `positions` (N, 3) m, its A_c from `matrix_arrays` (node_i, node_j,
+    unit, iso, axial, shift, inv_mass, tet_law, tet_weight: the system as pcg.apply takes it).  Motions A_c does not
+    see (an aggregate of held nodes, the rotations of one of a single node) get a diagonal of 1e-12 × its largest."""
+    count = int(aggregate.max()) + 1 if len(aggregate) else 0
+    sizes = np.bincount(aggregate, minlength=count).astype(np.float64)
+    centroids = np.stack([np.bincount(aggregate, positions[:, k], count) for k in range(3)], axis=1) / sizes[:, None]
+    offset = np.ascontiguousarray(positions - centroids[aggregate])
+    matrix = coarse_matrix(*matrix_arrays, aggregate, offset, count)
+    matrix[np.diag_indices_from(matrix)] += 1e-12 * max(float(np.abs(np.diag(matrix)).max(initial=0.0)), 1e-300)
+    factor = cholesky(matrix)
+    return CoarseSpace(aggregate, offset, factor, np.zeros(len(factor)))
+
+
+@numba.njit(cache=True, fastmath={"reassoc", "contract"})
+def cholesky(matrix):
+    """The lower triangular L of L·Lᵀ = `matrix` (symmetric positive definite), row by row (Cholesky–Banachiewicz),
+    in one thread (a threaded LAPACK would contend with the loops for the cores).  ValueError when a pivot is not
+    positive."""
+    size = matrix.shape[0]
+    factor = np.zeros_like(matrix)
+    for i in range(size):
+        for j in range(i + 1):
+            total = 0.0
+            for k in range(j):
+                total += factor[i, k] * factor[j, k]
+            if j < i:
+                factor[i, j] = (matrix[i, j] - total) / factor[j, j]
+            else:
+                pivot = matrix[i, i] - total
+                if not pivot > 0.0:
+                    raise ValueError("coarse matrix not positive definite")
+                factor[i, i] = np.sqrt(pivot)
+    return factor
+
+
+@numba.njit(cache=True, fastmath={"reassoc", "contract"})
+def cholesky_solve(factor, y):
+    """y ← (L·Lᵀ)⁻¹·y for the lower triangular `factor` L: forward by rows, backward by the columns of Lᵀ (the rows
+    of L).  Reassociated sums (vectorised; the same on one machine, rounding apart from the sequential order)."""
+    size = y.shape[0]
+    for i in range(size):
+        total = 0.0
+        for j in range(i):
+            total += factor[i, j] * y[j]
+        y[i] = (y[i] - total) / factor[i, i]
+    for i in range(size - 1, -1, -1):
+        y[i] /= factor[i, i]
+        u = y[i]
+        for j in range(i):
+            y[j] -= factor[i, j] * u
+
+
+@numba.njit(cache=True)
+def coarse_correction(coarse, inv_mass, r, z):
+    """z += F·T·A_c⁻¹·Tᵀ·r (r vanishes on held nodes): restriction, the Cholesky factor's two triangular solves,
+    prolongation to the free nodes."""
+    aggregate, offset, factor, y = coarse.aggregate, coarse.offset_m, coarse.factor, coarse.work
+    y[:] = 0.0
+    for n in range(r.shape[0]):
+        k = MODES * aggregate[n]
+        dx, dy, dz = offset[n, 0], offset[n, 1], offset[n, 2]
+        rx, ry, rz = r[n, 0], r[n, 1], r[n, 2]
+        y[k] += rx
+        y[k + 1] += ry
+        y[k + 2] += rz
+        y[k + 3] += dy * rz - dz * ry
+        y[k + 4] += dz * rx - dx * rz
+        y[k + 5] += dx * ry - dy * rx
+    cholesky_solve(factor, y)
+    for n in range(r.shape[0]):
+        if inv_mass[n] == 0.0:
+            continue
+        k = MODES * aggregate[n]
+        dx, dy, dz = offset[n, 0], offset[n, 1], offset[n, 2]
+        wx, wy, wz = y[k + 3], y[k + 4], y[k + 5]
+        z[n, 0] += y[k] + wy * dz - wz * dy
+        z[n, 1] += y[k + 1] + wz * dx - wx * dz
+        z[n, 2] += y[k + 2] + wx * dy - wy * dx

@@ -1,0 +1,313 @@
+"""Linearised backward Euler: one implicit step of the spring network per frame ([dLC99], paper P7).
+
+With f(x, v) the forces of the Eq. 1 springs, environment damping, gravity, external loads and
+penalty contacts, K = ∂f/∂x and D = ∂f/∂v, one step of length h solves
+
+    (M − h·D − h²·K)·Δv = h·(f(x, v) + h·K·v),   v ← v + Δv,   x ← x + h·v
+
+(Baraff & Witkin 1998), then — when the residual of the nonlinear step
+r = M·Δv − h·f(x + h·v_new, v_new) exceeds `newton_tolerance_n`·h on some node — Newton
+iterations J·δ = −r with J re-assembled at the iterate.
+
+Second order (BDF2, default from the second step on).  Backward Euler damps the liver's slow
+oscillations (about its fixed nodes) by ~(ω·h)²/2 per step, which at h = 1/150 s shows beside symplectic
+Euler at 72 substeps (docs/performance.md, "The physics").  BDF2,
+x₊ = (4·x − x₋)/3 + (2h/3)·v₊ and M·(v₊ − (4·v − v₋)/3) = (2h/3)·f(x₊, v₊), is exactly the step
+above of length 2h/3 from the extrapolated state ((4·x − x₋)/3, (4·v − v₋)/3) (held nodes are not
+extrapolated), so the same solver makes it; it is A-stable, L-stable and its error is second order.
+The previous state (StepHistory) is used only when the step starts from the state the
+last step left (same free nodes' x and v, same h); otherwise (first step, reset, topology change,
+state set from outside) the step is backward Euler.
+
+The numba kernels: physics.solver.implicit_kernels (forces, the system's blocks, support and contact terms,
+the Newton residual, the BDF2 start, the step), physics.solver.pcg (the solver).
+"""
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse
+
+from liver_sim.physics.contact.rows import Contacts, node_contacts
+from liver_sim.physics.settings import PRECONDITIONERS
+from liver_sim.physics.solver.coarse_space import CoarseSpace, aggregates, build_coarse_space, node_graph
+from liver_sim.physics.solver.implicit_kernels import assemble, bdf2_start, implicit_step, support_terms
+from liver_sim.physics.solver.pcg import SERIAL, block_jacobi, pcg, pcg_parallel
+from liver_sim.physics.tissue.fem_kernels import TetArrays, tet_terms
+from liver_sim.physics.tissue.organ_support import SupportArrays
+from liver_sim.physics.tissue.springs import SpringNetwork
+
+#: From this many nodes on, 'auto' takes the two-level preconditioner.  It pays from about the default liver's size
+#: (334 nodes) on; the default liver keeps block-Jacobi, so that its steps stay those of before it, bit for bit.
+TWO_LEVEL_MIN_NODES = 500
+
+#: The step length (s) of the quasi-static solve in ImplicitEuler.compliance, and its CG tolerance
+#: (docs/performance.md, "The physics": what it costs in accuracy and iterations against a tighter one).
+COMPLIANCE_HORIZON_S = 30.0
+COMPLIANCE_TOLERANCE = 3e-2
+#: The step length (s) of ImplicitEuler.equilibrium's backward-Euler iterations and their CG tolerance.
+STATIC_HORIZON_S = 1e3
+STATIC_CG_TOLERANCE = 1e-6
+
+
+NO_COARSE_SPACE = CoarseSpace.none()
+
+
+class StepHistory:
+    """What a step leaves the next one on the same nodes and elements: `warm`, the Δv (N, 3) that starts its CG
+    solve; BDF2's `states`, (x, v) of the last step and (x₋, v₋) of the one before, with its length `dt_s` (0: none,
+    the next step is backward Euler); `rotations`, the unit quaternions (M, 4: x, y, z, w) of the 'fem' law's
+    elements that start the next extraction of their rotations (physics.tissue.fem_kernels; identity at rest); and
+    what the last step took: `cg_iterations`, `newton_iterations`, its final `residual_n` (N) and whether it was
+    BDF2 (`second_order`).  Part of the model's state; a new one (ImplicitEuler.new_history) after a topology
+    change."""
+
+    def __init__(self, n_nodes: int, n_tets: int = 0):
+        self.warm = np.zeros((n_nodes, 3))
+        self.states = np.zeros((4, n_nodes, 3))
+        self.dt_s = 0.0
+        self.rotations = np.zeros((n_tets, 4))
+        self.rotations[:, 3] = 1.0
+        self.cg_iterations = 0
+        self.newton_iterations = 0
+        self.residual_n = 0.0
+        self.second_order = False
+
+    def reset(self) -> None:
+        """Forget the previous Δv, the previous state and the elements' rotations: the next step is backward Euler
+        from zero, its rotations extracted from the identity."""
+        self.warm[:] = 0.0
+        self.dt_s = 0.0
+        self.rotations[:] = 0.0
+        self.rotations[:, 3] = 1.0
+
+
+class ImplicitEuler:
+    """Linearised backward Euler on one spring network, its support (none by default) and the tetrahedra of the
+    'fem' law (physics.tissue.fem_kernels; none by default): its per-spring matrix blocks, element rotations and work
+    arrays, which depend on the topology only; with `second_order`, BDF2 from the second step on (see the module
+    docstring), from the StepHistory each step is given; its PCG's `preconditioner` (settings.PRECONDITIONERS:
+    'auto' is two-level from TWO_LEVEL_MIN_NODES nodes on), with the
+    two-level one a coarse space per step length, built at its first step (physics.solver.coarse_space).  Build a new
+    one after a topology change."""
+
+    def __init__(self, springs: SpringNetwork, n_nodes: int, cg_tolerance: float = 1e-3,
+                 max_cg_iterations: int = 500, newton_tolerance_n: float = 1e-2, max_newton: int = 2,
+                 second_order: bool = True, support: SupportArrays | None = None, tets: TetArrays | None = None,
+                 preconditioner: str = "auto", threads: int = 1):
+        if preconditioner not in PRECONDITIONERS:
+            raise ValueError(f"parameter preconditioner must be one of {', '.join(PRECONDITIONERS)}, "
+                             f"got {preconditioner!r}")
+        self.springs = springs
+        self.support = support or SupportArrays.none()
+        self.tets = tets if tets is not None else TetArrays.none()
+        self.n_nodes = int(n_nodes)
+        self.cg_tolerance = float(cg_tolerance)
+        self.max_cg_iterations = int(max_cg_iterations)
+        self.newton_tolerance_n = float(newton_tolerance_n)
+        self.max_newton = int(max_newton)
+        self.second_order = bool(second_order)
+        #: Whether the PCG adds the coarse correction to block-Jacobi.
+        self.two_level = preconditioner == "two_level" or (preconditioner == "auto"
+                                                           and self.n_nodes >= TWO_LEVEL_MIN_NODES)
+        #: Threads of the PCG (pcg.pcg_parallel above one).
+        self.threads = max(1, int(threads))
+        self._partial = SERIAL if self.threads == 1 else np.zeros((self.threads, self.n_nodes, 3))
+        self._aggregate: np.ndarray | None = None
+        self._coarse: dict[float, CoarseSpace] = {}
+        edges = len(springs.node_i)
+        # unsigned indices spare numba's negative-index wraparound in the inner loops
+        self._node_i = springs.node_i.astype(np.uint32)
+        self._node_j = springs.node_j.astype(np.uint32)
+        self._inv_rest = 1.0 / springs.rest_length_m
+        self._unit = np.zeros((edges, 3))
+        self._iso = np.zeros(edges)
+        self._axial = np.zeros(edges)
+        self._shift = np.ones(self.n_nodes)
+        self._diagonal = np.zeros((self.n_nodes, 3, 3))
+        self._preconditioner = np.zeros((self.n_nodes, 3, 3))
+        self._work = np.zeros((10, self.n_nodes, 3))
+        self._coefficient = np.zeros(0)
+        self._inv_mass = np.zeros(self.n_nodes)
+        self._tet_weight = 0.0
+
+    def step(self, history: StepHistory, x: np.ndarray, v: np.ndarray, inv_mass: np.ndarray,
+             external_force: np.ndarray, dt: float, environment_damping: float, gravity: np.ndarray,
+             contacts: Contacts | None = None) -> np.ndarray:
+        """Advance x, v (N, 3, in place) by one step of `dt` s from `history` (updated for the next step);
+        returns the contact force on the liver (N) at the new state (the tool feels its opposite)."""
+        if len(history.rotations) != len(self.tets.tets):
+            raise ValueError(f"a step history of {len(history.rotations)} elements for a solver of "
+                             f"{len(self.tets.tets)}: take ImplicitEuler.new_history")
+        tets = self.tets._replace(quaternion=history.rotations)
+        contacts = contacts or Contacts.none()
+        if len(self._coefficient) != len(contacts):
+            self._coefficient = np.zeros(len(contacts))
+        self._inv_mass = inv_mass
+        x_last, v_last, x_prev, v_prev = history.states
+        second = bdf2_start(x, v, x_last, v_last, x_prev, v_prev, inv_mass,
+                            self.second_order and history.dt_s == dt)
+        h = 2.0 * dt / 3.0 if second else float(dt)
+        if self.two_level and h not in self._coarse:  # the system at x for the coarse space of this h
+            self._assemble_at_rest(x, inv_mass, np.zeros_like(x), environment_damping, h, tets)
+        coarse = self._coarse_space(h, x, inv_mass, tets)
+        s = self.springs
+        contact, history.cg_iterations, history.newton_iterations, history.residual_n = implicit_step(
+            x, v, inv_mass, external_force, np.asarray(gravity, dtype=np.float64), float(environment_damping),
+            h, self._node_i, self._node_j, self._inv_rest, s.lambda1_n, s.lambda2_n, s.mu_ns_per_m,
+            self._unit, self._iso, self._axial, self._shift, self._diagonal, *self.support, tets, contacts.nodes,
+            contacts.weights,
+            contacts.normal, contacts.offset_m, contacts.normal_speed_m_s, contacts.stiffness_n_per_m,
+            contacts.damping_ns_per_m, self._coefficient, self._preconditioner, coarse, history.warm, self.cg_tolerance,
+            self.max_cg_iterations, self.newton_tolerance_n, self.max_newton, self._work, self._partial)
+        x_last[:], v_last[:] = x, v
+        history.dt_s = float(dt)
+        history.second_order = second
+        return contact
+
+    def new_history(self) -> StepHistory:
+        """A StepHistory of this solver's nodes and elements, at rest."""
+        return StepHistory(self.n_nodes, len(self.tets.tets))
+
+    def _rotations(self, rotations: np.ndarray | None) -> TetArrays:
+        """The elements with the rotations' warm start `rotations` (a state's StepHistory.rotations, updated in
+        place), or from the identity when None."""
+        if rotations is None:
+            rotations = self.new_history().rotations
+        return self.tets._replace(quaternion=rotations)
+
+    @property
+    def solver(self) -> str:
+        """Which solver the steps take: 'pcg block-jacobi' or 'pcg two-level' (with its aggregates once built), and
+        its threads when more than one (their count sets the order of the sums)."""
+        threads = f", {self.threads} threads" if self.threads > 1 else ""
+        if not self.two_level:
+            return f"pcg block-jacobi{threads}"
+        built = {c.aggregates for c in self._coarse.values()}
+        return f"pcg two-level{threads}" + (f", {built.pop()} aggregates" if len(built) == 1 else "")
+
+    def _coarse_space(self, h: float, x: np.ndarray, inv_mass: np.ndarray, tets: TetArrays) -> CoarseSpace:
+        """The coarse space of step length `h` (none without the two-level preconditioner); the first time, built
+        from the system last assembled, which must be the one of `h` at `x`."""
+        if not self.two_level:
+            return NO_COARSE_SPACE
+        coarse = self._coarse.get(h)
+        if coarse is None:
+            if self._aggregate is None:
+                self._aggregate = aggregates(*node_graph(self.n_nodes, np.stack([self._node_i, self._node_j], axis=1),
+                                                         self.tets.tets[:, [0, 1, 0, 2, 0, 3, 1, 2, 1, 3, 2, 3]]))
+            coarse = build_coarse_space(x, self._aggregate, (
+                self._node_i, self._node_j, self._unit, self._iso, self._axial, self._shift, inv_mass, tets,
+                self._tet_weight))
+            self._coarse[h] = coarse
+        return coarse
+
+    def matrix(self) -> scipy.sparse.csr_matrix:
+        """The spring, support, mass and damping part of the last assembled system matrix, (3N, 3N) sparse
+        (contacts and tetrahedra excluded; held nodes' rows and columns are the identity)."""
+        springs = self.springs
+        free = self._inv_mass > 0.0
+        blocks = self._iso[:, None, None] * np.eye(3) + self._axial[:, None, None] * (
+            self._unit[:, :, None] * self._unit[:, None, :])
+        blocks = blocks * (free[springs.node_i] & free[springs.node_j])[:, None, None]
+        nodes = np.arange(self.n_nodes)
+        rows = np.concatenate([nodes, springs.node_i, springs.node_j])
+        cols = np.concatenate([nodes, springs.node_j, springs.node_i])
+        values = np.concatenate([self._diagonal, -blocks, -blocks])
+        r = (3 * rows)[:, None, None] + np.arange(3)[None, :, None]
+        c = (3 * cols)[:, None, None] + np.arange(3)[None, None, :]
+        size = 3 * self.n_nodes
+        return scipy.sparse.coo_matrix((values.ravel(), (np.broadcast_to(r, values.shape).ravel(),
+                                                          np.broadcast_to(c, values.shape).ravel())),
+                                       shape=(size, size)).tocsr()
+
+    def compliance(self, x: np.ndarray, inv_mass: np.ndarray, load: np.ndarray, environment_damping: float,
+                   guess: np.ndarray, contacts: Contacts | None = None, rotations: np.ndarray | None = None) -> float:
+        """Static compliance bᵀ·K⁻¹·b (m/N) of the network at x under the load pattern b = `load` (N, 3) N,
+        held nodes (inv_mass 0) fixed: the tangent stiffness K of the springs (physics.solver.implicit_kernels) and of
+        the organ's supports at x, and of `contacts` (each row taken as active: another tool's penalty holding the
+        tissue), solved by the step's PCG as (M·(1 + H·c_env) + H·C + H²·K)·z = b with H = COMPLIANCE_HORIZON_S,
+        so the mass and damping terms weigh ≲ 1 % against K; `guess` (N, 3), the previous solution ·H², starts
+        the solve and is overwritten by this one; `rotations` the elements' warm start (StepHistory.rotations, None:
+        the identity)."""
+        h = COMPLIANCE_HORIZON_S
+        tets = self._rotations(rotations)
+        contacts = contacts or Contacts.none()
+        coefficient = h * contacts.damping_ns_per_m + h * h * contacts.stiffness_n_per_m
+        self._assemble_at_rest(x, inv_mass, np.zeros_like(x), environment_damping, h, tets, contacts, coefficient)
+        b = np.where((inv_mass > 0.0)[:, None], load, 0.0)
+        solution = np.where((inv_mass > 0.0)[:, None], guess / (h * h), 0.0)
+        self._solve(inv_mass, b, solution, COMPLIANCE_TOLERANCE, self._coarse_space(h, x, inv_mass, tets), tets,
+                    contacts, coefficient)
+        guess[:] = solution * (h * h)
+        return float(np.einsum("ij,ij->", b, guess))
+
+    def equilibrium(self, x: np.ndarray, inv_mass: np.ndarray, external_force: np.ndarray, tolerance_n: float,
+                    max_iterations: int = 500, rotations: np.ndarray | None = None) -> np.ndarray:
+        """Static equilibrium of the network and its support under `external_force` (N, 3) N, no gravity:
+        x (N, 3) m moves in place until |f(x)| ≤ `tolerance_n` on every free node, held nodes (inv_mass 0)
+        staying where x has them.  Newton's iterations (M + H·C + H²·K)·δx = H²·f(x), x ← x + δx, K the
+        tangent stiffness at x: backward-Euler steps of H = STATIC_HORIZON_S from rest, whose mass and
+        damping terms only regularise K.  K leaves out compressed springs' negative geometric stiffness
+        (physics.solver.implicit_kernels), so where springs are compressed the iterations converge linearly.  Returns
+        f(x) (N, 3): ≈ 0 on free nodes; on held nodes the pull of the network (and loads) that holding them
+        resists; `rotations` as in `compliance`.  Raises RuntimeError when not converged."""
+        h = STATIC_HORIZON_S
+        tets = self._rotations(rotations)
+        free = (inv_mass > 0.0)[:, None]
+        for _ in range(max_iterations + 1):
+            f = self._assemble_at_rest(x, inv_mass, external_force, 0.0, h, tets)
+            residual = float(np.sqrt((np.where(free, f, 0.0) ** 2).sum(axis=1)).max(initial=0.0))
+            if residual <= tolerance_n:
+                return f
+            step = np.zeros_like(x)
+            self._solve(inv_mass, np.where(free, f * (h * h), 0.0), step, STATIC_CG_TOLERANCE,
+                        self._coarse_space(h, x, inv_mass, tets), tets)
+            x += step
+        raise RuntimeError(f"no static equilibrium within {max_iterations} Newton iterations "
+                           f"(largest residual force {residual:.3g} N)")
+
+    def _assemble_at_rest(self, x: np.ndarray, inv_mass: np.ndarray, external_force: np.ndarray,
+                          environment_damping: float, h: float, tets: TetArrays, contacts: Contacts | None = None,
+                          coefficient: np.ndarray | None = None) -> np.ndarray:
+        """Assemble the step's system at x, v = 0 (springs and support; `contacts` with their `coefficient`,
+        h·c + h²·k each, in the preconditioner) and its preconditioner; returns the forces f(x) (N, 3)."""
+        zero = np.zeros_like(x)
+        f, ky = np.zeros_like(x), np.zeros_like(x)
+        s = self.springs
+        no = contacts or Contacts.none()
+        assemble(x, zero, zero, inv_mass, external_force, np.zeros(3), float(environment_damping), h, self._node_i,
+                 self._node_j, self._inv_rest, s.lambda1_n, s.lambda2_n, s.mu_ns_per_m, self._unit, self._iso,
+                 self._axial, self._shift, self._diagonal, f, ky, True)
+        support_terms(x, zero, zero, inv_mass, h, *self.support, f, ky, self._shift, self._diagonal, True)
+        tet_terms(x, zero, zero, inv_mass, h, tets, f, ky, self._diagonal, True)
+        self._tet_weight = h * h + h * tets.viscous_time_s
+        block_jacobi(self._diagonal, inv_mass, no.nodes, no.weights, no.normal,
+                     np.zeros(0) if coefficient is None else coefficient, self._preconditioner)
+        return f
+
+    def _solve(self, inv_mass: np.ndarray, b: np.ndarray, solution: np.ndarray, tolerance: float,
+               coarse: CoarseSpace, tets: TetArrays, contacts: Contacts | None = None,
+               coefficient: np.ndarray | None = None) -> None:
+        """solution ← A⁻¹·b by PCG from `solution` (the last assembled system, with `contacts` and their
+        `coefficient` if given) with `coarse`."""
+        r, z, p, q = (np.zeros_like(b) for _ in range(4))
+        no = contacts or Contacts.none()
+        solve = pcg_parallel if self.threads > 1 else pcg
+        solve(self._node_i, self._node_j, self._unit, self._iso, self._axial, self._shift, inv_mass, no.nodes,
+              no.weights, no.normal, np.zeros(0) if coefficient is None else coefficient, tets, self._tet_weight,
+              self._preconditioner, coarse, b, solution, tolerance, self.max_cg_iterations, r, z, p, q, self._partial)
+
+    def warm_up(self) -> None:
+        """Compile the kernels (numba, cached on disk) before a timed loop starts."""
+        springs = self.springs
+        x = np.random.default_rng(0).normal(size=(self.n_nodes, 3))
+        v = np.zeros_like(x)
+        contacts = node_contacts(np.array([0]), np.array([[0.0, 0.0, 1.0]]), np.array([0.0]), np.array([0.0]),
+                                 1.0, 0.0)
+        probe = ImplicitEuler(springs, self.n_nodes, max_cg_iterations=1, max_newton=0, support=self.support,
+                              preconditioner="two_level",
+                              tets=self.tets._replace(quaternion=self.tets.quaternion.copy(),
+                                                      rotation=self.tets.rotation.copy(),
+                                                      rotated_gradients=self.tets.rotated_gradients.copy()))
+        probe.step(probe.new_history(), x, v, np.ones(self.n_nodes), np.zeros_like(x), 1e-3, 0.0, np.zeros(3),
+                   contacts)

@@ -1,0 +1,300 @@
+"""The numba kernels of one implicit step (physics.solver.implicit): forces f and K·y, the system matrix
+A = M − h·D − h²·K in matrix-free form, the Newton residual, the BDF2 start, the step itself.
+
+Blocks.  A spring i→j with unit axis u, length l, strain d = (l − l0)/l0 and elastic tension
+T = λ1·d³ + λ2·d has the tangent stiffness Ks = (dT/dl)·uuᵀ + (T⁺/l)·(I − uuᵀ), dT/dl =
+(3·λ1·d² + λ2)/l0, and damping μ·uuᵀ; K gets −Ks on (i,i), (j,j) and +Ks on (i,j), (j,i), D
+likewise with μ·uuᵀ.  The geometric term uses T⁺ = max(T, 0): a compressed spring's negative
+geometric stiffness is dropped, so every block is positive semi-definite and the system matrix
+symmetric positive definite (the usual safeguard; the residual check corrects what it omits).
+The viscous tension's own x-derivative (non-symmetric) is omitted likewise.  Environment damping
+a −= c_env·v gives D = −c_env·M.  Held nodes (inv_mass 0: fixed or grasped) keep Δv = 0 and do
+not move (as `explicit_kernels.integrate`): their rows and columns are replaced by the identity.
+
+Support (physics.tissue.organ_support): a supported node n with stiffness k_n and damping c_n gets
+f_n = −k_n·(x_n − x_rest,n) − c_n·v_n, so K gets −k_n·I and D −c_n·I on its diagonal block, which
+adds h·c_n + h²·k_n to the node's shift (`support_terms`).
+
+Contacts (`implicit.Contacts`): element e with nodes a (up to 3, padding −1), weights w_a, unit normal n
+(pushing the liver), stiffness k and damping c has depth δ = o − n·Σ w_a·x_a and depth rate
+δ̇ = s − n·Σ w_a·v_a, force F = max(0, k·δ + c·δ̇) and f_a = w_a·F·n; active, its Jacobian blocks
+are ∂f_a/∂x_b = −w_a·w_b·k·nnᵀ and ∂f_a/∂v_b = −w_a·w_b·c·nnᵀ.  Node contacts are the
+1-node case, the tool's contacts with the skin triangles (contact.tool_geometry.contact_rows) the 3-node case.  Contacts
+enter the solver matrix-free, so they need no slot in the sparse pattern.
+"""
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+from liver_sim.physics.solver.pcg import block_jacobi, pcg, pcg_parallel
+from liver_sim.physics.tissue.fem_kernels import tet_terms
+from liver_sim.physics.tissue.pairs import add_pair
+
+
+@numba.njit(cache=True)
+def contact_forces(x, v, y, inv_mass, h, nodes, weights, normal, offset, speed, stiffness, damping,
+                   f, ky, coefficient):
+    """Add the active contacts' force at (x, v) to f and K·y to ky; coefficient[e] = h·c + h²·k when
+    active (at x + h·y), else 0.  Returns the total contact force on the liver (N), clipped at 0 each."""
+    tx, ty, tz = 0.0, 0.0, 0.0
+    for e in range(nodes.shape[0]):
+        nx, ny, nz = normal[e, 0], normal[e, 1], normal[e, 2]
+        px = 0.0
+        py = 0.0
+        pr = 0.0
+        for a in range(3):
+            n = nodes[e, a]
+            if n < 0:
+                continue
+            w = weights[e, a]
+            px += w * (nx * x[n, 0] + ny * x[n, 1] + nz * x[n, 2])
+            pr += w * (nx * v[n, 0] + ny * v[n, 1] + nz * v[n, 2])
+            if inv_mass[n] > 0.0:
+                py += w * (nx * y[n, 0] + ny * y[n, 1] + nz * y[n, 2])
+        k, c = stiffness[e], damping[e]
+        force = k * (offset[e] - px) + c * (speed[e] - pr)
+        if force - k * h * py <= 0.0:
+            coefficient[e] = 0.0
+            continue
+        coefficient[e] = h * c + h * h * k
+        tx += max(force, 0.0) * nx
+        ty += max(force, 0.0) * ny
+        tz += max(force, 0.0) * nz
+        for a in range(3):
+            n = nodes[e, a]
+            if n < 0:
+                continue
+            w = weights[e, a]
+            g = w * force
+            gy = -w * k * py
+            f[n, 0] += g * nx
+            f[n, 1] += g * ny
+            f[n, 2] += g * nz
+            ky[n, 0] += gy * nx
+            ky[n, 1] += gy * ny
+            ky[n, 2] += gy * nz
+    return tx, ty, tz
+
+
+@numba.njit(cache=True)
+def assemble(x, v, y, inv_mass, external, gravity, c_env, h, node_i, node_j, inv_rest, lambda1, lambda2, mu,
+             unit, iso, axial, shift, diagonal, f, ky, assemble_matrix):
+    """Forces f at (x, v) and ky = K·y (y zero on held nodes); with assemble_matrix, also the system
+    A = M·(1 + h·c_env) − h·D_springs − h²·K_springs in matrix-free form: per spring the block
+    B = iso·I + axial·uuᵀ (unit u) that enters (i,i) and (j,j) as +B and (i,j), (j,i) as −B;
+    shift = m·(1 + h·c_env) per node (1 on held ones, whose rows and columns are the identity);
+    and the 3×3 diagonal blocks of A."""
+    for n in range(x.shape[0]):
+        w = inv_mass[n]
+        for a in range(3):
+            ky[n, a] = 0.0
+            f[n, a] = external[n, a]
+        if w > 0.0:
+            m = 1.0 / w
+            for a in range(3):
+                f[n, a] += m * (gravity[a] - c_env * v[n, a])
+            if assemble_matrix:
+                shift[n] = m * (1.0 + h * c_env)
+        elif assemble_matrix:
+            shift[n] = 1.0
+        if assemble_matrix:
+            diagonal[n] = 0.0
+            for a in range(3):
+                diagonal[n, a, a] = shift[n]
+    for s in range(node_i.shape[0]):
+        i, j = node_i[s], node_j[s]
+        inv_l0 = inv_rest[s]
+        ux = x[j, 0] - x[i, 0]
+        uy = x[j, 1] - x[i, 1]
+        uz = x[j, 2] - x[i, 2]
+        length = math.sqrt(ux * ux + uy * uy + uz * uz)
+        if length * inv_l0 <= 1e-12:
+            if assemble_matrix:
+                iso[s] = 0.0
+                axial[s] = 0.0
+            continue
+        inv_length = 1.0 / length
+        ux, uy, uz = ux * inv_length, uy * inv_length, uz * inv_length
+        rate = (v[j, 0] - v[i, 0]) * ux + (v[j, 1] - v[i, 1]) * uy + (v[j, 2] - v[i, 2]) * uz
+        d = length * inv_l0 - 1.0
+        elastic = lambda1[s] * d * d * d + lambda2[s] * d
+        tension = elastic + mu[s] * rate
+        material = (3.0 * lambda1[s] * d * d + lambda2[s]) * inv_l0
+        geometric = max(elastic, 0.0) * inv_length
+        free_i = inv_mass[i] > 0.0
+        free_j = inv_mass[j] > 0.0
+        # Ks·(y_j − y_i), y zero on held nodes
+        dx = (y[j, 0] if free_j else 0.0) - (y[i, 0] if free_i else 0.0)
+        dy = (y[j, 1] if free_j else 0.0) - (y[i, 1] if free_i else 0.0)
+        dz = (y[j, 2] if free_j else 0.0) - (y[i, 2] if free_i else 0.0)
+        along = (material - geometric) * (dx * ux + dy * uy + dz * uz)
+        kx = geometric * dx + along * ux
+        ky_ = geometric * dy + along * uy
+        kz = geometric * dz + along * uz
+        add_pair(f, i, j, tension * ux, tension * uy, tension * uz)
+        add_pair(ky, i, j, kx, ky_, kz)
+        if not assemble_matrix:
+            continue
+        unit[s, 0], unit[s, 1], unit[s, 2] = ux, uy, uz
+        g = h * h * geometric
+        t = h * h * (material - geometric) + h * mu[s]
+        iso[s] = g
+        axial[s] = t
+        bxx, byy, bzz = t * ux * ux + g, t * uy * uy + g, t * uz * uz + g
+        bxy, bxz, byz = t * ux * uy, t * ux * uz, t * uy * uz
+        for n, free in ((i, free_i), (j, free_j)):
+            if free:
+                diagonal[n, 0, 0] += bxx
+                diagonal[n, 1, 1] += byy
+                diagonal[n, 2, 2] += bzz
+                diagonal[n, 0, 1] += bxy
+                diagonal[n, 1, 0] += bxy
+                diagonal[n, 0, 2] += bxz
+                diagonal[n, 2, 0] += bxz
+                diagonal[n, 1, 2] += byz
+                diagonal[n, 2, 1] += byz
+
+
+@numba.njit(cache=True)
+def support_terms(x, v, y, inv_mass, h, nodes, rest, stiffness, damping, f, ky, shift, diagonal, assemble_matrix):
+    """Add the support's forces at (x, v) to f and K·y to ky (free nodes); with assemble_matrix, also
+    h·c_n + h²·k_n to each free supported node's shift and diagonal block (after assemble)."""
+    for s in range(nodes.shape[0]):
+        n = nodes[s]
+        if inv_mass[n] == 0.0:
+            continue
+        k, c = stiffness[s], damping[s]
+        for a in range(3):
+            f[n, a] -= k * (x[n, a] - rest[s, a]) + c * v[n, a]
+            ky[n, a] -= k * y[n, a]
+        if assemble_matrix:
+            extra = h * c + h * h * k
+            shift[n] += extra
+            for a in range(3):
+                diagonal[n, a, a] += extra
+
+
+@numba.njit(cache=True)
+def newton_rhs(v, v0, f, inv_mass, h, rhs):
+    """Minus the residual of the nonlinear step, rhs = h·f(x, v) − M·(v − v0) on free nodes (0 on held
+    ones), f evaluated at the iterate; returns max over nodes of |rhs|/h (N)."""
+    worst = 0.0
+    for n in range(v.shape[0]):
+        w = inv_mass[n]
+        if w == 0.0:
+            for a in range(3):
+                rhs[n, a] = 0.0
+            continue
+        norm2 = 0.0
+        for a in range(3):
+            rhs[n, a] = h * f[n, a] - (v[n, a] - v0[n, a]) / w
+            norm2 += rhs[n, a] * rhs[n, a]
+        worst = max(worst, math.sqrt(norm2) / h)
+    return worst
+
+
+@numba.njit(cache=True)
+def advance(x, x0, v, v0, dv, inv_mass, h):
+    """v ← v + Δv and x ← x0 + h·v on free nodes (held nodes keep x and v)."""
+    for n in range(x.shape[0]):
+        if inv_mass[n] == 0.0:
+            continue
+        for a in range(3):
+            v[n, a] += dv[n, a]
+            x[n, a] = x0[n, a] + h * v[n, a]
+
+
+@numba.njit(cache=True)
+def bdf2_start(x, v, x_last, v_last, x_prev, v_prev, inv_mass, second_order):
+    """With `second_order` and x, v equal to x_last, v_last on every free node: x, v ← the extrapolated
+    start of a BDF2 step, (4·x − x_prev)/3 and (4·v − v_prev)/3 on free nodes, and True; else False,
+    x and v unchanged.  Either way x_prev, v_prev ← the incoming x, v (the next step's x₋, v₋)."""
+    same = second_order
+    for n in range(x.shape[0]):
+        if not same:
+            break
+        if inv_mass[n] == 0.0:
+            continue
+        for a in range(3):
+            if x[n, a] != x_last[n, a] or v[n, a] != v_last[n, a]:
+                same = False
+    for n in range(x.shape[0]):
+        for a in range(3):
+            px, pv = x_prev[n, a], v_prev[n, a]
+            x_prev[n, a], v_prev[n, a] = x[n, a], v[n, a]
+            if same and inv_mass[n] > 0.0:
+                x[n, a] = (4.0 * x[n, a] - px) / 3.0
+                v[n, a] = (4.0 * v[n, a] - pv) / 3.0
+    return same
+
+
+@numba.njit(cache=True, nogil=True)
+def implicit_step(x, v, inv_mass, external, gravity, c_env, h, node_i, node_j, inv_rest, lambda1, lambda2, mu,
+                  unit, iso, axial, shift, diagonal, support_nodes, support_rest, support_stiffness,
+                  support_damping, tet_law, nodes, weights, normal, offset, speed, stiffness,
+                  damping, coefficient, preconditioner, coarse, warm, tolerance, max_iterations, newton_tolerance,
+                  max_newton, work, partial):
+    """One linearised backward-Euler step of x, v in place (see the module docstring), then Newton
+    iterations while the nonlinear residual exceeds `newton_tolerance` (N) on some node, up to
+    `max_newton`.  `tet_law`: the tetrahedra of the 'fem' law (physics.tissue.fem_kernels.TetArrays; none for the
+    springs').  `coarse`: the preconditioner's coarse space (physics.solver.coarse_space; none: block-Jacobi alone).
+    `warm` holds the previous Δv (start of the solve; overwritten).  `work` is
+    (10, N, 3) scratch; `partial` pcg.SERIAL for one thread, else (threads, N, 3): the solve on the threads
+    (pcg.pcg_parallel).  Returns (contact force on the liver at the new state (3,), CG iterations,
+    Newton iterations, final residual (N))."""
+    f, ky, rhs, x0, v0, r, z, p, q, zero = work
+    zero[:] = 0.0
+    x0[:] = x
+    v0[:] = v
+    for n in range(x.shape[0]):
+        if inv_mass[n] == 0.0:
+            for a in range(3):
+                warm[n, a] = 0.0  # held: Δv = 0, and CG's vectors vanish there (see pcg.apply)
+    assemble(x, v, v, inv_mass, external, gravity, c_env, h, node_i, node_j, inv_rest, lambda1, lambda2, mu,
+             unit, iso, axial, shift, diagonal, f, ky, True)
+    support_terms(x, v, v, inv_mass, h, support_nodes, support_rest, support_stiffness, support_damping, f, ky,
+                  shift, diagonal, True)
+    tet_terms(x, v, v, inv_mass, h, tet_law, f, ky, diagonal, True)
+    tet_weight = h * h + h * tet_law.viscous_time_s
+    contact_forces(x, v, v, inv_mass, h, nodes, weights, normal, offset, speed, stiffness, damping, f, ky,
+                   coefficient)
+    for n in range(x.shape[0]):
+        for a in range(3):
+            rhs[n, a] = h * (f[n, a] + h * ky[n, a]) if inv_mass[n] > 0.0 else 0.0
+    total_iterations = 0
+    newton = 0
+    contact = np.zeros(3)
+    while True:
+        block_jacobi(diagonal, inv_mass, nodes, weights, normal, coefficient, preconditioner)
+        if partial.shape[0] > 1:
+            total_iterations += pcg_parallel(node_i, node_j, unit, iso, axial, shift, inv_mass, nodes, weights, normal,
+                                             coefficient, tet_law, tet_weight, preconditioner, coarse, rhs, warm,
+                                             tolerance, max_iterations, r, z, p, q, partial)
+        else:
+            total_iterations += pcg(node_i, node_j, unit, iso, axial, shift, inv_mass, nodes, weights, normal,
+                                    coefficient, tet_law, tet_weight, preconditioner, coarse, rhs, warm, tolerance,
+                                    max_iterations, r, z, p, q, partial)
+        advance(x, x0, v, v0, warm, inv_mass, h)
+        assemble(x, v, zero, inv_mass, external, gravity, c_env, h, node_i, node_j, inv_rest, lambda1, lambda2, mu,
+                 unit, iso, axial, shift, diagonal, f, ky, False)
+        support_terms(x, v, zero, inv_mass, h, support_nodes, support_rest, support_stiffness, support_damping, f,
+                      ky, shift, diagonal, False)
+        tet_terms(x, v, zero, inv_mass, h, tet_law, f, ky, diagonal, False)
+        tx, ty, tz = contact_forces(x, v, zero, inv_mass, h, nodes, weights, normal, offset, speed, stiffness,
+                                    damping, f, ky, coefficient)
+        contact[0], contact[1], contact[2] = tx, ty, tz
+        residual = newton_rhs(v, v0, f, inv_mass, h, rhs)
+        if newton >= max_newton or residual <= newton_tolerance:
+            break
+        newton += 1
+        assemble(x, v, zero, inv_mass, external, gravity, c_env, h, node_i, node_j, inv_rest, lambda1, lambda2, mu,
+                 unit, iso, axial, shift, diagonal, f, ky, True)
+        support_terms(x, v, zero, inv_mass, h, support_nodes, support_rest, support_stiffness, support_damping, f,
+                      ky, shift, diagonal, True)
+        tet_terms(x, v, zero, inv_mass, h, tet_law, f, ky, diagonal, True)
+        warm[:] = 0.0
+    warm[:] = v - v0
+    return contact, total_iterations, newton, residual
