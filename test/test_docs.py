@@ -261,7 +261,7 @@ EXECUTABLES = (*NODES, "liver-sim")
 
 def node_command_problem(node: str, tokens: list[str]) -> str | None:
     """Why the node command line `tokens` (after the executable) would not start the node as written, or None:
-    ROS arguments before `--ros-args`, a parameter file not the node's, an override of an undeclared parameter,
+    ROS arguments before `--ros-args`, a first parameter file not the node's, an override of an undeclared parameter,
     a value the node refuses at start (type, range, the bridge's passivity and rate limit)."""
     if "--ros-args" in tokens:
         before, ros = tokens[:tokens.index("--ros-args")], tokens[tokens.index("--ros-args") + 1:]
@@ -271,9 +271,11 @@ def node_command_problem(node: str, tokens: list[str]) -> str | None:
     if stray:
         return f"{stray} before --ros-args"
     overrides = []
+    params_files = [value for flag, value in zip(ros, ros[1:]) if flag == "--params-file"]
+    if params_files and not params_files[0].endswith(f"config/{node}.yaml") and not PLACEHOLDER.fullmatch(
+            params_files[0]):  # a further file (a segmented liver's support) may follow the node's own
+        return f"--params-file {params_files[0]} is not the node's config/{node}.yaml"
     for flag, value in zip(ros, ros[1:]):
-        if flag == "--params-file" and not value.endswith(f"config/{node}.yaml") and not PLACEHOLDER.fullmatch(value):
-            return f"--params-file {value} is not the node's config/{node}.yaml"
         if flag == "-p":
             overrides.append(value)
     try:
