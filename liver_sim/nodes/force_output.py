@@ -45,13 +45,15 @@ class ForceOutput:
         self.publisher.publish(message)
 
     def check(self) -> tuple[list[str], list[str]]:
-        """Look at the graph and read the samples back: (writers that appeared, writers gone) since the last
-        check, by name."""
+        """Look at the graph and read the samples back, at most READ_BACK_DEPTH of them: (writers that appeared,
+        writers gone) since the last check, by name."""
         writers = {endpoint_gid(info): (node_path(info.node_namespace, info.node_name)
                                         if info.node_name != UNKNOWN_NODE_NAME else "a node not yet named by the graph")
                    for info in self._node.get_publishers_info_by_topic(self.topic)}
         writers.pop(self._gid, None)
-        while (taken := self._take()) is not None:
+        for _ in range(READ_BACK_DEPTH):  # at most what the reader keeps: samples arriving meanwhile wait for the next
+            if (taken := self._take()) is None:
+                break
             if taken.gid != self._gid:
                 name = writers.get(taken.gid, GONE_WRITER)
                 self.bursts[name] = self.bursts.get(name, 0) + 1
