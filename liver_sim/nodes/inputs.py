@@ -1,5 +1,5 @@
 """What a node's loop reads: subscriptions it takes itself (LoopInputs), the newest value of each input and
-when it arrived (Latest), and values handed to it once from another thread (Handoff)."""
+when it arrived (Latest)."""
 from __future__ import annotations
 
 import time
@@ -46,34 +46,6 @@ class RosTime:
     def stamp(self) -> tuple[int, int]:
         """(sec, nanosec) now."""
         return divmod(self._clock.now().nanoseconds if self._simulated else time.time_ns(), 1_000_000_000)
-
-
-class Handoff:
-    """A value one thread hands to another to take once: :meth:`offer` replaces a value not yet taken, :meth:`take`
-    returns it once, then `Handoff.NOTHING` until the next offer. One tuple swapped whole (atomic under the GIL):
-    one offering thread, one taking thread, no lock."""
-
-    NOTHING = object()
-
-    def __init__(self):
-        self._offered = (0, Handoff.NOTHING)
-        self._taken = 0
-
-    def offer(self, value) -> None:
-        self._offered = (self._offered[0] + 1, value)
-
-    def take(self):
-        """The value offered since the last take, or NOTHING."""
-        version, value = self._offered
-        if version == self._taken:
-            return Handoff.NOTHING
-        self._taken = version
-        return value
-
-    @property
-    def pending(self) -> bool:
-        """Whether an offer waits to be taken."""
-        return self._offered[0] != self._taken
 
 
 class LoopInputs:
