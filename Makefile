@@ -60,12 +60,13 @@ export MPLBACKEND := Agg
 # to the sources (git-ignored; `make clean` removes it).
 
 .DEFAULT_GOAL := help
-.PHONY: help venv lint test test-quick demo bench check-domain clean distclean
+.PHONY: help venv lint test test-quick test-two-hands demo bench check-domain clean distclean
 
 help:
 	@echo "make demo       build the default liver, run a headless press-and-release, write out/demo/"
 	@echo "make test       run the test suite (both tiers, as CI does)"
 	@echo "make test-quick run the ROS-free tier (pytest -m \"not ros\"): about a minute, no ROS processes"
+	@echo "make test-two-hands  the two-hand real-time tests, which make test skips on fewer than 4 cores"
 	@echo "make lint       ruff over the repository (ruff.toml); make test runs it first"
 	@echo "make bench      physics benchmark (steps per second, real-time factor)"
 	@echo "make venv       create/update $(VENV) only (pinned, see requirements.txt)"
@@ -127,6 +128,11 @@ test: venv check-domain lint
 # tier is computing only, so it fills both workers.
 test-quick: venv check-domain
 	$(VENV_PY) -m pytest -q -n 2 -m "not ros" $(PYTEST_ARGS) test
+
+# The two-hand real-time tests (marker `two_hands`), which `make test` skips on fewer than 4 cores, run anyway
+# (docs/devices.md#two-hands): to measure what two hands need of this machine.
+test-two-hands: venv check-domain
+	LIVER_SIM_TWO_HANDS=1 $(VENV_PY) -m pytest -q -m two_hands $(PYTEST_ARGS) test
 
 demo: venv check-domain
 	$(VENV)/bin/liver-sim demo --out out/demo $(DEMO_ARGS)

@@ -26,6 +26,11 @@
   with nothing else of the suite computing (``-m rate_loops``): their loops
   get the machine's cores as a rig's would. A closed loop beside a worker
   computing physics lost its rate on two cores.
+* Two hands: the tests that run two device sides at once in real time (the
+  ``two_hands_demo`` fixture's, and those marked ``two_hands``) need more
+  than two cores (docs/devices.md#two-hands): on a machine with fewer than
+  TWO_HANDS_MIN_CORES they are skipped with that reason, unless
+  LIVER_SIM_TWO_HANDS=1 asks for them (``make test-two-hands``).
 * Test tiers: every test that takes ``ros_domain_id`` (directly, through
   ``ros_env`` or through another fixture), or is listed in
   ``ROS_WITHOUT_FIXTURE``, is marked ``ros``: it starts node processes or an
@@ -72,6 +77,24 @@ def pytest_unconfigure(config):
     _SESSION_LOCK.close()
 
 
+#: Cores a machine gives this process from which the two-hand real-time tests run: two device sides at 1 kHz, the
+#: physics with two contacts, a recorder and a live view took more than 2 cores on the AMD EPYC VM (docs/devices.md).
+TWO_HANDS_MIN_CORES = 4
+#: The environment variable that runs the two-hand tests on fewer cores (to measure what they need, or on a fast day).
+TWO_HANDS_VARIABLE = "LIVER_SIM_TWO_HANDS"
+#: The fixtures of the two-hand tests: a test that takes one is marked ``two_hands``.
+TWO_HANDS_FIXTURES = frozenset({"two_hands_demo"})
+
+
+def _two_hands_skip() -> str | None:
+    """Why the two-hand tests do not run here (None: they do)."""
+    cores = len(os.sched_getaffinity(0))
+    if cores >= TWO_HANDS_MIN_CORES or os.environ.get(TWO_HANDS_VARIABLE) == "1":
+        return None
+    return (f"two device sides in real time need {TWO_HANDS_MIN_CORES} cores, this machine gives {cores} "
+            f"(docs/devices.md#two-hands; {TWO_HANDS_VARIABLE}=1 or `make test-two-hands` runs them anyway)")
+
+
 #: Fixtures that give a test a ROS domain of its own: what starting ROS processes or contexts takes.
 ROS_FIXTURES = frozenset({"ros_domain_id", "ros_env", "recorded_demo", "two_hands_demo"})
 #: Tests (name prefixes, parameters included) that open an rclpy context in this process without those
@@ -84,8 +107,14 @@ def pytest_collection_modifyitems(config, items):
     """Mark ``ros`` every test whose fixture closure holds one of ROS_FIXTURES, or named in ROS_WITHOUT_FIXTURE, and
     ``rate_loops`` those of them not marked ``no_rate_loops``; the latter also form one xdist group, so that under
     ``pytest -n 2 --dist loadgroup`` they still run one after the other on one worker, sharing its session
-    fixtures (``make test`` runs them in a phase of their own, see the module doc)."""
+    fixtures (``make test`` runs them in a phase of their own, see the module doc). Two-hand tests (module doc) are
+    marked ``two_hands`` and skipped where the machine has too few cores."""
+    two_hands_skip = _two_hands_skip()
     for item in items:
+        if TWO_HANDS_FIXTURES.intersection(getattr(item, "fixturenames", ())):
+            item.add_marker(pytest.mark.two_hands)
+        if two_hands_skip and item.get_closest_marker("two_hands") is not None:
+            item.add_marker(pytest.mark.skip(reason=two_hands_skip))
         if (ROS_FIXTURES.intersection(getattr(item, "fixturenames", ()))
                 or item.name.startswith(ROS_WITHOUT_FIXTURE)):
             item.add_marker(pytest.mark.ros)

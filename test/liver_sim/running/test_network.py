@@ -323,6 +323,7 @@ def test_loop_bench_reports_every_figure_against_its_target(ros_domain_id, tmp_p
         assert gap["product_s"] == pytest.approx(gap["gap_s"] - gap["machine_s"])
 
 
+@pytest.mark.two_hands
 def test_loop_bench_with_two_tools_reports_each_device_and_both_contacts(ros_domain_id, tmp_path):
     import json
 

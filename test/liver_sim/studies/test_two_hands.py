@@ -99,6 +99,7 @@ def test_a_two_hand_session_is_resimulated_byte_for_byte_with_both_force_streams
         assert any(m.topic == f"/{name}/phantom/servo_cf" for m in first)
 
 
+@pytest.mark.two_hands
 def test_each_bridge_keeps_to_its_device_its_map_and_its_zero(ros_domain_id, tmp_path):
     """Both hands press and hold. No node but a side's own bridge publishes on its device's topic; a map for the left
     from a node named liver_tool outside /left (not the left's tool node) is refused and turns nothing; a rival on the
