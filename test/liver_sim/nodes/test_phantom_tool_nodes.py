@@ -3,17 +3,12 @@
 Every wait is bounded; nothing asserts on timing. Processes are stopped (SIGINT, then SIGKILL) in `finally`.
 """
 import math
-import signal
 import subprocess
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
-import rclpy
 from geometry_msgs.msg import PoseStamped
-from rclpy.executors import SingleThreadedExecutor
-from waiting import wait_for
+from node_processes import WAIT_S, Ros, command, start, statuses, stop
 
 from msg_defs.device_map import device_map_from_message
 from msg_defs.forces import force_message, force_message_type
@@ -21,9 +16,6 @@ from msg_defs.poses import pose_to_arrays
 from msg_defs.stamps import seconds_from_stamp, stamp_from_seconds
 from msg_defs.topics import TOPICS
 
-CONFIG = Path(__file__).resolve().parents[3] / "config"
-MODULES = {"phantom_sim": "liver_sim.nodes.phantom_node", "liver_tool": "liver_sim.nodes.tool_node"}
-WAIT_S = 30.0
 #: A short script anchored at the origin: up at z = 0.025, contact at 0.015, deep at 0.005 (m).
 SHORT_SCRIPT = {"anchor_m": [0.0, 0.0, 0.0], "tool_radius_m": 0.015, "depth_m": 0.01, "clearance_m": 0.01,
                 "approach_s": 0.2, "press_s": 0.3, "hold_s": 0.3, "withdraw_s": 0.2, "rest_s": 0.3,
@@ -32,74 +24,9 @@ UP_Z, DEEP_Z = 0.025, 0.005
 QUARTER_TURN_Z = [0.0, 0.0, math.sin(math.pi / 4), math.cos(math.pi / 4)]
 
 
-def value(v) -> str:
-    """A parameter value as `-p name:=value` takes it."""
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    if isinstance(v, list):
-        return "[" + ",".join(value(x) for x in v) + "]"
-    return repr(float(v)) if isinstance(v, float) else str(v)
-
-
-def command(executable: str, params: dict) -> list[str]:
-    args = [sys.executable, "-m", MODULES[executable], "--ros-args", "--params-file",
-            str(CONFIG / f"{executable}.yaml")]
-    for name, v in params.items():
-        args += ["-p", f"{name}:={value(v)}"]
-    return args
-
-
-def start(executable: str, params: dict, env: dict) -> subprocess.Popen:
-    return subprocess.Popen(command(executable, params), env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True, start_new_session=True)
-
-
-def stop(process: subprocess.Popen) -> str:
-    """Stop a node (SIGINT, then SIGKILL); its stderr."""
-    if process.poll() is None:
-        process.send_signal(signal.SIGINT)
-    try:
-        _, err = process.communicate(timeout=5.0)
-    except subprocess.TimeoutExpired:
-        process.kill()
-        _, err = process.communicate()
-    return err
-
-
-class Ros:
-    """A test-side node in its own context: subscriptions that collect, publishers, bounded waits."""
-
-    def __init__(self):
-        self.context = rclpy.Context()
-        rclpy.init(context=self.context)
-        self.node = rclpy.create_node("test_phantom_tool", context=self.context)
-        self.executor = SingleThreadedExecutor(context=self.context)
-        self.executor.add_node(self.node)
-
-    def collect(self, key: str, topic: str | None = None, msg_type=None) -> list:
-        """Every message of the topic (its contract QoS, but a history of 1000: a test side starved of CPU, as on
-        a busy machine, reads each sample late instead of only the newest of those it missed)."""
-        received = []
-        spec = TOPICS[key]
-        qos = spec.qos
-        qos.depth = max(qos.depth, 1000)
-        self.node.create_subscription(msg_type or spec.type, topic or spec.name, received.append, qos)
-        return received
-
-    def wait_until(self, condition, what: str, process: subprocess.Popen | None = None) -> None:
-        wait_for(condition, WAIT_S, what, between=lambda: self.executor.spin_once(timeout_sec=0.02),
-                 gone=lambda: None if process is None or process.poll() is None else
-                 f"the node exited ({process.returncode}): {process.stderr.read()}")
-
-    def close(self) -> None:
-        self.executor.shutdown()
-        self.node.destroy_node()
-        rclpy.shutdown(context=self.context)
-
-
 @pytest.fixture
 def ros(ros_domain_id):
-    session = Ros()
+    session = Ros("test_phantom_tool")
     try:
         yield session
     finally:
@@ -108,11 +35,6 @@ def ros(ros_domain_id):
 
 def positions(messages) -> np.ndarray:
     return np.array([pose_to_arrays(m.pose)[0] for m in messages]).reshape(-1, 3)
-
-
-def statuses(diagnostics: list, name: str) -> list[dict]:
-    return [{kv.key: kv.value for kv in status.values}
-            for array in diagnostics for status in array.status if status.name == name]
 
 
 def test_phantom_sim_plays_its_script(ros, ros_env):
