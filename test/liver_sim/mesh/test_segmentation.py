@@ -1,7 +1,9 @@
 """`liver-sim mesh build SEGMENTATION`: synthetic label volumes built here (NIfTI and NRRD, RAS, LPS, oblique) to
-meshes that keep the label's volume (3 %) and boundary (1.5 voxels) in the patient's axes, with their support; every
-bad input refused in one line with nothing written."""
+meshes that keep the label's volume (3 %) and boundary (1.5 voxels) in the patient's axes, with their support; a real
+liver mask (TotalSegmentator's example, data/README.md) to a sound liver of its volume; every bad input refused in one
+line with nothing written."""
 import math
+from pathlib import Path
 
 import nibabel
 import nrrd
@@ -13,6 +15,8 @@ from liver_sim.mesh.anatomical_support import read_support, support_path
 from liver_sim.mesh.io import load_mesh
 from liver_sim.mesh.segmentation_build import build_from_segmentation
 from liver_sim.studies.demo_liver import DemoMesh
+
+from meshes import assert_sound
 
 SPACING_MM = np.array([0.7, 0.7, 2.5])
 #: The organ, in the patient's LPS coordinates (mm): an ellipsoid wider left-right than front-back than tall,
@@ -189,6 +193,30 @@ def test_a_cut_off_organ_is_closed_and_the_faces_are_named(tmp_path):
     assert_faithful(summary, labels.sum() * voxel_ml(affine))
     mesh = load_mesh(summary["out"])
     assert mesh.watertight
+
+
+#: A real liver mask, TotalSegmentator's (Apache-2.0; data/README.md): 3 mm voxels, cut off by the scan below and above.
+REAL_LIVER = Path(__file__).parent / "data" / "totalsegmentator_example_liver.nii.gz"
+#: The bound on a real liver's surface (voxels), looser than the synthetic shapes' (docs/segmentation.md#figures).
+REAL_SURFACE_VOXELS = 4.0
+#: The real liver's mesh, of the patient meshes' order (~30 k tets), where the bound no longer depends on decimation.
+REAL_TARGET_TETS = 20000
+
+
+def test_a_real_liver_mask_builds_a_sound_supported_liver_of_its_volume(tmp_path):
+    summary = build_from_segmentation(REAL_LIVER, tmp_path / "out" / "liver.msh", target_tets=REAL_TARGET_TETS)
+    assert summary["spacing_mm"] == pytest.approx([3.0, 3.0, 3.0]) and summary["axes"].startswith("RAS")
+    assert summary["label_volume_ml"] == pytest.approx(summary["label_voxels"] * 0.027)
+    assert 900.0 < summary["kept_volume_ml"] < summary["label_volume_ml"]  # an adult liver; specks dropped
+    assert summary["mesh_volume_ml"] == pytest.approx(summary["kept_volume_ml"], rel=0.03)
+    assert summary["max_surface_distance_voxels"] <= REAL_SURFACE_VOXELS
+    assert summary["touched_faces"] == ["k = 0 (inferior)", "k = 29 (superior)"]  # the scan's ends
+    assert summary["tetrahedra"] == pytest.approx(REAL_TARGET_TETS, rel=0.1)
+    mesh = load_mesh(summary["out"])
+    assert assert_sound(mesh) == 1
+    assert summary["support_skin_nodes"] >= 6 and "bare area" in summary["support"]
+    size = np.ptp(mesh.points, axis=0)
+    assert size[0] > size[2] and 0.15 < size[0] < 0.30  # wider (left-right) than high, as a liver is
 
 
 def test_two_blobs_keep_the_largest_and_report_the_other(tmp_path):
