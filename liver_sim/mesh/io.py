@@ -137,11 +137,14 @@ def write_mesh(mesh: TetMesh, path) -> Path:
 
 
 def checked_output_path(path) -> Path:
-    """`path` as a Path if :func:`write_mesh` can write its format, else MeshError."""
+    """`path` as a Path if :func:`write_mesh` can write its format into an existing folder, else MeshError (checked
+    before a long build, not after it)."""
     path = Path(path)
     if path.suffix.lower() not in WRITE_SUFFIXES:
         raise MeshError(str(path), f"unsupported output format '{path.suffix}' (writable: "
                                    f"{', '.join(WRITE_SUFFIXES)})")
+    if not path.parent.is_dir():
+        raise MeshError(str(path), f"cannot write: the folder {path.parent} does not exist (make it first)")
     return path
 
 

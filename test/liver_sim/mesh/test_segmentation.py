@@ -334,6 +334,10 @@ def test_a_support_label_that_does_not_touch_is_refused(tmp_path, capsys):
 
 def test_the_command_prints_the_summary_and_writes_both_files(tmp_path, capsys):
     path, _ = lps_file(tmp_path)
+    absent = tmp_path / "cases" / "patient.vtu"  # refused before the build, naming the folder
+    assert main(["mesh", "build", str(path), "--target-tets", "3000", "--out", str(absent)]) == 2
+    assert f"the folder {absent.parent} does not exist" in capsys.readouterr().err
+    assert not absent.parent.exists()
     out = tmp_path / "out" / "patient.vtu"
     assert main(["mesh", "build", str(path), "--target-tets", "3000", "--out", str(out)]) == 0
     printed = capsys.readouterr()
