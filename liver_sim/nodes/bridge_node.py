@@ -53,8 +53,9 @@ class HapticBridge(Node):
 
 
 class ManagedHapticBridge(LifecycleNode):
-    """The bridge as a lifecycle node: configure builds it, activate runs the loop, deactivate and shutdown leave
-    zero force on the wire and stop it, cleanup removes it. The envelope is the one of the process's start, in
+    """The bridge as a lifecycle node: configure builds it (the force command's writer a lifecycle publisher, which
+    sends only while active), activate runs the loop, deactivate and shutdown leave zero force on the wire and stop
+    it, cleanup removes it. The envelope is the one of the process's start, in
     every state: a change while unconfigured is checked against it as a running bridge's would be. K·scale is checked
     at every parameter change (with every device map the loop may render with once configured) and at activation,
     which is refused while it is not passive."""
@@ -81,12 +82,16 @@ class ManagedHapticBridge(LifecycleNode):
         return TransitionCallbackReturn.SUCCESS
 
     def on_activate(self, state) -> TransitionCallbackReturn:
+        activated = super().on_activate(state)  # the force publisher first: the loop's first tick is sent
+        if activated != TransitionCallbackReturn.SUCCESS:
+            return activated
         try:
             self.shell.start()  # checks K·scale with every map the loop may render with
         except ValueError as exc:
+            super().on_deactivate(state)
             self.get_logger().error(f"activate refused: {exc}")
             return TransitionCallbackReturn.FAILURE
-        return super().on_activate(state)
+        return TransitionCallbackReturn.SUCCESS
 
     def on_deactivate(self, state) -> TransitionCallbackReturn:
         self.shell.stop("deactivated")

@@ -25,11 +25,13 @@ GONE_WRITER = "a writer gone before the graph named it"
 
 class ForceOutput:
     """The writer on `p.force_topic` and what else writes there: `rivals` (the other publishers the graph shows now,
-    by node) and `bursts` (samples of other writers read back since the last :meth:`take_bursts`, by writer)."""
+    by node) and `bursts` (samples of other writers read back since the last :meth:`take_bursts`, by writer).
+    On a lifecycle node the writer is a lifecycle publisher: it sends only while the node is active."""
 
     def __init__(self, node, p):
         force_type = force_message_type(p.force_output)
-        self.publisher = node.create_publisher(force_type, p.force_topic, TOPICS["servo_cf"].qos)
+        create = getattr(node, "create_lifecycle_publisher", node.create_publisher)
+        self.publisher = create(force_type, p.force_topic, TOPICS["servo_cf"].qos)
         self.topic = self.publisher.topic_name
         self._gid = publisher_gid(self.publisher)
         self._node = rclpy.create_node(f"_{node.get_name()}_force_watch", namespace=node.get_namespace(),
@@ -70,4 +72,4 @@ class ForceOutput:
     def destroy(self, node) -> None:
         self._take.close()
         self._node.destroy_node()
-        node.destroy_publisher(self.publisher)
+        getattr(node, "destroy_lifecycle_publisher", node.destroy_publisher)(self.publisher)

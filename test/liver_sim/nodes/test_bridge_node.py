@@ -400,6 +400,32 @@ def test_a_managed_bridge_zeroes_the_force_on_deactivate(rig_factory, ros_env):
     assert_safe(rig.forces)
 
 
+def test_a_managed_bridges_force_writer_is_a_lifecycle_publisher_sending_only_while_active(ros_domain_id):
+    """As the ros2/demos lifecycle talker: the writer is made in on_configure, enabled by activate and disabled by
+    deactivate (after the loop's last zero), so an inactive bridge cannot send a command whatever its threads do."""
+    import rclpy
+    from rclpy.lifecycle import LifecyclePublisher, TransitionCallbackReturn
+
+    from liver_sim.nodes.bridge_node import ManagedHapticBridge
+
+    rclpy.init()
+    bridge = ManagedHapticBridge()
+    try:
+        assert bridge.trigger_configure() == TransitionCallbackReturn.SUCCESS
+        writer = bridge.shell.output.publisher
+        assert isinstance(writer, LifecyclePublisher) and not writer.is_activated
+        assert bridge.trigger_activate() == TransitionCallbackReturn.SUCCESS
+        assert writer.is_activated and bridge.shell.loop.is_alive()
+        assert bridge.trigger_deactivate() == TransitionCallbackReturn.SUCCESS
+        assert not writer.is_activated and bridge.shell.supervisor.closed
+        assert bridge.trigger_cleanup() == TransitionCallbackReturn.SUCCESS  # the writer destroyed with the shell
+        assert writer not in bridge._managed_entities
+    finally:
+        bridge.close()
+        bridge.destroy_node()
+        rclpy.shutdown()
+
+
 def test_after_a_stop_the_bridges_one_writer_ends_on_zero(rig_factory, ros_env):
     """DDS keeps order within one writer only: the loop's commands and the supervisor's zeros go on one writer, so
     no retransmitted command can arrive after the last zero (a driver that holds the last command would keep
