@@ -318,24 +318,30 @@ def test_recorder_follows_the_published_type_and_records_other_topics(ros_env, t
 
 
 RUNNING_PUBLISHER = """
-import sys, time, rclpy
+import sys, threading, time, rclpy
+from rclpy.duration import Duration
 from msg_defs.forces import wrench_stamped
 from msg_defs.topics import TOPICS
 rclpy.init()
 node = rclpy.create_node("running_publisher")
 publisher = node.create_publisher(TOPICS["tool_wrench"].type, TOPICS["tool_wrench"].name, TOPICS["tool_wrench"].qos)
-print("publishing", flush=True)
-end = time.monotonic() + float(sys.argv[1])
-while time.monotonic() < end:
+halt = threading.Event()
+threading.Thread(target=lambda: (sys.stdin.readline(), halt.set()), daemon=True).start()
+published = 0
+while not halt.is_set():
     publisher.publish(wrench_stamped([0.0, 0.0, 0.1], time.time(), "liver"))
+    published += 1
     time.sleep(0.005)
+acknowledged = publisher.wait_for_all_acked(Duration(seconds=float(sys.argv[1])))
+print("published", published, "acknowledged", acknowledged, flush=True)
+halt.wait(3600)
 """
 
 
 @NO_RATE_LOOPS
 def test_a_recorder_started_mid_run_counts_nothing_lost_of_a_running_publisher(ros_env, tmp_path):
-    publisher = subprocess.Popen([sys.executable, "-c", RUNNING_PUBLISHER, "60"], env=ros_env,
-                                 stdout=subprocess.PIPE, text=True)
+    publisher = subprocess.Popen([sys.executable, "-c", RUNNING_PUBLISHER, "30"], env=ros_env,
+                                 stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
     tally = Tally(["/liver/tool_wrench"])
     try:
         published = lambda: max(tally.last().values(), default=0)  # noqa: E731
@@ -348,17 +354,23 @@ def test_a_recorder_started_mid_run_counts_nothing_lost_of_a_running_publisher(r
         at_match = published()
         wait_for(lambda: published() >= at_match + 500, 60.0, "500 messages published while it records",
                  tally.counts)
+        # the writer stops and waits until every reader it matched acknowledged all it published: a recorder
+        # stopped then holds the last of them
+        publisher.stdin.write("stop\n")
+        publisher.stdin.flush()
+        _, last, _, acknowledged = publisher.stdout.readline().split()
         status, output = stop(recorder, signal.SIGINT)
     finally:
         tally.close(linger_s=0.0)
         publisher.kill()
         publisher.wait()
+    assert acknowledged == "True", "the publisher's readers did not acknowledge all it published within 30 s"
     # what the running writer published before the recording began is not wanted, whether the graph showed
     # the writer by `ready` or its transient-local history reached the recorder later
     assert status == 0 and "lost: 0" in output, output
     (writer,) = json.loads(bag_info(tmp_path / "session").custom_data["writers"])
     assert writer["first"] > 1 and writer["before_match"] == 0 and writer["gaps"] == 0, writer
-    assert writer["received"] == writer["last"] - writer["first"] + 1 > 300, writer
+    assert writer["last"] == int(last) and writer["received"] == writer["last"] - writer["first"] + 1, writer
 
 
 def test_replay_leaves_out_device_commands_unless_remapped():
