@@ -12,7 +12,7 @@ from waiting import wait_for
 
 from liver_sim.base.process_settings import cli_command_line
 from liver_sim.sessions.bag import bag_info
-from liver_sim.sessions.record import RECORDER_NODE
+from liver_sim.sessions.record import READY
 
 from network_clients import Tally, read_bag
 
@@ -108,10 +108,13 @@ node = rclpy.create_node("running_publisher")
 publisher = node.create_publisher(TOPICS["tool_wrench"].type, TOPICS["tool_wrench"].name, TOPICS["tool_wrench"].qos)
 halt = threading.Event()
 threading.Thread(target=lambda: (sys.stdin.readline(), halt.set()), daemon=True).start()
-published = 0
+published = matched = 0
 while not halt.is_set():
     publisher.publish(wrench_stamped([0.0, 0.0, 0.1], time.time(), "liver"))
     published += 1
+    if publisher.get_subscription_count() != matched:
+        matched = publisher.get_subscription_count()
+        print("matched", matched, flush=True)
     time.sleep(0.005)
 acknowledged = publisher.wait_for_all_acked(Duration(seconds=float(sys.argv[1])))
 print("published", published, "acknowledged", acknowledged, flush=True)
@@ -131,7 +134,9 @@ def test_a_recorder_started_mid_run_counts_nothing_lost_of_a_running_publisher(r
         recorder = subprocess.Popen(cli_command_line("record", "--out", str(tmp_path / "session"), "--topics",
                                                      "/liver/tool_wrench"),
                                     env=ros_env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-        wait_for(lambda: tally.subscribers("/liver/tool_wrench", RECORDER_NODE), 60.0, "the recorder's subscription")
+        # recording from `ready` on, and sent to by the writer (which discovers the recorder on its own)
+        assert any(line.startswith(READY) for line in recorder.stdout), "the recorder ended before `ready`"
+        assert any(line.split() == ["matched", "2"] for line in publisher.stdout), "the writer never matched it"
         at_match = published()
         wait_for(lambda: published() >= at_match + 500, 60.0, "500 messages published while it records",
                  tally.counts)
@@ -139,7 +144,7 @@ def test_a_recorder_started_mid_run_counts_nothing_lost_of_a_running_publisher(r
         # stopped then holds the last of them
         publisher.stdin.write("stop\n")
         publisher.stdin.flush()
-        _, last, _, acknowledged = publisher.stdout.readline().split()
+        _, last, _, acknowledged = next(line for line in publisher.stdout if line.startswith("published")).split()
         status, output = stop(recorder, signal.SIGINT)
     finally:
         tally.close(linger_s=0.0)
