@@ -32,6 +32,7 @@ from liver_sim.physics.settings import PRECONDITIONERS
 from liver_sim.physics.solver.coarse_space import CoarseSpace, aggregates, build_coarse_space, node_graph
 from liver_sim.physics.solver.implicit_kernels import assemble, bdf2_start, implicit_step, support_terms
 from liver_sim.physics.solver.pcg import SERIAL, block_jacobi, pcg, pcg_parallel
+from liver_sim.physics.solver.records import ContactRows, Loads, Operator, Scratch, SolveSettings, SpringLaw, Tissue
 from liver_sim.physics.tissue.fem_kernels import TetArrays, tet_terms
 from liver_sim.physics.tissue.organ_support import SupportArrays
 from liver_sim.physics.tissue.springs import SpringNetwork
@@ -50,6 +51,7 @@ STATIC_CG_TOLERANCE = 1e-6
 
 
 NO_COARSE_SPACE = CoarseSpace.none()
+
 
 
 class StepHistory:
@@ -114,18 +116,11 @@ class ImplicitEuler:
         self._partial = SERIAL if self.threads == 1 else np.zeros((self.threads, self.n_nodes, 3))
         self._aggregate: np.ndarray | None = None
         self._coarse: dict[float, CoarseSpace] = {}
-        edges = len(springs.node_i)
         # unsigned indices spare numba's negative-index wraparound in the inner loops
-        self._node_i = springs.node_i.astype(np.uint32)
-        self._node_j = springs.node_j.astype(np.uint32)
+        node_i, node_j = springs.node_i.astype(np.uint32), springs.node_j.astype(np.uint32)
         self._inv_rest = 1.0 / springs.rest_length_m
-        self._unit = np.zeros((edges, 3))
-        self._iso = np.zeros(edges)
-        self._axial = np.zeros(edges)
-        self._shift = np.ones(self.n_nodes)
-        self._diagonal = np.zeros((self.n_nodes, 3, 3))
-        self._preconditioner = np.zeros((self.n_nodes, 3, 3))
-        self._work = np.zeros((10, self.n_nodes, 3))
+        self._op = Operator.allocate(node_i, node_j, self.n_nodes)
+        self._scratch = Scratch(np.zeros((10, self.n_nodes, 3)), self._partial, np.zeros((self.n_nodes, 3, 3)))
         self._coefficient = np.zeros(0)
         self._inv_mass = np.zeros(self.n_nodes)
         self._tet_weight = 0.0
@@ -150,19 +145,21 @@ class ImplicitEuler:
         if self.two_level and h not in self._coarse:  # the system at x for the coarse space of this h
             self._assemble_at_rest(x, inv_mass, np.zeros_like(x), environment_damping, h, tets)
         coarse = self._coarse_space(h, x, inv_mass, tets)
-        s = self.springs
+        loads = Loads(external_force, np.asarray(gravity, dtype=np.float64), float(environment_damping))
         contact, history.cg_iterations, history.newton_iterations, history.residual_n = implicit_step(
-            x, v, inv_mass, external_force, np.asarray(gravity, dtype=np.float64), float(environment_damping),
-            h, self._node_i, self._node_j, self._inv_rest, s.lambda1_n, s.lambda2_n, s.mu_ns_per_m,
-            self._unit, self._iso, self._axial, self._shift, self._diagonal, *self.support, tets, contacts.nodes,
-            contacts.weights,
-            contacts.normal, contacts.offset_m, contacts.normal_speed_m_s, contacts.stiffness_n_per_m,
-            contacts.damping_ns_per_m, self._coefficient, self._preconditioner, coarse, history.warm, self.cg_tolerance,
-            self.max_cg_iterations, self.newton_tolerance_n, self.max_newton, self._work, self._partial)
+            x, v, inv_mass, loads, h, Tissue(self._law(), self.support, tets), self._op,
+            ContactRows.of(contacts, self._coefficient), coarse, history.warm,
+            SolveSettings(self.cg_tolerance, self.max_cg_iterations, self.newton_tolerance_n, self.max_newton),
+            self._scratch)
         x_last[:], v_last[:] = x, v
         history.dt_s = float(dt)
         history.second_order = second
         return contact
+
+    def _law(self) -> SpringLaw:
+        """The springs' law for the kernels."""
+        s = self.springs
+        return SpringLaw(self._op.node_i, self._op.node_j, self._inv_rest, s.lambda1_n, s.lambda2_n, s.mu_ns_per_m)
 
     def new_history(self) -> StepHistory:
         """A StepHistory of this solver's nodes and elements, at rest."""
@@ -193,11 +190,10 @@ class ImplicitEuler:
         coarse = self._coarse.get(h)
         if coarse is None:
             if self._aggregate is None:
-                self._aggregate = aggregates(*node_graph(self.n_nodes, np.stack([self._node_i, self._node_j], axis=1),
+                self._aggregate = aggregates(*node_graph(self.n_nodes, np.stack([self._op.node_i, self._op.node_j],
+                                                                                axis=1),
                                                          self.tets.tets[:, [0, 1, 0, 2, 0, 3, 1, 2, 1, 3, 2, 3]]))
-            coarse = build_coarse_space(x, self._aggregate, (
-                self._node_i, self._node_j, self._unit, self._iso, self._axial, self._shift, inv_mass, tets,
-                self._tet_weight))
+            coarse = build_coarse_space(x, self._aggregate, (*self._op[:6], inv_mass, tets, self._tet_weight))
             self._coarse[h] = coarse
         return coarse
 
@@ -206,13 +202,14 @@ class ImplicitEuler:
         (contacts and tetrahedra excluded; held nodes' rows and columns are the identity)."""
         springs = self.springs
         free = self._inv_mass > 0.0
-        blocks = self._iso[:, None, None] * np.eye(3) + self._axial[:, None, None] * (
-            self._unit[:, :, None] * self._unit[:, None, :])
+        op = self._op
+        blocks = op.iso[:, None, None] * np.eye(3) + op.axial[:, None, None] * (
+            op.unit[:, :, None] * op.unit[:, None, :])
         blocks = blocks * (free[springs.node_i] & free[springs.node_j])[:, None, None]
         nodes = np.arange(self.n_nodes)
         rows = np.concatenate([nodes, springs.node_i, springs.node_j])
         cols = np.concatenate([nodes, springs.node_j, springs.node_i])
-        values = np.concatenate([self._diagonal, -blocks, -blocks])
+        values = np.concatenate([op.diagonal, -blocks, -blocks])
         r = (3 * rows)[:, None, None] + np.arange(3)[None, :, None]
         c = (3 * cols)[:, None, None] + np.arange(3)[None, None, :]
         size = 3 * self.n_nodes
@@ -273,16 +270,13 @@ class ImplicitEuler:
         h·c + h²·k each, in the preconditioner) and its preconditioner; returns the forces f(x) (N, 3)."""
         zero = np.zeros_like(x)
         f, ky = np.zeros_like(x), np.zeros_like(x)
-        s = self.springs
-        no = contacts or Contacts.none()
-        assemble(x, zero, zero, inv_mass, external_force, np.zeros(3), float(environment_damping), h, self._node_i,
-                 self._node_j, self._inv_rest, s.lambda1_n, s.lambda2_n, s.mu_ns_per_m, self._unit, self._iso,
-                 self._axial, self._shift, self._diagonal, f, ky, True)
-        support_terms(x, zero, zero, inv_mass, h, *self.support, f, ky, self._shift, self._diagonal, True)
-        tet_terms(x, zero, zero, inv_mass, h, tets, f, ky, self._diagonal, True)
+        rows = ContactRows.of(contacts or Contacts.none(), np.zeros(0) if coefficient is None else coefficient)
+        assemble(x, zero, zero, inv_mass, Loads(external_force, np.zeros(3), float(environment_damping)), h,
+                 self._law(), self._op, f, ky, True)
+        support_terms(x, zero, zero, inv_mass, h, self.support, f, ky, self._op, True)
+        tet_terms(x, zero, zero, inv_mass, h, tets, f, ky, self._op.diagonal, True)
         self._tet_weight = h * h + h * tets.viscous_time_s
-        block_jacobi(self._diagonal, inv_mass, no.nodes, no.weights, no.normal,
-                     np.zeros(0) if coefficient is None else coefficient, self._preconditioner)
+        block_jacobi(self._op.diagonal, inv_mass, rows, self._scratch.preconditioner)
         return f
 
     def _solve(self, inv_mass: np.ndarray, b: np.ndarray, solution: np.ndarray, tolerance: float,
@@ -290,12 +284,11 @@ class ImplicitEuler:
                coefficient: np.ndarray | None = None) -> None:
         """solution ← A⁻¹·b by PCG from `solution` (the last assembled system, with `contacts` and their
         `coefficient` if given) with `coarse`."""
-        r, z, p, q = (np.zeros_like(b) for _ in range(4))
-        no = contacts or Contacts.none()
+        vectors = tuple(np.zeros_like(b) for _ in range(4))
+        rows = ContactRows.of(contacts or Contacts.none(), np.zeros(0) if coefficient is None else coefficient)
         solve = pcg_parallel if self.threads > 1 else pcg
-        solve(self._node_i, self._node_j, self._unit, self._iso, self._axial, self._shift, inv_mass, no.nodes,
-              no.weights, no.normal, np.zeros(0) if coefficient is None else coefficient, tets, self._tet_weight,
-              self._preconditioner, coarse, b, solution, tolerance, self.max_cg_iterations, r, z, p, q, self._partial)
+        solve(self._op, inv_mass, rows, tets, self._tet_weight, self._scratch.preconditioner, coarse, b, solution,
+              SolveSettings(tolerance, self.max_cg_iterations, 0.0, 0), vectors, self._partial)
 
     def warm_up(self) -> None:
         """Compile the kernels (numba, cached on disk) before a timed loop starts."""

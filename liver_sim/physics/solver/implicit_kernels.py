@@ -35,10 +35,12 @@ from liver_sim.physics.tissue.pairs import add_pair
 
 
 @numba.njit(cache=True)
-def contact_forces(x, v, y, inv_mass, h, nodes, weights, normal, offset, speed, stiffness, damping,
-                   f, ky, coefficient):
-    """Add the active contacts' force at (x, v) to f and K·y to ky; coefficient[e] = h·c + h²·k when
-    active (at x + h·y), else 0.  Returns the total contact force on the liver (N), clipped at 0 each."""
+def contact_forces(x, v, y, inv_mass, h, rows, f, ky):
+    """Add the active contacts' force at (x, v) to f and K·y to ky (`rows` a records.ContactRows);
+    rows.coefficient[e] = h·c + h²·k when active (at x + h·y), else 0.  Returns the total contact force on the liver
+    (N), clipped at 0 each."""
+    nodes, weights, normal, coefficient = rows.nodes, rows.weights, rows.normal, rows.coefficient
+    offset, speed, stiffness, damping = rows.offset, rows.speed, rows.stiffness, rows.damping
     tx, ty, tz = 0.0, 0.0, 0.0
     for e in range(nodes.shape[0]):
         nx, ny, nz = normal[e, 0], normal[e, 1], normal[e, 2]
@@ -80,13 +82,17 @@ def contact_forces(x, v, y, inv_mass, h, nodes, weights, normal, offset, speed, 
 
 
 @numba.njit(cache=True)
-def assemble(x, v, y, inv_mass, external, gravity, c_env, h, node_i, node_j, inv_rest, lambda1, lambda2, mu,
-             unit, iso, axial, shift, diagonal, f, ky, assemble_matrix):
-    """Forces f at (x, v) and ky = K·y (y zero on held nodes); with assemble_matrix, also the system
+def assemble(x, v, y, inv_mass, loads, h, springs, op, f, ky, assemble_matrix):
+    """Forces f at (x, v) of the `springs` (records.SpringLaw) and `loads` (records.Loads), and ky = K·y (y zero on
+    held nodes); with assemble_matrix, also the system (into `op`, a records.Operator)
     A = M·(1 + h·c_env) − h·D_springs − h²·K_springs in matrix-free form: per spring the block
     B = iso·I + axial·uuᵀ (unit u) that enters (i,i) and (j,j) as +B and (i,j), (j,i) as −B;
     shift = m·(1 + h·c_env) per node (1 on held ones, whose rows and columns are the identity);
     and the 3×3 diagonal blocks of A."""
+    external, gravity, c_env = loads.external, loads.gravity, loads.c_env
+    node_i, node_j, inv_rest = springs.node_i, springs.node_j, springs.inv_rest
+    lambda1, lambda2, mu = springs.lambda1, springs.lambda2, springs.mu
+    unit, iso, axial, shift, diagonal = op.unit, op.iso, op.axial, op.shift, op.diagonal
     for n in range(x.shape[0]):
         w = inv_mass[n]
         for a in range(3):
@@ -159,9 +165,12 @@ def assemble(x, v, y, inv_mass, external, gravity, c_env, h, node_i, node_j, inv
 
 
 @numba.njit(cache=True)
-def support_terms(x, v, y, inv_mass, h, nodes, rest, stiffness, damping, f, ky, shift, diagonal, assemble_matrix):
-    """Add the support's forces at (x, v) to f and K·y to ky (free nodes); with assemble_matrix, also
-    h·c_n + h²·k_n to each free supported node's shift and diagonal block (after assemble)."""
+def support_terms(x, v, y, inv_mass, h, support, f, ky, op, assemble_matrix):
+    """Add the forces of the `support` (organ_support.SupportArrays) at (x, v) to f and K·y to ky (free nodes); with
+    assemble_matrix, also h·c_n + h²·k_n to each free supported node's shift and diagonal block in `op`
+    (records.Operator, after assemble)."""
+    nodes, rest, stiffness, damping = support
+    shift, diagonal = op.shift, op.diagonal
     for s in range(nodes.shape[0]):
         n = nodes[s]
         if inv_mass[n] == 0.0:
@@ -232,20 +241,18 @@ def bdf2_start(x, v, x_last, v_last, x_prev, v_prev, inv_mass, second_order):
 
 
 @numba.njit(cache=True, nogil=True)
-def implicit_step(x, v, inv_mass, external, gravity, c_env, h, node_i, node_j, inv_rest, lambda1, lambda2, mu,
-                  unit, iso, axial, shift, diagonal, support_nodes, support_rest, support_stiffness,
-                  support_damping, tet_law, nodes, weights, normal, offset, speed, stiffness,
-                  damping, coefficient, preconditioner, coarse, warm, tolerance, max_iterations, newton_tolerance,
-                  max_newton, work, partial):
+def implicit_step(x, v, inv_mass, loads, h, tissue, op, rows, coarse, warm, settings, scratch):
     """One linearised backward-Euler step of x, v in place (see the module docstring), then Newton
-    iterations while the nonlinear residual exceeds `newton_tolerance` (N) on some node, up to
-    `max_newton`.  `tet_law`: the tetrahedra of the 'fem' law (physics.tissue.fem_kernels.TetArrays; none for the
-    springs').  `coarse`: the preconditioner's coarse space (physics.solver.coarse_space; none: block-Jacobi alone).
-    `warm` holds the previous Δv (start of the solve; overwritten).  `work` is
-    (10, N, 3) scratch; `partial` pcg.SERIAL for one thread, else (threads, N, 3): the solve on the threads
-    (pcg.pcg_parallel).  Returns (contact force on the liver at the new state (3,), CG iterations,
+    iterations while the nonlinear residual exceeds settings.newton_tolerance_n (N) on some node, up to
+    settings.max_newton (`settings` a records.SolveSettings).  `loads` (records.Loads) act beside the `tissue`
+    (records.Tissue: springs, support, the tetrahedra of the 'fem' law), `rows` the contacts (records.ContactRows),
+    `op` (records.Operator) receives the system.  `coarse`: the preconditioner's coarse space
+    (physics.solver.coarse_space; none: block-Jacobi alone).  `warm` holds the previous Δv (start of the solve;
+    overwritten).  `scratch` (records.Scratch): `partial` pcg.SERIAL for one thread, else (threads, N, 3): the solve
+    on the threads (pcg.pcg_parallel).  Returns (contact force on the liver at the new state (3,), CG iterations,
     Newton iterations, final residual (N))."""
-    f, ky, rhs, x0, v0, r, z, p, q, zero = work
+    f, ky, rhs, x0, v0, r, z, p, q, zero = scratch.work
+    springs, support, tet_law = tissue.springs, tissue.support, tissue.tets
     zero[:] = 0.0
     x0[:] = x
     v0[:] = v
@@ -253,48 +260,39 @@ def implicit_step(x, v, inv_mass, external, gravity, c_env, h, node_i, node_j, i
         if inv_mass[n] == 0.0:
             for a in range(3):
                 warm[n, a] = 0.0  # held: Δv = 0, and CG's vectors vanish there (see pcg.apply)
-    assemble(x, v, v, inv_mass, external, gravity, c_env, h, node_i, node_j, inv_rest, lambda1, lambda2, mu,
-             unit, iso, axial, shift, diagonal, f, ky, True)
-    support_terms(x, v, v, inv_mass, h, support_nodes, support_rest, support_stiffness, support_damping, f, ky,
-                  shift, diagonal, True)
-    tet_terms(x, v, v, inv_mass, h, tet_law, f, ky, diagonal, True)
+    assemble(x, v, v, inv_mass, loads, h, springs, op, f, ky, True)
+    support_terms(x, v, v, inv_mass, h, support, f, ky, op, True)
+    tet_terms(x, v, v, inv_mass, h, tet_law, f, ky, op.diagonal, True)
     tet_weight = h * h + h * tet_law.viscous_time_s
-    contact_forces(x, v, v, inv_mass, h, nodes, weights, normal, offset, speed, stiffness, damping, f, ky,
-                   coefficient)
+    contact_forces(x, v, v, inv_mass, h, rows, f, ky)
     for n in range(x.shape[0]):
         for a in range(3):
             rhs[n, a] = h * (f[n, a] + h * ky[n, a]) if inv_mass[n] > 0.0 else 0.0
     total_iterations = 0
     newton = 0
     contact = np.zeros(3)
+    vectors = (r, z, p, q)
     while True:
-        block_jacobi(diagonal, inv_mass, nodes, weights, normal, coefficient, preconditioner)
-        if partial.shape[0] > 1:
-            total_iterations += pcg_parallel(node_i, node_j, unit, iso, axial, shift, inv_mass, nodes, weights, normal,
-                                             coefficient, tet_law, tet_weight, preconditioner, coarse, rhs, warm,
-                                             tolerance, max_iterations, r, z, p, q, partial)
+        block_jacobi(op.diagonal, inv_mass, rows, scratch.preconditioner)
+        if scratch.partial.shape[0] > 1:
+            total_iterations += pcg_parallel(op, inv_mass, rows, tet_law, tet_weight, scratch.preconditioner, coarse,
+                                             rhs, warm, settings, vectors, scratch.partial)
         else:
-            total_iterations += pcg(node_i, node_j, unit, iso, axial, shift, inv_mass, nodes, weights, normal,
-                                    coefficient, tet_law, tet_weight, preconditioner, coarse, rhs, warm, tolerance,
-                                    max_iterations, r, z, p, q, partial)
+            total_iterations += pcg(op, inv_mass, rows, tet_law, tet_weight, scratch.preconditioner, coarse, rhs,
+                                    warm, settings, vectors, scratch.partial)
         advance(x, x0, v, v0, warm, inv_mass, h)
-        assemble(x, v, zero, inv_mass, external, gravity, c_env, h, node_i, node_j, inv_rest, lambda1, lambda2, mu,
-                 unit, iso, axial, shift, diagonal, f, ky, False)
-        support_terms(x, v, zero, inv_mass, h, support_nodes, support_rest, support_stiffness, support_damping, f,
-                      ky, shift, diagonal, False)
-        tet_terms(x, v, zero, inv_mass, h, tet_law, f, ky, diagonal, False)
-        tx, ty, tz = contact_forces(x, v, zero, inv_mass, h, nodes, weights, normal, offset, speed, stiffness,
-                                    damping, f, ky, coefficient)
+        assemble(x, v, zero, inv_mass, loads, h, springs, op, f, ky, False)
+        support_terms(x, v, zero, inv_mass, h, support, f, ky, op, False)
+        tet_terms(x, v, zero, inv_mass, h, tet_law, f, ky, op.diagonal, False)
+        tx, ty, tz = contact_forces(x, v, zero, inv_mass, h, rows, f, ky)
         contact[0], contact[1], contact[2] = tx, ty, tz
         residual = newton_rhs(v, v0, f, inv_mass, h, rhs)
-        if newton >= max_newton or residual <= newton_tolerance:
+        if newton >= settings.max_newton or residual <= settings.newton_tolerance_n:
             break
         newton += 1
-        assemble(x, v, zero, inv_mass, external, gravity, c_env, h, node_i, node_j, inv_rest, lambda1, lambda2, mu,
-                 unit, iso, axial, shift, diagonal, f, ky, True)
-        support_terms(x, v, zero, inv_mass, h, support_nodes, support_rest, support_stiffness, support_damping, f,
-                      ky, shift, diagonal, True)
-        tet_terms(x, v, zero, inv_mass, h, tet_law, f, ky, diagonal, True)
+        assemble(x, v, zero, inv_mass, loads, h, springs, op, f, ky, True)
+        support_terms(x, v, zero, inv_mass, h, support, f, ky, op, True)
+        tet_terms(x, v, zero, inv_mass, h, tet_law, f, ky, op.diagonal, True)
         warm[:] = 0.0
     warm[:] = v - v0
     return contact, total_iterations, newton, residual

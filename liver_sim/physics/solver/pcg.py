@@ -34,8 +34,10 @@ def _chunk(c, chunks, count):
 
 
 @numba.njit(cache=True, inline="always")
-def _springs_times(node_i, node_j, unit, iso, axial, p, first, last, out):
-    """out += each spring's B·(p_i − p_j) to i and its opposite to j, B = iso·I + axial·uuᵀ, springs first..last−1."""
+def _springs_times(op, p, first, last, out):
+    """out += each spring's B·(p_i − p_j) to i and its opposite to j, B = iso·I + axial·uuᵀ (records.Operator),
+    springs first..last−1."""
+    node_i, node_j, unit, iso, axial = op.node_i, op.node_j, op.unit, op.iso, op.axial
     for s in range(first, last):
         i, j = node_i[s], node_j[s]
         dx = p[i, 0] - p[j, 0]
@@ -49,25 +51,25 @@ def _springs_times(node_i, node_j, unit, iso, axial, p, first, last, out):
 
 
 @numba.njit(cache=True, inline="always")
-def _apply(node_i, node_j, unit, iso, axial, shift, inv_mass, nodes, weights, normal, coefficient, tet_law, tet_weight,
-           p, out, partial):
+def _apply(op, inv_mass, rows, tet_law, tet_weight, p, out, partial):
     """out = A·p (see `apply`).  With `partial` of (chunks > 1, N, 3), the springs and tetrahedra in `chunks` chunks
     on the threads, each into its own slice, summed per node after shift·p in chunk order (no atomics; the same
     sums whatever thread runs a chunk)."""
     chunks = partial.shape[0]
-    springs, elements = node_i.shape[0], tet_law.tets.shape[0]
+    shift, nodes, weights, normal, coefficient = op.shift, rows.nodes, rows.weights, rows.normal, rows.coefficient
+    springs, elements = op.node_i.shape[0], tet_law.tets.shape[0]
     if chunks <= 1:
         for n in range(p.shape[0]):
             for a in range(3):
                 out[n, a] = shift[n] * p[n, a]
-        _springs_times(node_i, node_j, unit, iso, axial, p, 0, springs, out)
+        _springs_times(op, p, 0, springs, out)
         tet_apply(tet_law, tet_weight, p, 0, elements, out)
     else:
         for c in numba.prange(chunks):
             own = partial[c]
             own[:] = 0.0
             first, last = _chunk(c, chunks, springs)
-            _springs_times(node_i, node_j, unit, iso, axial, p, first, last, own)
+            _springs_times(op, p, first, last, own)
             first, last = _chunk(c, chunks, elements)
             tet_apply(tet_law, tet_weight, p, first, last, own)
         for n in numba.prange(p.shape[0]):
@@ -100,18 +102,19 @@ def _apply(node_i, node_j, unit, iso, axial, shift, inv_mass, nodes, weights, no
 
 
 @numba.njit(cache=True)
-def apply(node_i, node_j, unit, iso, axial, shift, inv_mass, nodes, weights, normal, coefficient, tet_law, tet_weight,
-          p, out):
-    """out = A·p, matrix-free: shift·p, each spring's B·(p_i − p_j) to i and its opposite to j, the tetrahedra of
-    the 'fem' law (`tet_law`, a fem_kernels.TetArrays, scaled by `tet_weight` = h² + h·τ; fem_kernels.tet_apply) and
-    the active contacts' (h·c + h²·k)·w_a·w_b·nnᵀ.  p must vanish on held nodes; out does there too."""
-    _apply(node_i, node_j, unit, iso, axial, shift, inv_mass, nodes, weights, normal, coefficient, tet_law, tet_weight,
-           p, out, np.zeros((1, 0, 3)))
+def apply(op, inv_mass, rows, tet_law, tet_weight, p, out):
+    """out = A·p, matrix-free (`op` a records.Operator, `rows` a records.ContactRows): shift·p, each spring's
+    B·(p_i − p_j) to i and its opposite to j, the tetrahedra of the 'fem' law (`tet_law`, a fem_kernels.TetArrays,
+    scaled by `tet_weight` = h² + h·τ; fem_kernels.tet_apply) and the active contacts' (h·c + h²·k)·w_a·w_b·nnᵀ.
+    p must vanish on held nodes; out does there too."""
+    _apply(op, inv_mass, rows, tet_law, tet_weight, p, out, np.zeros((1, 0, 3)))
 
 
 @numba.njit(cache=True)
-def block_jacobi(diagonal, inv_mass, nodes, weights, normal, coefficient, inverse):
-    """inverse[n] = (A_nn + Σ contacts' diagonal blocks)⁻¹ (3×3, symmetric positive definite)."""
+def block_jacobi(diagonal, inv_mass, rows, inverse):
+    """inverse[n] = (A_nn + Σ diagonal blocks of the contact `rows`, records.ContactRows)⁻¹ (3×3, symmetric positive
+    definite)."""
+    nodes, weights, normal, coefficient = rows.nodes, rows.weights, rows.normal, rows.coefficient
     inverse[:] = diagonal
     for e in range(nodes.shape[0]):
         if coefficient[e] == 0.0:
@@ -170,16 +173,16 @@ def _dot(u, w, chunks, sums):
 
 
 @numba.njit(cache=True, inline="always")
-def _pcg(node_i, node_j, unit, iso, axial, shift, inv_mass, nodes, weights, normal, coefficient, tet_law, tet_weight,
-         preconditioner, coarse, b, z0, tolerance, max_iterations, r, z, p, q, partial):
+def _pcg(op, inv_mass, rows, tet_law, tet_weight, preconditioner, coarse, b, z0, settings, vectors, partial):
     """`pcg`'s iterations; the products (`_apply`) and the vector updates in partial.shape[0] chunks of springs,
     elements and nodes (prange: on the threads of a parallel dispatcher, in order in a serial one)."""
+    r, z, p, q = vectors
+    tolerance, max_iterations = settings.cg_tolerance, settings.max_cg_iterations
     two_level = coarse.factor.shape[0] > 0
     chunks = partial.shape[0]
     count = b.shape[0]
     sums = np.zeros((chunks, 2))
-    _apply(node_i, node_j, unit, iso, axial, shift, inv_mass, nodes, weights, normal, coefficient, tet_law, tet_weight,
-           z0, q, partial)
+    _apply(op, inv_mass, rows, tet_law, tet_weight, z0, q, partial)
     for n in range(count):
         for a in range(3):
             r[n, a] = b[n, a] - q[n, a]
@@ -202,8 +205,7 @@ def _pcg(node_i, node_j, unit, iso, axial, shift, inv_mass, nodes, weights, norm
     p[:] = z
     iterations = 0
     while r_norm2 > target and iterations < max_iterations:
-        _apply(node_i, node_j, unit, iso, axial, shift, inv_mass, nodes, weights, normal, coefficient, tet_law,
-               tet_weight, p, q, partial)
+        _apply(op, inv_mass, rows, tet_law, tet_weight, p, q, partial)
         pq = _dot(p, q, chunks, sums)
         if pq <= 0.0:
             break
@@ -235,21 +237,18 @@ def _pcg(node_i, node_j, unit, iso, axial, shift, inv_mass, nodes, weights, norm
 
 
 @numba.njit(cache=True)
-def pcg(node_i, node_j, unit, iso, axial, shift, inv_mass, nodes, weights, normal, coefficient, tet_law, tet_weight,
-        preconditioner, coarse, b, z0, tolerance, max_iterations, r, z, p, q, partial):
+def pcg(op, inv_mass, rows, tet_law, tet_weight, preconditioner, coarse, b, z0, settings, vectors, partial):
     """Solve A·z = b by preconditioned conjugate gradients from z0 (overwritten by z): block-Jacobi, plus the
     coarse correction of `coarse` (a coarse_space.CoarseSpace; none: block-Jacobi alone); stops when
-    ‖r‖ ≤ tolerance·‖b‖.  Returns the iterations used.  One thread, `partial` SERIAL (`pcg_parallel`: on the
+    ‖r‖ ≤ cg_tolerance·‖b‖ or after max_cg_iterations (`settings`, records.SolveSettings); `vectors` (r, z, p, q)
+    (N, 3) each, scratch.  Returns the iterations used.  One thread, `partial` SERIAL (`pcg_parallel`: on the
     threads).  With SERIAL its sums run node by node in order."""
-    return _pcg(node_i, node_j, unit, iso, axial, shift, inv_mass, nodes, weights, normal, coefficient, tet_law,
-                tet_weight, preconditioner, coarse, b, z0, tolerance, max_iterations, r, z, p, q, partial)
+    return _pcg(op, inv_mass, rows, tet_law, tet_weight, preconditioner, coarse, b, z0, settings, vectors, partial)
 
 
 @numba.njit(cache=True, parallel=True)
-def pcg_parallel(node_i, node_j, unit, iso, axial, shift, inv_mass, nodes, weights, normal, coefficient, tet_law,
-                 tet_weight, preconditioner, coarse, b, z0, tolerance, max_iterations, r, z, p, q, partial):
+def pcg_parallel(op, inv_mass, rows, tet_law, tet_weight, preconditioner, coarse, b, z0, settings, vectors, partial):
     """`pcg` on the threads: springs, elements and nodes in partial.shape[0] chunks, `partial` (chunks, N, 3) the
     chunks' own sums of A·p.  The sums' order depends on the chunks alone, so a run repeats itself bit for bit with
     the same thread count; against `pcg` it differs by rounding."""
-    return _pcg(node_i, node_j, unit, iso, axial, shift, inv_mass, nodes, weights, normal, coefficient, tet_law,
-                tet_weight, preconditioner, coarse, b, z0, tolerance, max_iterations, r, z, p, q, partial)
+    return _pcg(op, inv_mass, rows, tet_law, tet_weight, preconditioner, coarse, b, z0, settings, vectors, partial)

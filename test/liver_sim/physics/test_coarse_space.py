@@ -18,10 +18,13 @@ from liver_sim.physics.solver.coarse_space import (
     node_graph,
 )
 from liver_sim.physics.solver.implicit_kernels import assemble
+from liver_sim.physics.solver.records import ContactRows, Loads, Operator, SolveSettings, SpringLaw
 from liver_sim.physics.tissue.fem_kernels import TetArrays, build_tets, tet_terms
 from liver_sim.physics.tissue.springs import build_springs
 
 from meshes import box_mesh
+
+NO_ROWS = ContactRows.of(Contacts.none(), np.zeros(0))
 
 H_S = 1.0 / 150.0
 
@@ -33,18 +36,22 @@ def assembled_system(mesh, params: ModelParams, x, inv_mass):
     tets = TetArrays.none()
     if params.tissue_law == "fem":
         tets = build_tets(mesh.points, mesh.tets, 2e3, 0.45, 500.0)
-    n, edges = len(x), springs.edges
-    unit, iso, axial = np.zeros((edges, 3)), np.zeros(edges), np.zeros(edges)
-    shift, diagonal = np.zeros(n), np.zeros((n, 3, 3))
+    n = len(x)
     f, ky, zero = np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3))
     node_i, node_j = springs.node_i.astype(np.uint32), springs.node_j.astype(np.uint32)
-    assemble(x, zero, zero, inv_mass, zero, np.zeros(3), 3.0, H_S, node_i, node_j, 1.0 / springs.rest_length_m,
-             springs.lambda1_n, springs.lambda2_n, springs.mu_ns_per_m, unit, iso, axial, shift, diagonal, f, ky, True)
-    tet_terms(x, zero, zero, inv_mass, H_S, tets, f, ky, diagonal, True)
-    inverse = np.zeros_like(diagonal)
-    no = Contacts.none()
-    pcg.block_jacobi(diagonal, inv_mass, no.nodes, no.weights, no.normal, np.zeros(0), inverse)
-    return (node_i, node_j, unit, iso, axial, shift, inv_mass, tets, H_S * H_S + H_S * tets.viscous_time_s), inverse
+    op = Operator.allocate(node_i, node_j, n)
+    law = SpringLaw(node_i, node_j, 1.0 / springs.rest_length_m, springs.lambda1_n, springs.lambda2_n,
+                    springs.mu_ns_per_m)
+    assemble(x, zero, zero, inv_mass, Loads(zero, np.zeros(3), 3.0), H_S, law, op, f, ky, True)
+    tet_terms(x, zero, zero, inv_mass, H_S, tets, f, ky, op.diagonal, True)
+    inverse = np.zeros_like(op.diagonal)
+    pcg.block_jacobi(op.diagonal, inv_mass, NO_ROWS, inverse)
+    return (*op[:6], inv_mass, tets, H_S * H_S + H_S * tets.viscous_time_s), inverse
+
+
+def operator_record(operator) -> Operator:
+    """The records.Operator of `assembled_system`'s arrays (its diagonal blocks left out: the solve reads none)."""
+    return Operator(*operator[:6], np.zeros((0, 3, 3)))
 
 
 def graph(mesh):
@@ -63,14 +70,13 @@ def perturbed_box(law: str):
 def dense_operator(operator):
     """pcg.apply's operator (no contacts) as a dense (3N × 3N) matrix, column by column."""
     inv_mass = operator[6]
-    no = Contacts.none()
     columns = []
     for k in range(3 * len(inv_mass)):
         p = np.zeros((len(inv_mass), 3))
         p.flat[k] = 1.0
         p[inv_mass == 0.0] = 0.0
         out = np.zeros_like(p)
-        pcg.apply(*operator[:7], no.nodes, no.weights, no.normal, np.zeros(0), *operator[7:], p, out)
+        pcg.apply(operator_record(operator), inv_mass, NO_ROWS, *operator[7:], p, out)
         columns.append(out.ravel())
     return np.array(columns).T
 
@@ -140,12 +146,12 @@ def test_two_levels_solve_the_same_system_in_fewer_iterations():
     coarse = build_coarse_space(mesh.points, aggregates(*graph(mesh)), operator)
     b = np.random.default_rng(2).normal(scale=1e-3, size=mesh.points.shape) * operator[5][:, None]
     b[inv_mass == 0.0] = 0.0
-    no = Contacts.none()
 
     def solve(space, tolerance):
         z = np.zeros_like(b)
-        iterations = pcg.pcg(*operator[:7], no.nodes, no.weights, no.normal, np.zeros(0), *operator[7:], inverse,
-                             space, b, z, tolerance, 1000, *(np.zeros_like(b) for _ in range(4)), pcg.SERIAL)
+        iterations = pcg.pcg(operator_record(operator), inv_mass, NO_ROWS, *operator[7:], inverse, space, b, z,
+                             SolveSettings(tolerance, 1000, 0.0, 0), tuple(np.zeros_like(b) for _ in range(4)),
+                             pcg.SERIAL)
         return z, iterations
 
     exact, _ = solve(CoarseSpace.none(), 1e-12)

@@ -11,6 +11,7 @@ from liver_sim.physics.model import LiverModel
 from liver_sim.physics.settings import ModelParams
 from liver_sim.physics.solver import explicit_kernels, implicit_kernels, pcg, reference
 from liver_sim.physics.solver.implicit import ImplicitEuler
+from liver_sim.physics.solver.records import ContactRows, Operator
 from liver_sim.physics.tissue.fem_kernels import TetArrays
 from liver_sim.physics.tissue.springs import build_springs
 from liver_sim.physics.tools.tool import Tool
@@ -192,21 +193,19 @@ def test_held_nodes_stay_put(liver):
 def test_contact_jacobian_matches_finite_differences():
     mesh, springs, x, v, inv_mass, contacts, external = tiny_scene()
     inv_mass = np.ones(len(x))
-    arrays = (contacts.nodes, contacts.weights, contacts.normal, contacts.offset_m, contacts.normal_speed_m_s,
-              contacts.stiffness_n_per_m, contacts.damping_ns_per_m)
 
     def force(xs, vs):
         f = np.zeros_like(xs)
-        implicit_kernels.contact_forces(xs, vs, np.zeros_like(xs), inv_mass, 0.0, *arrays, f, np.zeros_like(xs),
-                                        np.zeros(len(contacts)))
+        implicit_kernels.contact_forces(xs, vs, np.zeros_like(xs), inv_mass, 0.0,
+                                        ContactRows.of(contacts, np.zeros(len(contacts))), f, np.zeros_like(xs))
         return f
 
     def operator(coefficient, p):
         """The solver's contact term of A·p with per-element coefficient (springs and mass left out)."""
         out = np.zeros_like(p)
-        none = np.zeros(0, np.int64)
-        pcg.apply(none, none, np.zeros((0, 3)), np.zeros(0), np.zeros(0), np.zeros(len(p)), inv_mass,
-                  contacts.nodes, contacts.weights, contacts.normal, coefficient, TetArrays.none(), 0.0, p, out)
+        none = np.zeros(0, np.uint32)
+        springs_none = Operator.allocate(none, none, len(p))._replace(shift=np.zeros(len(p)))
+        pcg.apply(springs_none, inv_mass, ContactRows.of(contacts, coefficient), TetArrays.none(), 0.0, p, out)
         return out
 
     direction = np.random.default_rng(5).normal(size=x.shape)
@@ -217,8 +216,8 @@ def test_contact_jacobian_matches_finite_differences():
     np.testing.assert_allclose(-operator(contacts.stiffness_n_per_m, direction), dfdx, atol=1e-6)
     np.testing.assert_allclose(-operator(contacts.damping_ns_per_m, direction), dfdv, atol=1e-6)
     ky = np.zeros_like(x)
-    implicit_kernels.contact_forces(x, v, direction, inv_mass, 0.0, *arrays, np.zeros_like(x), ky,
-                                    np.zeros(len(contacts)))
+    implicit_kernels.contact_forces(x, v, direction, inv_mass, 0.0, ContactRows.of(contacts, np.zeros(len(contacts))),
+                                    np.zeros_like(x), ky)
     np.testing.assert_allclose(ky, dfdx, atol=1e-6)
 
 

@@ -11,6 +11,7 @@ from liver_sim.physics.model import LiverModel
 from liver_sim.physics.parameters import model_params
 from liver_sim.physics.settings import ModelParams
 from liver_sim.physics.solver import implicit_kernels, reference
+from liver_sim.physics.solver.records import Operator
 from liver_sim.physics.structure import default_fixed_nodes
 from liver_sim.physics.tissue import spring_kernels
 from liver_sim.physics.tissue.organ_support import SupportArrays, build_support
@@ -37,9 +38,10 @@ def test_support_force_and_jacobian_in_both_integrators():
 
     def implicit_terms(xs, vs, y, h=0.01):
         f, ky = np.zeros_like(xs), np.zeros_like(xs)
-        shift, diagonal = np.ones(len(xs)), np.zeros((len(xs), 3, 3))
-        implicit_kernels.support_terms(xs, vs, y, inv_mass, h, *support, f, ky, shift, diagonal, True)
-        return f, ky, shift, diagonal
+        none = np.zeros(0, np.uint32)
+        op = Operator.allocate(none, none, len(xs))
+        implicit_kernels.support_terms(xs, vs, y, inv_mass, h, support, f, ky, op, True)
+        return f, ky, op.shift, op.diagonal
 
     direction = np.random.default_rng(1).normal(size=x.shape)
     f, ky, shift, diagonal = implicit_terms(x, v, direction)

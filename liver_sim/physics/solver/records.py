@@ -1,0 +1,106 @@
+"""The records the implicit step's kernels take (numba passes named tuples of arrays as one argument).
+
+`SpringLaw` is the springs' law (F = λ1·d³ + λ2·d + μ·ṗ, physics.tissue.springs), `Operator` the step's
+matrix-free system A that `implicit_kernels.assemble` fills and `pcg` multiplies by, `ContactRows` the contacts'
+penalty rows (contact.rows.Contacts) with each row's coefficient in A, `Loads` what acts on every node besides
+the tissue, `Tissue` the laws a step sums, `SolveSettings` when the CG and Newton iterations stop, `Scratch` a
+solver's work arrays.
+"""
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from liver_sim.physics.tissue.fem_kernels import TetArrays
+from liver_sim.physics.tissue.organ_support import SupportArrays
+
+
+class SpringLaw(NamedTuple):
+    """Per spring: end nodes `node_i`, `node_j` (E,) uint32, `inv_rest` 1/l0 (E,) 1/m, `lambda1` λ1 and `lambda2`
+    λ2 (E,) N, `mu` μ (E,) N·s/m."""
+
+    node_i: np.ndarray
+    node_j: np.ndarray
+    inv_rest: np.ndarray
+    lambda1: np.ndarray
+    lambda2: np.ndarray
+    mu: np.ndarray
+
+
+class Operator(NamedTuple):
+    """The step's system A = M − h·D − h²·K without contacts and tetrahedra: per spring its nodes (E,) uint32, unit
+    axis `unit` (E, 3) and block B = iso·I + axial·uuᵀ (`iso`, `axial` (E,)); per node `shift` (N,), m·(1 + h·c_env)
+    plus the support's h·c + h²·k (1 on held nodes), and the 3×3 `diagonal` blocks (N, 3, 3)."""
+
+    node_i: np.ndarray
+    node_j: np.ndarray
+    unit: np.ndarray
+    iso: np.ndarray
+    axial: np.ndarray
+    shift: np.ndarray
+    diagonal: np.ndarray
+
+    @classmethod
+    def allocate(cls, node_i: np.ndarray, node_j: np.ndarray, n_nodes: int) -> "Operator":
+        """The operator of springs `node_i`→`node_j` (uint32) on `n_nodes` nodes, to be assembled: blocks 0, shift 1."""
+        edges = len(node_i)
+        return cls(node_i, node_j, np.zeros((edges, 3)), np.zeros(edges), np.zeros(edges), np.ones(n_nodes),
+                   np.zeros((n_nodes, 3, 3)))
+
+
+class ContactRows(NamedTuple):
+    """The penalty rows of contact.rows.Contacts for the kernels (`nodes` (K, 3) int64 with −1 pads, `weights`,
+    `normal` (K, 3), `offset` o, `speed` s, `stiffness` k, `damping` c (K,)) and each row's `coefficient` (K,) in A,
+    h·c + h²·k while active, else 0 (written by implicit_kernels.contact_forces)."""
+
+    nodes: np.ndarray
+    weights: np.ndarray
+    normal: np.ndarray
+    offset: np.ndarray
+    speed: np.ndarray
+    stiffness: np.ndarray
+    damping: np.ndarray
+    coefficient: np.ndarray
+
+    @classmethod
+    def of(cls, contacts, coefficient: np.ndarray) -> "ContactRows":
+        """The rows of `contacts` (contact.rows.Contacts) with each row's `coefficient` in the system."""
+        return cls(contacts.nodes, contacts.weights, contacts.normal, contacts.offset_m, contacts.normal_speed_m_s,
+                   contacts.stiffness_n_per_m, contacts.damping_ns_per_m, coefficient)
+
+
+class Loads(NamedTuple):
+    """`external` forces (N, 3) N, `gravity` (3,) m/s² and the environment's damping `c_env` 1/s."""
+
+    external: np.ndarray
+    gravity: np.ndarray
+    c_env: float
+
+
+class Tissue(NamedTuple):
+    """The laws a step sums: the `springs` (SpringLaw), the organ's `support` (organ_support.SupportArrays) and the
+    tetrahedra of the 'fem' law (`tets`, fem_kernels.TetArrays; none with the springs' law)."""
+
+    springs: SpringLaw
+    support: SupportArrays
+    tets: TetArrays
+
+
+class SolveSettings(NamedTuple):
+    """PCG stops at ‖r‖ ≤ `cg_tolerance`·‖b‖ or `max_cg_iterations`; Newton's iterations at a residual of
+    `newton_tolerance_n` N on every node or `max_newton`."""
+
+    cg_tolerance: float
+    max_cg_iterations: int
+    newton_tolerance_n: float
+    max_newton: int
+
+
+class Scratch(NamedTuple):
+    """A solver's work arrays: `work` (10, N, 3), `partial` pcg.SERIAL for one thread, else (threads, N, 3), and the
+    block-Jacobi `preconditioner` (N, 3, 3)."""
+
+    work: np.ndarray
+    partial: np.ndarray
+    preconditioner: np.ndarray
