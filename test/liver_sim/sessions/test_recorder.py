@@ -4,6 +4,7 @@ import json
 import signal
 import subprocess
 import sys
+import threading
 from pathlib import Path
 
 import numpy as np
@@ -136,7 +137,9 @@ def test_a_recorder_started_mid_run_counts_nothing_lost_of_a_running_publisher(r
                                     env=ros_env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
         # recording from `ready` on, and sent to by the writer (which discovers the recorder on its own)
         assert any(line.startswith(READY) for line in recorder.stdout), "the recorder ended before `ready`"
-        assert any(line.split() == ["matched", "2"] for line in publisher.stdout), "the writer never matched it"
+        lines = []
+        threading.Thread(target=lambda: lines.extend(publisher.stdout), daemon=True).start()
+        wait_for(lambda: "matched 2\n" in lines, 60.0, "the writer matching the recorder", lambda: lines)
         at_match = published()
         wait_for(lambda: published() >= at_match + 500, 60.0, "500 messages published while it records",
                  tally.counts)
@@ -144,7 +147,8 @@ def test_a_recorder_started_mid_run_counts_nothing_lost_of_a_running_publisher(r
         # stopped then holds the last of them
         publisher.stdin.write("stop\n")
         publisher.stdin.flush()
-        _, last, _, acknowledged = next(line for line in publisher.stdout if line.startswith("published")).split()
+        wait_for(lambda: lines[-1].startswith("published"), 60.0, "the publisher's count", lambda: lines)
+        _, last, _, acknowledged = lines[-1].split()
         status, output = stop(recorder, signal.SIGINT)
     finally:
         tally.close(linger_s=0.0)
@@ -156,4 +160,4 @@ def test_a_recorder_started_mid_run_counts_nothing_lost_of_a_running_publisher(r
     assert status == 0 and "lost: 0" in output, output
     (writer,) = json.loads(bag_info(tmp_path / "session").custom_data["writers"])
     assert writer["first"] > 1 and writer["before_match"] == 0 and writer["gaps"] == 0, writer
-    assert writer["last"] == int(last) and writer["received"] == writer["last"] - writer["first"] + 1, writer
+    assert writer["last"] == int(last) and writer["received"] == writer["last"] - writer["first"] + 1 > 300, writer
