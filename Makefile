@@ -60,7 +60,7 @@ export MPLBACKEND := Agg
 # to the sources (git-ignored; `make clean` removes it).
 
 .DEFAULT_GOAL := help
-.PHONY: help venv lint test test-quick test-two-hands demo bench check-domain clean distclean
+.PHONY: help venv warm lint test test-quick test-two-hands demo bench check-domain clean distclean
 
 help:
 	@echo "make demo       build the default liver, run a headless press-and-release, write out/demo/"
@@ -70,6 +70,7 @@ help:
 	@echo "make lint       ruff over the repository (ruff.toml); make test runs it first"
 	@echo "make bench      physics benchmark (steps per second, real-time factor)"
 	@echo "make venv       create/update $(VENV) only (pinned, see requirements.txt)"
+	@echo "make warm       bring the physics kernels' numba cache up to date (make test and demo do)"
 	@echo "make clean      remove out/, caches and build leftovers"
 	@echo "make distclean  clean, and remove $(VENV)"
 	@echo "variables: PYTHON=$(PYTHON) VENV=$(VENV) ROS_DOMAIN_ID=$(ROS_DOMAIN_ID)"
@@ -99,6 +100,12 @@ $(STAMP): $(REQ_STAMP) setup.py setup.cfg package.xml resource/liver_sim \
 	$(VENV)/bin/liver-sim warm
 	@touch $@
 
+# numba's cache of the physics kernels, brought up to date before anything that runs them in parallel: after a
+# kernel module changed, two test workers compiling one kernel at once can leave a cache entry that crashes the
+# next process to load it. A second or two when the cache is current.
+warm: venv
+	@$(VENV)/bin/liver-sim warm
+
 check-domain:
 	@case "$(ROS_DOMAIN_ID)" in \
 	  ''|*[!0-9]*) echo "ROS_DOMAIN_ID='$(ROS_DOMAIN_ID)' is not a number" >&2; exit 2;; \
@@ -114,7 +121,7 @@ lint: venv
 # ones, and the no_rate_loops ones: recorders, replays); then the rate_loops tests, whose node processes keep a rate
 # in real time, in order in one process, with nothing else of the suite computing beside their loops. A phase that
 # PYTEST_ARGS leaves without tests (pytest's status 5) passes when the other ran some.
-test: venv check-domain lint
+test: warm check-domain lint
 	@echo "ROS_DOMAIN_ID=$(ROS_DOMAIN_ID) ROS_AUTOMATIC_DISCOVERY_RANGE=$(ROS_AUTOMATIC_DISCOVERY_RANGE)"
 	@$(VENV_PY) -m pytest -q -n 2 -m "not rate_loops" $(PYTEST_ARGS) test; s1=$$?; \
 	  [ $$s1 -eq 0 ] || [ $$s1 -eq 5 ] || exit $$s1; \
@@ -126,15 +133,15 @@ test: venv check-domain lint
 # The tiers are pytest markers (setup.cfg, applied in test/conftest.py): `ros`
 # marks the tests that start node processes or an rclpy context. The ROS-free
 # tier is computing only, so it fills both workers.
-test-quick: venv check-domain
+test-quick: warm check-domain
 	$(VENV_PY) -m pytest -q -n 2 -m "not ros" $(PYTEST_ARGS) test
 
 # The two-hand real-time tests (marker `two_hands`), which `make test` skips on fewer than 4 cores, run anyway
 # (docs/devices.md#two-hands): to measure what two hands need of this machine.
-test-two-hands: venv check-domain
+test-two-hands: warm check-domain
 	LIVER_SIM_TWO_HANDS=1 $(VENV_PY) -m pytest -q -m two_hands $(PYTEST_ARGS) test
 
-demo: venv check-domain
+demo: warm check-domain
 	$(VENV)/bin/liver-sim demo --out out/demo $(DEMO_ARGS)
 
 bench: venv check-domain
