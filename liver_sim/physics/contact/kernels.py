@@ -142,11 +142,11 @@ def _local_minimum(skin, triangles, feature, distance, t):
 
 
 @numba.njit(cache=True)
-def probe_geometry(x, v, skin, triangles, probes, shift, radius, tool_velocity, dt, nodes, weights, normal, depth,
-                   share, point, surface_weight):
-    """The contacts of the probes p (+ `shift`, balls of `radius` moving at `tool_velocity`) with the
-    candidate skin `triangles`: row c·T + t for probe c and candidate t (T candidates).  Each row is the
-    triangle's `nodes`, the barycentric `weights` of its closest point q to p (Ericson), the unit `normal`
+def probe_geometry(x, v, tool, shift, dt):
+    """The contacts of the `tool`'s probes p (a ToolSweep: `probes` + `shift`, balls of `radius_m` moving at
+    `velocity_m_s`) with its candidate skin `triangles`, written into its row arrays: row c·T + t for probe c and
+    candidate t (T candidates).  Each row is the triangle's `nodes`, the barycentric `weights` of its closest
+    point q to p (Ericson), the unit `normal`
     pushing the liver (from p to q; from q to p when p lies behind the triangle's outward face; the inward
     face normal when p is on it), the `depth` δ = radius ∓ |p − q| (m, negative apart), q (`point`), and
     the row's `share` of its probe's contact: s_t/Σ s, s_t = γ_t·max(δ_t, 0)² (when no row of the probe
@@ -164,6 +164,11 @@ def probe_geometry(x, v, skin, triangles, probes, shift, radius, tool_velocity, 
     0): the force is continuous as the tool slides over edges and corners, and the contact direction blends
     between the local minima where the skin wraps around the tool (a dent) instead of jumping.
     """
+    skin, triangles, probes, radius, tool_velocity = tool.skin, tool.triangles, tool.probes, tool.radius_m, \
+        tool.velocity_m_s
+    nodes, weights, normal, depth, share, point = tool.nodes, tool.weights, tool.normal, tool.depth, tool.share, \
+        tool.point
+    surface_weight = tool.surface_weight
     count = triangles.shape[0]
     feature = np.empty(count, dtype=np.int64)
     distance = np.empty(count)
@@ -238,8 +243,7 @@ def add_contact_forces(x, v, tool, shift, dt, f):
     − Σ w_a·v_a), spread over the triangle's nodes as w_a times that.  Returns the total force on the liver
     (the tool feels its opposite); the rows' geometry is left in the tool's arrays."""
     t = tool
-    probe_geometry(x, v, t.skin, t.triangles, t.probes, shift, t.radius_m, t.velocity_m_s, dt, t.nodes, t.weights,
-                   t.normal, t.depth, t.share, t.point, t.surface_weight)
+    probe_geometry(x, v, t, shift, dt)
     tx, ty, tz = 0.0, 0.0, 0.0
     for c in range(t.depth.shape[0]):
         if not (t.share[c] > 0.0 and t.depth[c] > 0.0):

@@ -169,8 +169,7 @@ def tool_sweep(shape: ToolShape, pose: ToolPose | None, previous: ToolPose | Non
 
 def probe_contacts(x: np.ndarray, v: np.ndarray, tool: ToolSweep, shift: np.ndarray, dt: float) -> None:
     """The tool's contact rows (kernels.probe_geometry) with its probes moved by `shift`, in its arrays."""
-    probe_geometry(x, v, tool.skin, tool.triangles, tool.probes, shift, tool.radius_m, tool.velocity_m_s, dt,
-                   tool.nodes, tool.weights, tool.normal, tool.depth, tool.share, tool.point, tool.surface_weight)
+    probe_geometry(x, v, tool, shift, dt)
 
 
 def contact_rows(x: np.ndarray, v: np.ndarray, tool: ToolSweep, shift: np.ndarray, dt: float,
