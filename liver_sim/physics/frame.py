@@ -29,7 +29,8 @@ from liver_sim.physics.contact.tool_geometry import ToolPose, contact_rows, prob
 from liver_sim.physics.solver.explicit_kernels import max_speed, run_frame
 from liver_sim.physics.state import State, ToolState, carried_state, rest_state
 from liver_sim.physics.structure import Structure, build_structure
-from liver_sim.physics.tissue.spring_kernels import spring_forces_serial, support_forces
+from liver_sim.physics.tissue.organ_support import support_forces
+from liver_sim.physics.tissue.spring_law import spring_forces_serial
 from liver_sim.physics.tissue.springs import estimate_stable_time_step
 from liver_sim.physics.tools.tool import Tool
 from liver_sim.physics.tools.use import held_positions, release
@@ -216,9 +217,7 @@ def spring_forces(structure: Structure, state: State) -> np.ndarray:
     """work.force ← external forces + the springs' Eq. 1 forces + the support at the state (N, 3), returned."""
     f = structure.work.force
     f[:] = state.external_forces_n
-    s = structure.spring_arrays
-    spring_forces_serial(state.positions, state.velocities, s.node_i, s.node_j, s.rest_m, s.lambda1_n, s.lambda2_n,
-                         s.mu_ns_per_m, f)
+    spring_forces_serial(state.positions, state.velocities, structure.spring_arrays, f)
     support = structure.support
     support_forces(state.positions, state.velocities, support.nodes, support.rest_m, support.stiffness_n_per_m,
                    support.damping_ns_per_m, f)

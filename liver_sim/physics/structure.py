@@ -20,7 +20,7 @@ from liver_sim.physics.solver.explicit_kernels import StepSettings, WorkArrays
 from liver_sim.physics.solver.implicit import ImplicitEuler
 from liver_sim.physics.tissue.fem_kernels import build_tets
 from liver_sim.physics.tissue.organ_support import SupportArrays, build_support, node_areas_m2
-from liver_sim.physics.tissue.spring_kernels import SpringArrays
+from liver_sim.physics.tissue.spring_law import SpringArrays, spring_arrays
 from liver_sim.physics.tissue.springs import SpringNetwork, build_springs, estimate_stable_time_step, stable_time_step
 from liver_sim.physics.topology.tearing import TearDetector
 
@@ -156,8 +156,7 @@ def build_structure(mesh: TetMesh, params: ModelParams, capsule_triangles: np.nd
         tets = build_tets(mesh.points, mesh.tets, tissue.parenchyma_young_modulus_kpa * 1e3,
                           tissue.parenchyma_poisson_ratio, tissue.parenchyma_viscosity_pa_s)
     return Structure(mesh, params, capsule, masses_kg, fixed_nodes, springs,
-                     SpringArrays(springs.node_i, springs.node_j, springs.rest_length_m, springs.lambda1_n,
-                                  springs.lambda2_n, springs.mu_ns_per_m),
+                     spring_arrays(springs),
                      support, parallel, bound, version,
                      WorkArrays(np.zeros((n, 3)), np.zeros((threads, n, 3)), parallel),
                      ImplicitEuler(springs, n, support=support, tets=tets, preconditioner=params.preconditioner,

@@ -1,7 +1,7 @@
 """numba kernels of one explicit frame (Eq. 2, or symplectic Euler): forces, then integration, per substep.
 
 Each of `settings.substeps` steps of Δt: f = f_ext + the Eq. 1 springs and the support
-(physics.tissue.spring_kernels) + the Eq. 3 contact of the tool's probes moved along its velocity
+(physics.tissue.spring_law) + the Eq. 3 contact of the tool's probes moved along its velocity
 (physics.contact.kernels.add_contact_forces); a = f/m + g − c_env·v on every free node (inv_mass > 0;
 fixed and held nodes do not move).  Explicit Euler (Eq. 2): x ← x + Δt·v, v ← v + Δt·a; symplectic
 Euler: v ← v + Δt·a, x ← x + Δt·v_new.  `max_speed` is the divergence guard's measure of a state (the
@@ -12,7 +12,7 @@ Array conventions: positions `x` and velocities `v` are (N, 3) float64 in m and 
 in `f` (N, 3) in newtons.
 
 `run_frame` takes the state arrays and five named tuples (numba reads their fields as
-compile-time attributes, at no cost): the spring network (`physics.tissue.spring_kernels.SpringArrays`), the support
+compile-time attributes, at no cost): the spring network (`physics.tissue.spring_law.SpringArrays`), the support
 (`physics.tissue.organ_support.SupportArrays`), the integration settings (`StepSettings`), the tool and its
 contact candidates (`physics.contact.kernels.ToolSweep`) and the work arrays (`WorkArrays`).
 """
@@ -25,7 +25,8 @@ import numba
 import numpy as np
 
 from liver_sim.physics.contact.kernels import TOOL_NONE, add_contact_forces
-from liver_sim.physics.tissue.spring_kernels import spring_forces_parallel, spring_forces_serial, support_forces
+from liver_sim.physics.tissue.organ_support import support_forces
+from liver_sim.physics.tissue.spring_law import spring_forces_parallel, spring_forces_serial
 
 
 class StepSettings(NamedTuple):
@@ -87,12 +88,10 @@ def add_forces(x, v, external_force, springs, support, tool, work, shift, dt, co
     by `shift`; the contact force on the liver (N) goes to `contact` (left alone without a tool)."""
     f = work.force
     f[:] = external_force
-    s = springs
     if work.parallel:
-        spring_forces_parallel(x, v, s.node_i, s.node_j, s.rest_m, s.lambda1_n, s.lambda2_n, s.mu_ns_per_m,
-                               work.partial, f)
+        spring_forces_parallel(x, v, springs, work.partial, f)
     else:
-        spring_forces_serial(x, v, s.node_i, s.node_j, s.rest_m, s.lambda1_n, s.lambda2_n, s.mu_ns_per_m, f)
+        spring_forces_serial(x, v, springs, f)
     support_forces(x, v, support.nodes, support.rest_m, support.stiffness_n_per_m, support.damping_ns_per_m, f)
     if tool.kind != TOOL_NONE:
         contact[:] = add_contact_forces(x, v, tool, shift, dt, f)

@@ -32,9 +32,10 @@ from liver_sim.physics.settings import PRECONDITIONERS
 from liver_sim.physics.solver.coarse_space import CoarseSpace, aggregates, build_coarse_space, node_graph
 from liver_sim.physics.solver.implicit_kernels import assemble, bdf2_start, implicit_step, support_terms
 from liver_sim.physics.solver.pcg import SERIAL, block_jacobi, pcg, pcg_parallel
-from liver_sim.physics.solver.records import ContactRows, Loads, Operator, Scratch, SolveSettings, SpringLaw, Tissue
+from liver_sim.physics.solver.records import ContactRows, Loads, Operator, Scratch, SolveSettings, Tissue
 from liver_sim.physics.tissue.fem_kernels import TetArrays, tet_terms
 from liver_sim.physics.tissue.organ_support import SupportArrays
+from liver_sim.physics.tissue.spring_law import spring_arrays
 from liver_sim.physics.tissue.springs import SpringNetwork
 
 #: From this many nodes on, 'auto' takes the two-level preconditioner.  It pays from about the default liver's size
@@ -118,8 +119,8 @@ class ImplicitEuler:
         self._coarse: dict[float, CoarseSpace] = {}
         # unsigned indices spare numba's negative-index wraparound in the inner loops
         node_i, node_j = springs.node_i.astype(np.uint32), springs.node_j.astype(np.uint32)
-        self._inv_rest = 1.0 / springs.rest_length_m
         self._op = Operator.allocate(node_i, node_j, self.n_nodes)
+        self._springs = spring_arrays(springs, node_i, node_j)  # the kernels' record of the same arrays
         self._scratch = Scratch(np.zeros((10, self.n_nodes, 3)), self._partial, np.zeros((self.n_nodes, 3, 3)))
         self._coefficient = np.zeros(0)
         self._inv_mass = np.zeros(self.n_nodes)
@@ -147,7 +148,7 @@ class ImplicitEuler:
         coarse = self._coarse_space(h, x, inv_mass, tets)
         loads = Loads(external_force, np.asarray(gravity, dtype=np.float64), float(environment_damping))
         contact, history.cg_iterations, history.newton_iterations, history.residual_n = implicit_step(
-            x, v, inv_mass, loads, h, Tissue(self._law(), self.support, tets), self._op,
+            x, v, inv_mass, loads, h, Tissue(self._springs, self.support, tets), self._op,
             ContactRows.of(contacts, self._coefficient), coarse, history.warm,
             SolveSettings(self.cg_tolerance, self.max_cg_iterations, self.newton_tolerance_n, self.max_newton),
             self._scratch)
@@ -155,11 +156,6 @@ class ImplicitEuler:
         history.dt_s = float(dt)
         history.second_order = second
         return contact
-
-    def _law(self) -> SpringLaw:
-        """The springs' law for the kernels."""
-        s = self.springs
-        return SpringLaw(self._op.node_i, self._op.node_j, self._inv_rest, s.lambda1_n, s.lambda2_n, s.mu_ns_per_m)
 
     def new_history(self) -> StepHistory:
         """A StepHistory of this solver's nodes and elements, at rest."""
@@ -272,7 +268,7 @@ class ImplicitEuler:
         f, ky = np.zeros_like(x), np.zeros_like(x)
         rows = ContactRows.of(contacts or Contacts.none(), np.zeros(0) if coefficient is None else coefficient)
         assemble(x, zero, zero, inv_mass, Loads(external_force, np.zeros(3), float(environment_damping)), h,
-                 self._law(), self._op, f, ky, True)
+                 self._springs, self._op, f, ky, True)
         support_terms(x, zero, zero, inv_mass, h, self.support, f, ky, self._op, True)
         tet_terms(x, zero, zero, inv_mass, h, tets, f, ky, self._op.diagonal, True)
         self._tet_weight = h * h + h * tets.viscous_time_s

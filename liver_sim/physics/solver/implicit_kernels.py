@@ -1,13 +1,9 @@
 """The numba kernels of one implicit step (physics.solver.implicit): forces f and K·y, the system matrix
 A = M − h·D − h²·K in matrix-free form, the Newton residual, the BDF2 start, the step itself.
 
-Blocks.  A spring i→j with unit axis u, length l, strain d = (l − l0)/l0 and elastic tension
-T = λ1·d³ + λ2·d has the tangent stiffness Ks = (dT/dl)·uuᵀ + (T⁺/l)·(I − uuᵀ), dT/dl =
-(3·λ1·d² + λ2)/l0, and damping μ·uuᵀ; K gets −Ks on (i,i), (j,j) and +Ks on (i,j), (j,i), D
-likewise with μ·uuᵀ.  The geometric term uses T⁺ = max(T, 0): a compressed spring's negative
-geometric stiffness is dropped, so every block is positive semi-definite and the system matrix
-symmetric positive definite (the usual safeguard; the residual check corrects what it omits).
-The viscous tension's own x-derivative (non-symmetric) is omitted likewise.  Environment damping
+Blocks.  A spring's forces, tangent stiffness and damping and its block of the system are its law's
+(physics.tissue.spring_law.spring_terms), a tetrahedron's likewise (physics.tissue.fem_kernels.tet_terms); every
+block is positive semi-definite and the system matrix symmetric positive definite.  Environment damping
 a −= c_env·v gives D = −c_env·M.  Held nodes (inv_mass 0: fixed or grasped) keep Δv = 0 and do
 not move (as `explicit_kernels.integrate`): their rows and columns are replaced by the identity.
 
@@ -31,7 +27,7 @@ import numpy as np
 
 from liver_sim.physics.solver.pcg import block_jacobi, pcg, pcg_parallel
 from liver_sim.physics.tissue.fem_kernels import tet_terms
-from liver_sim.physics.tissue.pairs import add_pair
+from liver_sim.physics.tissue.spring_law import spring_terms
 
 
 @numba.njit(cache=True)
@@ -83,16 +79,14 @@ def contact_forces(x, v, y, inv_mass, h, rows, f, ky):
 
 @numba.njit(cache=True)
 def assemble(x, v, y, inv_mass, loads, h, springs, op, f, ky, assemble_matrix):
-    """Forces f at (x, v) of the `springs` (records.SpringLaw) and `loads` (records.Loads), and ky = K·y (y zero on
-    held nodes); with assemble_matrix, also the system (into `op`, a records.Operator)
-    A = M·(1 + h·c_env) − h·D_springs − h²·K_springs in matrix-free form: per spring the block
-    B = iso·I + axial·uuᵀ (unit u) that enters (i,i) and (j,j) as +B and (i,j), (j,i) as −B;
+    """Forces f at (x, v) of the `springs` (physics.tissue.spring_law.SpringArrays) and `loads` (records.Loads),
+    and ky = K·y (y zero on held nodes); with assemble_matrix, also the system (into `op`, a records.Operator)
+    A = M·(1 + h·c_env) − h·D_springs − h²·K_springs in matrix-free form: per spring its block
+    (spring_law.spring_terms);
     shift = m·(1 + h·c_env) per node (1 on held ones, whose rows and columns are the identity);
     and the 3×3 diagonal blocks of A."""
     external, gravity, c_env = loads.external, loads.gravity, loads.c_env
-    node_i, node_j, inv_rest = springs.node_i, springs.node_j, springs.inv_rest
-    lambda1, lambda2, mu = springs.lambda1, springs.lambda2, springs.mu
-    unit, iso, axial, shift, diagonal = op.unit, op.iso, op.axial, op.shift, op.diagonal
+    shift, diagonal = op.shift, op.diagonal
     for n in range(x.shape[0]):
         w = inv_mass[n]
         for a in range(3):
@@ -110,59 +104,7 @@ def assemble(x, v, y, inv_mass, loads, h, springs, op, f, ky, assemble_matrix):
             diagonal[n] = 0.0
             for a in range(3):
                 diagonal[n, a, a] = shift[n]
-    for s in range(node_i.shape[0]):
-        i, j = node_i[s], node_j[s]
-        inv_l0 = inv_rest[s]
-        ux = x[j, 0] - x[i, 0]
-        uy = x[j, 1] - x[i, 1]
-        uz = x[j, 2] - x[i, 2]
-        length = math.sqrt(ux * ux + uy * uy + uz * uz)
-        if length * inv_l0 <= 1e-12:
-            if assemble_matrix:
-                iso[s] = 0.0
-                axial[s] = 0.0
-            continue
-        inv_length = 1.0 / length
-        ux, uy, uz = ux * inv_length, uy * inv_length, uz * inv_length
-        rate = (v[j, 0] - v[i, 0]) * ux + (v[j, 1] - v[i, 1]) * uy + (v[j, 2] - v[i, 2]) * uz
-        d = length * inv_l0 - 1.0
-        elastic = lambda1[s] * d * d * d + lambda2[s] * d
-        tension = elastic + mu[s] * rate
-        material = (3.0 * lambda1[s] * d * d + lambda2[s]) * inv_l0
-        geometric = max(elastic, 0.0) * inv_length
-        free_i = inv_mass[i] > 0.0
-        free_j = inv_mass[j] > 0.0
-        # Ks·(y_j − y_i), y zero on held nodes
-        dx = (y[j, 0] if free_j else 0.0) - (y[i, 0] if free_i else 0.0)
-        dy = (y[j, 1] if free_j else 0.0) - (y[i, 1] if free_i else 0.0)
-        dz = (y[j, 2] if free_j else 0.0) - (y[i, 2] if free_i else 0.0)
-        along = (material - geometric) * (dx * ux + dy * uy + dz * uz)
-        kx = geometric * dx + along * ux
-        ky_ = geometric * dy + along * uy
-        kz = geometric * dz + along * uz
-        add_pair(f, i, j, tension * ux, tension * uy, tension * uz)
-        add_pair(ky, i, j, kx, ky_, kz)
-        if not assemble_matrix:
-            continue
-        unit[s, 0], unit[s, 1], unit[s, 2] = ux, uy, uz
-        g = h * h * geometric
-        t = h * h * (material - geometric) + h * mu[s]
-        iso[s] = g
-        axial[s] = t
-        bxx, byy, bzz = t * ux * ux + g, t * uy * uy + g, t * uz * uz + g
-        bxy, bxz, byz = t * ux * uy, t * ux * uz, t * uy * uz
-        for n, free in ((i, free_i), (j, free_j)):
-            if free:
-                diagonal[n, 0, 0] += bxx
-                diagonal[n, 1, 1] += byy
-                diagonal[n, 2, 2] += bzz
-                diagonal[n, 0, 1] += bxy
-                diagonal[n, 1, 0] += bxy
-                diagonal[n, 0, 2] += bxz
-                diagonal[n, 2, 0] += bxz
-                diagonal[n, 1, 2] += byz
-                diagonal[n, 2, 1] += byz
-
+    spring_terms(x, v, y, inv_mass, h, springs, op, f, ky, assemble_matrix)
 
 @numba.njit(cache=True)
 def support_terms(x, v, y, inv_mass, h, support, f, ky, op, assemble_matrix):

@@ -1,7 +1,7 @@
 """Preconditioned conjugate gradients, matrix-free, on the implicit step's system A = M − h·D − h²·K
 (physics.solver.implicit_kernels): A·p, the preconditioners, the solve.  The operator's parts: the springs (u, iso,
-axial per spring), the tetrahedra of the 'fem' law (physics.tissue.fem_kernels, none with the springs' law), the
-contacts.
+axial per spring: physics.tissue.spring_law.spring_apply), the tetrahedra of the 'fem' law (physics.tissue.fem_kernels,
+none with the springs' law), the contacts.
 
 The solve starts from the previous step's Δv and stops at ‖r‖ ≤ cg_tolerance·‖b‖ (default 1e-3; the Newton residual
 check guards the result).  Preconditioner: block-Jacobi (the 3×3 diagonal blocks, contacts included), and on larger
@@ -21,7 +21,7 @@ import numpy as np
 
 from liver_sim.physics.solver.coarse_space import coarse_correction
 from liver_sim.physics.tissue.fem_kernels import tet_apply
-from liver_sim.physics.tissue.pairs import add_pair
+from liver_sim.physics.tissue.spring_law import spring_apply
 
 #: The `partial` of a serial solve: no per-thread slices, one chunk.
 SERIAL = np.zeros((1, 0, 3))
@@ -31,23 +31,6 @@ SERIAL = np.zeros((1, 0, 3))
 def _chunk(c, chunks, count):
     """The range (first, last) of chunk c of `count` items cut into `chunks`."""
     return c * count // chunks, (c + 1) * count // chunks
-
-
-@numba.njit(cache=True, inline="always")
-def _springs_times(op, p, first, last, out):
-    """out += each spring's B·(p_i − p_j) to i and its opposite to j, B = iso·I + axial·uuᵀ (records.Operator),
-    springs first..last−1."""
-    node_i, node_j, unit, iso, axial = op.node_i, op.node_j, op.unit, op.iso, op.axial
-    for s in range(first, last):
-        i, j = node_i[s], node_j[s]
-        dx = p[i, 0] - p[j, 0]
-        dy = p[i, 1] - p[j, 1]
-        dz = p[i, 2] - p[j, 2]
-        ux, uy, uz = unit[s, 0], unit[s, 1], unit[s, 2]
-        g = iso[s]
-        t = axial[s] * (ux * dx + uy * dy + uz * dz)
-        bx, by, bz = g * dx + t * ux, g * dy + t * uy, g * dz + t * uz
-        add_pair(out, i, j, bx, by, bz)
 
 
 @numba.njit(cache=True, inline="always")
@@ -62,14 +45,14 @@ def _apply(op, inv_mass, rows, tet_law, tet_weight, p, out, partial):
         for n in range(p.shape[0]):
             for a in range(3):
                 out[n, a] = shift[n] * p[n, a]
-        _springs_times(op, p, 0, springs, out)
+        spring_apply(op, p, 0, springs, out)
         tet_apply(tet_law, tet_weight, p, 0, elements, out)
     else:
         for c in numba.prange(chunks):
             own = partial[c]
             own[:] = 0.0
             first, last = _chunk(c, chunks, springs)
-            _springs_times(op, p, first, last, own)
+            spring_apply(op, p, first, last, own)
             first, last = _chunk(c, chunks, elements)
             tet_apply(tet_law, tet_weight, p, first, last, own)
         for n in numba.prange(p.shape[0]):

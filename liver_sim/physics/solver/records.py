@@ -1,10 +1,9 @@
 """The records the implicit step's kernels take (numba passes named tuples of arrays as one argument).
 
-`SpringLaw` is the springs' law (F = λ1·d³ + λ2·d + μ·ṗ, physics.tissue.springs), `Operator` the step's
-matrix-free system A that `implicit_kernels.assemble` fills and `pcg` multiplies by, `ContactRows` the contacts'
-penalty rows (contact.rows.Contacts) with each row's coefficient in A, `Loads` what acts on every node besides
-the tissue, `Tissue` the laws a step sums, `SolveSettings` when the CG and Newton iterations stop, `Scratch` a
-solver's work arrays.
+`Operator` is the step's matrix-free system A that `implicit_kernels.assemble` fills and `pcg` multiplies by,
+`ContactRows` the contacts' penalty rows (contact.rows.Contacts) with each row's coefficient in A, `Loads` what acts
+on every node besides the tissue, `Tissue` the laws a step sums, `SolveSettings` when the CG and Newton iterations
+stop, `Scratch` a solver's work arrays.
 """
 from __future__ import annotations
 
@@ -14,18 +13,7 @@ import numpy as np
 
 from liver_sim.physics.tissue.fem_kernels import TetArrays
 from liver_sim.physics.tissue.organ_support import SupportArrays
-
-
-class SpringLaw(NamedTuple):
-    """Per spring: end nodes `node_i`, `node_j` (E,) uint32, `inv_rest` 1/l0 (E,) 1/m, `lambda1` λ1 and `lambda2`
-    λ2 (E,) N, `mu` μ (E,) N·s/m."""
-
-    node_i: np.ndarray
-    node_j: np.ndarray
-    inv_rest: np.ndarray
-    lambda1: np.ndarray
-    lambda2: np.ndarray
-    mu: np.ndarray
+from liver_sim.physics.tissue.spring_law import SpringArrays
 
 
 class Operator(NamedTuple):
@@ -79,10 +67,11 @@ class Loads(NamedTuple):
 
 
 class Tissue(NamedTuple):
-    """The laws a step sums: the `springs` (SpringLaw), the organ's `support` (organ_support.SupportArrays) and the
-    tetrahedra of the 'fem' law (`tets`, fem_kernels.TetArrays; none with the springs' law)."""
+    """The laws a step sums: the `springs` (spring_law.SpringArrays), the organ's `support`
+    (organ_support.SupportArrays) and the tetrahedra of the 'fem' law (`tets`, fem_kernels.TetArrays; none with the
+    springs' law)."""
 
-    springs: SpringLaw
+    springs: SpringArrays
     support: SupportArrays
     tets: TetArrays
 

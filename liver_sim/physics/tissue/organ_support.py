@@ -10,8 +10,8 @@ diaphragm, the inferior vena cava, its ligaments and the viscera it rests on:
 
 A_n a third of the area of the capsule triangles around node n at rest (m²), the sum over the regions
 holding n, and τ `support_damping_s` (the ties' Kelvin–Voigt time constant, s).  Its Jacobian
-is −k_n·I (∂f/∂x) and −c_n·I (∂f/∂v) on the node's diagonal block (physics.solver.implicit_kernels,
-physics.tissue.spring_kernels).
+is −k_n·I (∂f/∂x) and −c_n·I (∂f/∂v) on the node's diagonal block (physics.solver.implicit_kernels; the forces:
+`support_forces`).
 The default regions sit on the default liver (liver_sim.mesh.liver_shape, DICOM LPS axes); on a mesh
 where they hold no capsule node the scene is the paper's (physics.model).
 """
@@ -19,6 +19,7 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
+import numba
 import numpy as np
 
 from liver_sim.mesh.tetmesh import TetMesh
@@ -66,3 +67,12 @@ def build_support(mesh: TetMesh, capsule_triangles: np.ndarray, params: ModelPar
     nodes = capsule[per_area > 0.0]
     stiffness = (per_area * node_areas_m2(mesh.points, triangles)[capsule])[per_area > 0.0]
     return SupportArrays(nodes, mesh.points[nodes].copy(), stiffness, params.support_damping_s * stiffness)
+
+
+@numba.njit(cache=True)
+def support_forces(x, v, nodes, rest, stiffness, damping, f):
+    """Add the support's spring-dampers to f: −k_n·(x_n − rest_n) − c_n·v_n on each supported node n."""
+    for s in range(nodes.shape[0]):
+        n = nodes[s]
+        for a in range(3):
+            f[n, a] -= stiffness[s] * (x[n, a] - rest[s, a]) + damping[s] * v[n, a]

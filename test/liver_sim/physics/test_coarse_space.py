@@ -18,8 +18,9 @@ from liver_sim.physics.solver.coarse_space import (
     node_graph,
 )
 from liver_sim.physics.solver.implicit_kernels import assemble
-from liver_sim.physics.solver.records import ContactRows, Loads, Operator, SolveSettings, SpringLaw
+from liver_sim.physics.solver.records import ContactRows, Loads, Operator, SolveSettings
 from liver_sim.physics.tissue.fem_kernels import TetArrays, build_tets, tet_terms
+from liver_sim.physics.tissue.spring_law import spring_arrays
 from liver_sim.physics.tissue.springs import build_springs
 
 from meshes import box_mesh
@@ -40,8 +41,7 @@ def assembled_system(mesh, params: ModelParams, x, inv_mass):
     f, ky, zero = np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3))
     node_i, node_j = springs.node_i.astype(np.uint32), springs.node_j.astype(np.uint32)
     op = Operator.allocate(node_i, node_j, n)
-    law = SpringLaw(node_i, node_j, 1.0 / springs.rest_length_m, springs.lambda1_n, springs.lambda2_n,
-                    springs.mu_ns_per_m)
+    law = spring_arrays(springs, node_i, node_j)
     assemble(x, zero, zero, inv_mass, Loads(zero, np.zeros(3), 3.0), H_S, law, op, f, ky, True)
     tet_terms(x, zero, zero, inv_mass, H_S, tets, f, ky, op.diagonal, True)
     inverse = np.zeros_like(op.diagonal)

@@ -10,7 +10,7 @@ from liver_sim.physics.model import LiverModel
 from liver_sim.physics.settings import FIG2_LAW, ModelParams, SpringLaw
 from liver_sim.physics.solver import explicit_kernels, reference
 from liver_sim.physics.structure import default_fixed_nodes
-from liver_sim.physics.tissue import spring_kernels
+from liver_sim.physics.tissue import spring_law
 from liver_sim.physics.tissue.springs import build_springs
 
 from meshes import box_mesh, kinetic_energy_j
@@ -38,15 +38,15 @@ def two_node_state():
     """Two 0.5 kg nodes on x, rest length 1 m, stretched to 1.1 m, at rest."""
     x = np.array([[0.0, 0.0, 0.0], [1.1, 0.0, 0.0]])
     v = np.zeros((2, 3))
-    arrays = dict(node_i=np.array([0]), node_j=np.array([1]), rest=np.array([1.0]),
-                  lambda1=np.array([50.0]), lambda2=np.array([0.35]), mu=np.array([0.0]))
-    return x, v, arrays
+    law = spring_law.SpringArrays(node_i=np.array([0]), node_j=np.array([1]), inv_rest_per_m=np.array([1.0]),
+                                  lambda1_n=np.array([50.0]), lambda2_n=np.array([0.35]), mu_ns_per_m=np.array([0.0]))
+    return x, v, law
 
 
 def test_spring_kernel_force_by_hand():
-    x, v, arrays = two_node_state()
+    x, v, law = two_node_state()
     f = np.zeros((2, 3))
-    spring_kernels.spring_forces_serial(x, v, *arrays.values(), f)
+    spring_law.spring_forces_serial(x, v, law, f)
     np.testing.assert_allclose(f, [[0.085, 0, 0], [-0.085, 0, 0]])
 
 
@@ -93,13 +93,11 @@ def test_spring_kernels_equal_numpy_oracle(box, parallel):
     springs = build_springs(box, ModelParams())
     x, v = perturbed_state(box)
     f = np.zeros_like(x)
+    law = spring_law.spring_arrays(springs)
     if parallel:
-        spring_kernels.spring_forces_parallel(x, v, springs.node_i, springs.node_j, springs.rest_length_m,
-                                              springs.lambda1_n, springs.lambda2_n, springs.mu_ns_per_m,
-                                              np.zeros((3, len(x), 3)), f)
+        spring_law.spring_forces_parallel(x, v, law, np.zeros((3, len(x), 3)), f)
     else:
-        spring_kernels.spring_forces_serial(x, v, springs.node_i, springs.node_j, springs.rest_length_m,
-                                            springs.lambda1_n, springs.lambda2_n, springs.mu_ns_per_m, f)
+        spring_law.spring_forces_serial(x, v, law, f)
     expected = reference.spring_forces(x, v, springs)
     assert np.abs(expected).max() > 0.1
     np.testing.assert_allclose(f, expected, rtol=1e-10, atol=1e-12)

@@ -13,8 +13,7 @@ from liver_sim.physics.settings import ModelParams
 from liver_sim.physics.solver import implicit_kernels, reference
 from liver_sim.physics.solver.records import Operator
 from liver_sim.physics.structure import default_fixed_nodes
-from liver_sim.physics.tissue import spring_kernels
-from liver_sim.physics.tissue.organ_support import SupportArrays, build_support
+from liver_sim.physics.tissue.organ_support import SupportArrays, build_support, support_forces
 from liver_sim.sessions.parameters import node_parameters
 from liver_sim.studies.validate import figures_json
 
@@ -31,7 +30,7 @@ def test_support_force_and_jacobian_in_both_integrators():
     x, v, support = random_support()
     expected = reference.support_forces(x, v, support)
     f = np.zeros_like(x)
-    spring_kernels.support_forces(x, v, *support, f)
+    support_forces(x, v, *support, f)
     np.testing.assert_allclose(f, expected, rtol=1e-12)
     inv_mass = np.ones(len(x))
     inv_mass[support.nodes[0]] = 0.0  # a held node: no force, no matrix entry
