@@ -259,7 +259,8 @@ def add_warm_command(commands) -> None:
 
 def warm(args) -> int:
     # this command's own modules, loaded when it runs (module docstring)
-    from liver_sim.physics.parameters import INTEGRATORS, PhysicsParameters, build_model
+    from liver_sim.physics.parameters import PhysicsParameters, build_model
+    from liver_sim.physics.settings import INTEGRATORS
 
     started = time.monotonic()
     defaults = PhysicsParameters.defaults()

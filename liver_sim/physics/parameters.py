@@ -15,92 +15,18 @@ from liver_sim.mesh.io import load_mesh
 from liver_sim.mesh.liver_shape import default_liver
 from liver_sim.physics.contact.tool_geometry import ToolShape
 from liver_sim.physics.model import LiverModel
-from liver_sim.physics.settings import (
-    CONTACT_MODELS,
-    INTEGRATOR_SUBSTEPS,
-    INTEGRATORS,
-    SOLVER_THREADS,
-    SPRING_CONSTANTS,
-    SUPPORTS,
-    TISSUE_LAWS,
-    ModelParams,
-    SpringLaw,
-    TissueProperties,
-)
+from liver_sim.physics.settings import ModelParams, from_node_values, node_parameters
 from liver_sim.physics.tools.tool import LOCAL_MODELS, Tool
 from liver_sim.physics.tools.use import TOOL_MODES, ToolUse
 
-DEFAULTS = ModelParams()
-TISSUE = DEFAULTS.tissue
 PARAMETERS = {
     "mesh_path": Param("", "volume or closed-surface mesh file (metres); empty: the embedded default liver"),
     "mesh_scale": Param(1.0, "factor from mesh_path's units to metres (dimensionless; 0.01: centimetres, 0.001: "
                         "millimetres); a mesh not 0.02-0.5 m across after scaling is refused", 1e-6, 1e6),
     "target_tets": Param(1150, "tetrahedra to aim for when mesh_path is a surface", 50, 2_000_000),
     "frame_id": Param("liver", "frame of every published position"),
-    "rate_hz": Param(DEFAULTS.frame_rate_hz, "physics frame rate (Hz)", 1.0, 1000.0),
     "realtime_priority": realtime_priority_parameter(60),
-    "integrator": Param(DEFAULTS.integrator, "implicit_euler (linearised backward Euler), symplectic_euler or "
-                        "explicit_euler (Eq. 2)", choices=INTEGRATORS),
-    "substeps": Param(0, "integration steps per frame; 0: the integrator's own ("
-                      + ", ".join(f"{k} {n}" for k, n in INTEGRATOR_SUBSTEPS.items()) + ")", 0, 10_000),
-    "tissue_law": Param(DEFAULTS.tissue_law, "the parenchyma: springs (Eq. 1 on the tet edges, the paper's) or fem "
-                        "(co-rotational linear tetrahedra with parenchyma E, ν and η; implicit_euler and material "
-                        "only)",
-                        choices=TISSUE_LAWS),
-    "solver_threads": Param(DEFAULTS.solver_threads, "threads of a frame's numba kernels (the implicit step's PCG, "
-                            "the explicit spring pass): auto (all from 20 000 springs on), one (beside the 1 kHz "
-                            "loops on a 2-core machine) or all", choices=SOLVER_THREADS),
-    "spring_constants": Param(DEFAULTS.spring_constants, "material: each spring's λ1, λ2, μ from the tissue "
-                              "properties and the mesh; paper: the paper's per-spring constants below",
-                              choices=SPRING_CONSTANTS),
-    "parenchyma_young_modulus_kpa": Param(TISSUE.parenchyma_young_modulus_kpa, "parenchyma Young's modulus (kPa)",
-                                          0.01, 1e4),
-    "parenchyma_poisson_ratio": Param(TISSUE.parenchyma_poisson_ratio, "parenchyma Poisson's ratio (the network "
-                                      "matches the indentation modulus E/(1-ν²))", 0.0, 0.499),
-    "parenchyma_viscosity_pa_s": Param(TISSUE.parenchyma_viscosity_pa_s, "parenchyma viscosity η (Pa·s)", 0.0, 1e6),
-    "cubic_ratio": Param(TISSUE.cubic_ratio, "material: λ1/λ2 of Eq. 1 on every spring (dimensionless; Fig. 2's "
-                         "143 by default, 0: linear springs)", 0.0, 1e5),
-    "capsule_stiffness_n_per_m": Param(TISSUE.capsule_stiffness_n_per_m, "capsule membrane stiffness E·t (N/m)",
-                                       0.0, 1e6),
-    "capsule_viscosity_ns_per_m": Param(TISSUE.capsule_viscosity_ns_per_m, "capsule membrane viscosity η·t (N·s/m)",
-                                        0.0, 1e4),
-    "capsule_lambda1_n": Param(DEFAULTS.capsule.lambda1_n, "paper: capsule spring cubic stiffness λ1 of Eq. 1 (N)",
-                               0.0, 1e6),
-    "capsule_lambda2_n": Param(DEFAULTS.capsule.lambda2_n, "paper: capsule linear stiffness λ2 of Eq. 1 (N)",
-                               0.0, 1e6),
-    "capsule_mu_ns_per_m": Param(DEFAULTS.capsule.mu_ns_per_m, "paper: capsule viscosity μ of Eq. 1 (N·s/m)",
-                                 0.0, 1e4),
-    "parenchyma_lambda1_n": Param(DEFAULTS.parenchyma.lambda1_n, "paper: parenchyma cubic stiffness λ1 (N)",
-                                  0.0, 1e6),
-    "parenchyma_lambda2_n": Param(DEFAULTS.parenchyma.lambda2_n, "paper: parenchyma linear stiffness λ2 (N)",
-                                  0.0, 1e6),
-    "parenchyma_mu_ns_per_m": Param(DEFAULTS.parenchyma.mu_ns_per_m, "paper: parenchyma viscosity μ (N·s/m)",
-                                    0.0, 1e4),
-    "density_kg_m3": Param(DEFAULTS.density_kg_m3, "tissue density for the lumped masses (kg/m³)", 1.0, 1e5),
-    "environment_damping_per_s": Param(DEFAULTS.environment_damping_per_s,
-                                       "environmental viscosity c: a −= c·v (1/s)", 0.0, 1e4),
-    "gravity_m_s2": Param(list(DEFAULTS.gravity_m_s2), "gravity vector in the liver frame (m/s²)"),
-    "fixed_nodes": Param([-1], "indices of fixed nodes; [-1]: none with support organ (the central tet's four "
-                         "nodes if support_regions hold no skin node), the central tet's with support paper"),
-    "support": Param(DEFAULTS.support, "how the liver is held: organ (skin in support_regions tied to its rest "
-                     "position) or paper (the four nodes of the tet nearest the centroid fixed, paper §3.1)",
-                     choices=SUPPORTS),
-    "support_regions": Param([float(v) for region in DEFAULTS.support_regions for v in region],
-                             "support organ: spheres, five numbers each: centre x, y, z (m, liver frame), radius "
-                             "(m), stiffness per unit skin area (N/m³); each skin node inside is tied to its rest "
-                             "position with that stiffness times its share of skin area (m²). Default: the "
-                             "default liver's bare area, vena cava, left triangular ligament, visceral bed"),
-    "support_damping_s": Param(DEFAULTS.support_damping_s, "support organ: damping of each tie over its stiffness "
-                               "(s, Kelvin-Voigt time constant)", 0.0, 10.0),
-    "contact_stiffness_n_per_m": Param(DEFAULTS.contact_stiffness_n_per_m, "penalty λ of Eq. 3 (N/m)", 0.0, 1e6),
-    "contact_damping_ns_per_m": Param(DEFAULTS.contact_damping_ns_per_m, "penalty μ of Eq. 3 (N·s/m)", 0.0, 1e4),
-    "contact_model": Param(DEFAULTS.contact_model, "probe: Eq. 3, one penalty per contact probe; surface: a sphere or "
-                           "capsule meets the skin as a surface, contact_stiffness_per_area_n_per_m3 at every node and "
-                           "face it presses (implicit_euler only)", choices=CONTACT_MODELS),
-    "contact_stiffness_per_area_n_per_m3": Param(DEFAULTS.contact_stiffness_per_area_n_per_m3,
-                                                 "contact_model surface: penalty per unit skin area (N/m³, a pressure "
-                                                 "per metre of depth)", 0.0, 1e10),
+    **node_parameters(),  # the model's, declared with ModelParams (physics.settings)
     "tools": Param([""], "the tools on the liver, one name each (e.g. [left, right]: two hands): tool NAME takes "
                    "its pose on tool_pose_topic and publishes contact_plane_topic and tool_wrench_topic in the "
                    "namespace /NAME (relative names go under it), with parameters NAME.<name> of its own for its "
@@ -111,12 +37,6 @@ PARAMETERS = {
     "tool_radius_m": Param(ToolShape().radius_m, "sphere/capsule radius (m)", 1e-4, 0.2),
     "tool_length_m": Param(ToolShape().length_m, "capsule shaft length along the tool +z (m)", 0.0, 1.0),
     "tool_half_extents_m": Param(list(ToolShape().half_extents_m), "box half extents (m)"),
-    "tearing": Param(DEFAULTS.tearing, "separate tetrahedra stretched beyond the tearing strains (paper §2.6); "
-                     "the torn mesh is republished on surface_topic"),
-    "tear_strain_parenchyma": Param(DEFAULTS.tear_strain_parenchyma, "stretch across a face between two tets "
-                                    "(mean normal strain, dimensionless) above which they separate", 0.01, 10.0),
-    "tear_strain_capsule": Param(DEFAULTS.tear_strain_capsule, "the same for a face with an edge on the capsule "
-                                 "(dimensionless)", 0.01, 10.0),
     "tool_mode": Param("press", "press: the tool pushes the surface (Eq. 3); grasp: the skin nodes it touches "
                        "follow it until tool_mode changes; cut: each stroke in contact cuts the skin (and cut_depth_m "
                        "of tissue under it) along the tool path when the tool leaves the surface (§3.5). May be "
@@ -231,29 +151,8 @@ def physics_tools(p: PhysicsParameters, values: Mapping[str, object] | None = No
 
 
 def model_params(p: PhysicsParameters) -> ModelParams:
-    """The ModelParams named by the node's parameters (validated)."""
-    fixed = tuple(p.fixed_nodes) if list(p.fixed_nodes) != [-1] else None
-    regions = list(p.support_regions)
-    if len(regions) % 5:
-        raise ValueError(f"parameter support_regions must hold five numbers per region (x, y, z, radius m, "
-                         f"stiffness N/m³), got {len(regions)} numbers")
-    return ModelParams(
-        spring_constants=p.spring_constants, tissue_law=p.tissue_law, solver_threads=p.solver_threads,
-        tissue=TissueProperties(p.parenchyma_young_modulus_kpa, p.parenchyma_poisson_ratio,
-                                p.parenchyma_viscosity_pa_s, p.capsule_stiffness_n_per_m, p.capsule_viscosity_ns_per_m,
-                                p.cubic_ratio),
-        capsule=SpringLaw(p.capsule_lambda1_n, p.capsule_lambda2_n, p.capsule_mu_ns_per_m),
-        parenchyma=SpringLaw(p.parenchyma_lambda1_n, p.parenchyma_lambda2_n, p.parenchyma_mu_ns_per_m),
-        density_kg_m3=p.density_kg_m3, environment_damping_per_s=p.environment_damping_per_s,
-        gravity_m_s2=tuple(p.gravity_m_s2), integrator=p.integrator,
-        frame_rate_hz=p.rate_hz, substeps=p.substeps or None, fixed_nodes=fixed,
-        support=p.support, support_regions=tuple(tuple(regions[i:i + 5]) for i in range(0, len(regions), 5)),
-        support_damping_s=p.support_damping_s,
-        contact_stiffness_n_per_m=p.contact_stiffness_n_per_m,
-        contact_damping_ns_per_m=p.contact_damping_ns_per_m, contact_model=p.contact_model,
-        contact_stiffness_per_area_n_per_m3=p.contact_stiffness_per_area_n_per_m3, tearing=p.tearing,
-        tear_strain_parenchyma=p.tear_strain_parenchyma,
-        tear_strain_capsule=p.tear_strain_capsule).validate()
+    """The ModelParams named by the node's parameters (validated; physics.settings.from_node_values)."""
+    return from_node_values(p)
 
 
 def model_tool(tool: PhysicsTool) -> Tool:

@@ -3,13 +3,20 @@ docs/paper.md; materials: docs/materials.md).
 
 Every quantity is in SI units (the modulus in kPa); the field names carry them.  `validate()` refuses
 out-of-range values with a ValueError that names the parameter.
+
+Each field the physics node exposes is declared once, here, with its description, range or choices
+(`declared`); the node's table of those parameters and the record they name are derived from these declarations
+(`node_parameters`, `from_node_values`; liver_sim.physics.parameters).
 """
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields, replace
+from collections.abc import Callable, Mapping
+from dataclasses import MISSING, dataclass, field, fields, replace
 
 import numpy as np
+
+from liver_sim.base.parameters import Param
 
 #: The integrators and their steps per 150 Hz frame when `substeps` is not given: linearised backward
 #: Euler is stable at one step per frame; the explicit ones need steps under the parenchyma's viscous stability
@@ -54,6 +61,53 @@ DEFAULT_SUPPORT_REGIONS = (
 )
 
 
+#: The key of a field's NodeParameter in its metadata; a nested record's field holds its parameters' name prefix under
+#: NODE_RECORD.
+NODE, NODE_RECORD = "node_parameter", "node_record"
+
+
+@dataclass(frozen=True)
+class NodeParameter:
+    """How a model field is a parameter of the physics node: its `description` (with its unit), range `low`..`high`
+    (what the node accepts; ModelParams.validate checks only what the model needs, a wider range) or `choices`, its
+    `name` there (None: the field's), and its value there and back (`to_node`, `from_node`: the identity unless the
+    node's form differs, e.g. None as 0)."""
+
+    description: str
+    low: float | None = None
+    high: float | None = None
+    choices: tuple | None = None
+    name: str | None = None
+    to_node: Callable | None = None
+    from_node: Callable | None = None
+
+
+def declared(default=MISSING, *, description: str, low: float | None = None, high: float | None = None,
+             choices: tuple | None = None, name: str | None = None, to_node: Callable | None = None,
+             from_node: Callable | None = None):
+    """A dataclass field with `default` (none if not given), declared as a parameter of the physics node
+    (NodeParameter; `{record}` in its description: the record's name, for a record nested twice)."""
+    return field(default=default, metadata={NODE: NodeParameter(description, low, high, choices, name, to_node,
+                                                                from_node)})
+
+
+def nested(default, prefix: str):
+    """A dataclass field holding a record whose declared fields are node parameters named `prefix` + their name."""
+    return field(default=default, metadata={NODE_RECORD: prefix})
+
+
+def _flat_regions(regions) -> list:
+    return [float(v) for region in regions for v in region]
+
+
+def _grouped_regions(values) -> tuple:
+    values = list(values)
+    if len(values) % 5:
+        raise ValueError(f"parameter support_regions must hold five numbers per region (x, y, z, radius m, "
+                         f"stiffness N/m³), got {len(values)} numbers")
+    return tuple(tuple(values[i:i + 5]) for i in range(0, len(values), 5))
+
+
 @dataclass(frozen=True)
 class SpringLaw:
     """Eq. 1: F = λ1·d³ + λ2·d + μ·ṗ, d = (l − l0)/l0, ṗ the elongation rate (m/s).
@@ -61,9 +115,9 @@ class SpringLaw:
     λ1 and λ2 are forces (N) since d is dimensionless; μ is in N·s/m.
     """
 
-    lambda1_n: float
-    lambda2_n: float
-    mu_ns_per_m: float
+    lambda1_n: float = declared(description="paper: {record} cubic stiffness λ1 of Eq. 1 (N)", low=0.0, high=1e6)
+    lambda2_n: float = declared(description="paper: {record} linear stiffness λ2 of Eq. 1 (N)", low=0.0, high=1e6)
+    mu_ns_per_m: float = declared(description="paper: {record} viscosity μ of Eq. 1 (N·s/m)", low=0.0, high=1e4)
 
     def force_n(self, strain, strain_rate_m_s=0.0):
         """Tension (N, positive pulls the two nodes together) for strain d and elongation rate ṗ."""
@@ -86,12 +140,17 @@ class TissueProperties:
     Capsule: a membrane of stiffness E·t (N/m) and viscosity η·t (N·s/m).  `cubic_ratio`: λ1/λ2 (Fig. 2).
     """
 
-    parenchyma_young_modulus_kpa: float = 2.0
-    parenchyma_poisson_ratio: float = 0.45
-    parenchyma_viscosity_pa_s: float = 500.0
-    capsule_stiffness_n_per_m: float = 500.0
-    capsule_viscosity_ns_per_m: float = 0.025
-    cubic_ratio: float = CUBIC_RATIO
+    parenchyma_young_modulus_kpa: float = declared(2.0, description="parenchyma Young's modulus (kPa)", low=0.01,
+                                                   high=1e4)
+    parenchyma_poisson_ratio: float = declared(0.45, description="parenchyma Poisson's ratio (the network matches the "
+                                               "indentation modulus E/(1-ν²))", low=0.0, high=0.499)
+    parenchyma_viscosity_pa_s: float = declared(500.0, description="parenchyma viscosity η (Pa·s)", low=0.0, high=1e6)
+    capsule_stiffness_n_per_m: float = declared(500.0, description="capsule membrane stiffness E·t (N/m)", low=0.0,
+                                                high=1e6)
+    capsule_viscosity_ns_per_m: float = declared(0.025, description="capsule membrane viscosity η·t (N·s/m)",
+                                                 low=0.0, high=1e4)
+    cubic_ratio: float = declared(CUBIC_RATIO, description="material: λ1/λ2 of Eq. 1 on every spring (dimensionless; "
+                                  "Fig. 2's 143 by default, 0: linear springs)", low=0.0, high=1e5)
 
     def validate(self) -> "TissueProperties":
         """Return self, or raise ValueError naming the first value out of range (finite and >= 0;
@@ -136,32 +195,63 @@ class ModelParams:
     (`tear_strain_capsule` for a face with an edge on the capsule) opens (P13, §2.6).
     """
 
-    spring_constants: str = "material"
-    tissue_law: str = "springs"
-    tissue: TissueProperties = TissueProperties()
-    capsule: SpringLaw = SpringLaw(lambda1_n=1430.0, lambda2_n=10.0, mu_ns_per_m=0.02)
-    parenchyma: SpringLaw = SpringLaw(lambda1_n=71.5, lambda2_n=0.5, mu_ns_per_m=5.0)
-    density_kg_m3: float = 1060.0
+    spring_constants: str = declared("material", description="material: each spring's λ1, λ2, μ from the tissue "
+                                     "properties and the mesh; paper: the paper's per-spring constants below",
+                                     choices=SPRING_CONSTANTS)
+    tissue_law: str = declared("springs", description="the parenchyma: springs (Eq. 1 on the tet edges, the paper's) "
+                               "or fem (co-rotational linear tetrahedra with parenchyma E, ν and η; implicit_euler and "
+                               "material only)", choices=TISSUE_LAWS)
+    tissue: TissueProperties = nested(TissueProperties(), "")
+    capsule: SpringLaw = nested(SpringLaw(lambda1_n=1430.0, lambda2_n=10.0, mu_ns_per_m=0.02), "capsule_")
+    parenchyma: SpringLaw = nested(SpringLaw(lambda1_n=71.5, lambda2_n=0.5, mu_ns_per_m=5.0), "parenchyma_")
+    density_kg_m3: float = declared(1060.0, description="tissue density for the lumped masses (kg/m³)", low=1.0,
+                                    high=1e5)
     min_node_mass_fraction: float = 0.4
-    environment_damping_per_s: float = 3.0
-    gravity_m_s2: tuple = (0.0, 0.0, 0.0)
-    integrator: str = "implicit_euler"
-    frame_rate_hz: float = 150.0
-    substeps: int | None = None
-    fixed_nodes: tuple | None = None
-    support: str = "organ"
-    support_regions: tuple = DEFAULT_SUPPORT_REGIONS
-    support_damping_s: float = 0.01
-    contact_stiffness_n_per_m: float = 300.0
-    contact_damping_ns_per_m: float = 1.0
-    contact_model: str = "probe"
-    contact_stiffness_per_area_n_per_m3: float = 3.0e7
+    environment_damping_per_s: float = declared(3.0, description="environmental viscosity c: a −= c·v (1/s)",
+                                                low=0.0, high=1e4)
+    gravity_m_s2: tuple = declared((0.0, 0.0, 0.0), description="gravity vector in the liver frame (m/s²)",
+                                   to_node=list, from_node=tuple)
+    integrator: str = declared("implicit_euler", description="implicit_euler (linearised backward Euler), "
+                               "symplectic_euler or explicit_euler (Eq. 2)", choices=INTEGRATORS)
+    frame_rate_hz: float = declared(150.0, description="physics frame rate (Hz)", low=1.0, high=1000.0,
+                                    name="rate_hz")
+    substeps: int | None = declared(None, description="integration steps per frame; 0: the integrator's own ("
+                                    + ", ".join(f"{k} {n}" for k, n in INTEGRATOR_SUBSTEPS.items()) + ")", low=0,
+                                    high=10_000, to_node=lambda n: n or 0, from_node=lambda n: n or None)
+    fixed_nodes: tuple | None = declared(None, description="indices of fixed nodes; [-1]: none with support organ (the "
+                                         "central tet's four nodes if support_regions hold no skin node), the central "
+                                         "tet's with support paper", to_node=lambda n: [-1] if n is None else list(n),
+                                         from_node=lambda n: None if list(n) == [-1] else tuple(n))
+    support: str = declared("organ", description="how the liver is held: organ (skin in support_regions tied to its "
+                            "rest position) or paper (the four nodes of the tet nearest the centroid fixed, paper "
+                            "§3.1)", choices=SUPPORTS)
+    support_regions: tuple = declared(DEFAULT_SUPPORT_REGIONS, description="support organ: spheres, five numbers "
+                                      "each: centre x, y, z (m, liver frame), radius (m), stiffness per unit skin area "
+                                      "(N/m³); each skin node inside is tied to its rest position with that stiffness "
+                                      "times its share of skin area (m²). Default: the default liver's bare area, vena "
+                                      "cava, left triangular ligament, visceral bed", to_node=_flat_regions,
+                                      from_node=_grouped_regions)
+    support_damping_s: float = declared(0.01, description="support organ: damping of each tie over its stiffness (s, "
+                                        "Kelvin-Voigt time constant)", low=0.0, high=10.0)
+    contact_stiffness_n_per_m: float = declared(300.0, description="penalty λ of Eq. 3 (N/m)", low=0.0, high=1e6)
+    contact_damping_ns_per_m: float = declared(1.0, description="penalty μ of Eq. 3 (N·s/m)", low=0.0, high=1e4)
+    contact_model: str = declared("probe", description="probe: Eq. 3, one penalty per contact probe; surface: a sphere "
+                                  "or capsule meets the skin as a surface, contact_stiffness_per_area_n_per_m3 at "
+                                  "every node and face it presses (implicit_euler only)", choices=CONTACT_MODELS)
+    contact_stiffness_per_area_n_per_m3: float = declared(3.0e7, description="contact_model surface: penalty per unit "
+                                                          "skin area (N/m³, a pressure per metre of depth)", low=0.0,
+                                                          high=1e10)
     max_node_speed_m_s: float = 20.0
-    tearing: bool = False
-    tear_strain_parenchyma: float = 0.4
-    tear_strain_capsule: float = 0.5
+    tearing: bool = declared(False, description="separate tetrahedra stretched beyond the tearing strains (paper "
+                             "§2.6); the torn mesh is republished on surface_topic")
+    tear_strain_parenchyma: float = declared(0.4, description="stretch across a face between two tets (mean normal "
+                                             "strain, dimensionless) above which they separate", low=0.01, high=10.0)
+    tear_strain_capsule: float = declared(0.5, description="the same for a face with an edge on the capsule "
+                                          "(dimensionless)", low=0.01, high=10.0)
     preconditioner: str = "auto"
-    solver_threads: str = "auto"
+    solver_threads: str = declared("auto", description="threads of a frame's numba kernels (the implicit step's "
+                                   "PCG, the explicit spring pass): auto (all from 20 000 springs on), one (beside the "
+                                   "1 kHz loops on a 2-core machine) or all", choices=SOLVER_THREADS)
 
     def __post_init__(self):
         if self.substeps is None and self.integrator in INTEGRATOR_SUBSTEPS:
@@ -245,3 +335,41 @@ class ModelParams:
         if len(self.gravity_m_s2) != 3 or not all(math.isfinite(g) for g in self.gravity_m_s2):
             raise ValueError(f"parameter gravity_m_s2 must be three finite numbers, got {self.gravity_m_s2!r}")
         return self
+
+
+def _declared_fields(record, prefix: str = "", label: str = ""):
+    """(node name, NodeParameter, value, record label) of each declared field of `record` (an instance; a record
+    class: its fields' defaults), the fields of nested records flattened under their prefix."""
+    instance = not isinstance(record, type)
+    for f in fields(record):
+        value = getattr(record, f.name) if instance else f.default
+        if NODE_RECORD in f.metadata:
+            yield from _declared_fields(value, prefix + f.metadata[NODE_RECORD], f.name)
+        elif NODE in f.metadata:
+            spec = f.metadata[NODE]
+            yield prefix + (spec.name or f.name), spec, value, label
+
+
+def node_parameters() -> dict[str, Param]:
+    """The physics node's parameters of ModelParams' declared fields (liver_sim.base.parameters.Param), their
+    defaults the fields' defaults in the node's form."""
+    return {name: Param(spec.to_node(value) if spec.to_node else value,
+                        spec.description.replace("{record}", label), spec.low, spec.high, spec.choices)
+            for name, spec, value, label in _declared_fields(ModelParams)}
+
+
+def from_node_values(values, record_type: type | None = None, prefix: str = ""):
+    """The ModelParams (validated) named by the node's parameters `values` (a mapping or a record holding the names
+    of node_parameters()); the fields not declared keep their defaults."""
+    record_type = record_type or ModelParams
+    changes = {}
+    for f in fields(record_type):
+        if NODE_RECORD in f.metadata:
+            changes[f.name] = from_node_values(values, type(f.default), prefix + f.metadata[NODE_RECORD])
+        elif NODE in f.metadata:
+            spec = f.metadata[NODE]
+            name = prefix + (spec.name or f.name)
+            value = values[name] if isinstance(values, Mapping) else getattr(values, name)
+            changes[f.name] = spec.from_node(value) if spec.from_node else value
+    record = record_type(**changes)
+    return record.validate() if record_type is ModelParams else record
