@@ -1,10 +1,10 @@
-"""The haptic safety stage: norm clamp, rate limit, watchdog ramp and their composition."""
+"""haptic_bridge.safety: the norm clamp, the rate limit, the watchdog ramp, the soft start and their composition
+SafeForceOutput."""
 import math
 
 import numpy as np
 import pytest
 
-from haptic_bridge.parameters import BridgeParameters
 from haptic_bridge.safety import (
     PHANTOM_MAX_FORCE_N,
     RateLimiter,
@@ -12,7 +12,6 @@ from haptic_bridge.safety import (
     Watchdog,
     clamp_norm,
 )
-from haptic_bridge.tick import hold_time_s, passivity_problem
 
 FRESH = (0.0, 0.0)
 STALE = (0.2, 0.0)  # local model 200 ms old, lifetime 50 ms
@@ -64,16 +63,6 @@ def test_rate_limiter_holds_per_second_of_tick_time_through_a_burst():
     limiter.step(np.zeros(3), 0.0)
     burst = [limiter.step(target, 0.001 + k * 1e-6) for k in range(3)]  # three ticks within 3 µs of each other
     assert burst[-1][2] - burst[0][2] <= 400.0 * 2e-6 + 1e-12, "the burst adds no more than its span allows"
-
-
-def test_passivity_is_checked_at_the_longest_hold_not_the_nominal_period():
-    p = BridgeParameters.defaults()
-    assert hold_time_s(p) == p.stall_bound_s == 0.005  # ticks 1 ms apart, but up to 5 ms before a zero
-    assert passivity_problem(p) is None  # K 190 < 2·0.5/0.005 = 200 N/m
-    slow = p.replace(rate_hz=250.0, stall_bound_s=0.002, stiffness_n_per_m=240.0)
-    assert hold_time_s(slow) == 0.004 and passivity_problem(slow) is None  # then T is the period: 240 < 250 N/m
-    problem = passivity_problem(p.replace(stall_bound_s=0.008))  # 2·0.5/0.008 = 125 N/m
-    assert "T=8 ms" in problem and "stall_bound_s" in problem and "< 125 N/m" in problem
 
 
 def test_rate_limiter_survives_a_non_finite_target():
@@ -197,3 +186,28 @@ def test_safe_output_never_exceeds_the_clamp_or_emits_non_finite_values():
         # The rate limit holds except for the cut to exactly zero at the end of a stale ramp.
         assert np.linalg.norm(out - previous) <= 0.4 * (1 + 1e-9) or not out.any()
         previous = out
+
+
+def test_soft_start_rises_over_its_time_after_start_and_after_restart():
+    output = SafeForceOutput(2.0, 400.0, 0.001, 0.05, 0.01, soft_start_s=0.1)
+    force = np.array([0.0, 0.0, 1.0])
+    outs = [float(np.linalg.norm(output.step(force, 0.0, 0.0))) for _ in range(150)]
+    assert outs[9] < 0.11 and outs[49] == pytest.approx(0.5, abs=0.02) and outs[-1] == pytest.approx(1.0)
+    output.restart()
+    assert float(np.linalg.norm(output.step(force, 0.0, 0.0))) <= 0.011
+    for _ in range(30):  # stale: down within ramp_time_s (10 ms)
+        output.step(force, 1.0, 0.0)
+    assert not output.step(force, 1.0, 0.0).any()
+    rise = [float(np.linalg.norm(output.step(force, 0.0, 0.0))) for _ in range(100)]
+    assert rise[19] < 0.25  # recovery ramps up as slowly as the start, not in 10 ms
+
+
+def test_a_lowered_clamp_bounds_the_very_next_command():
+    output = SafeForceOutput(2.0, 400.0, 0.001, 0.05, 0.01, soft_start_s=0.1)
+    for _ in range(200):
+        output.step(np.array([0.0, 0.0, 1.5]), 0.0, 0.0)
+    output.configure(0.05, 400.0, 0.05, 0.01, 0.1)
+    assert np.linalg.norm(output.step(np.array([0.0, 0.0, 1.5]), 0.0, 0.0)) <= 0.05
+    with pytest.raises(ValueError, match="max_force"):
+        output.configure(5.0, 400.0, 0.05, 0.01, 0.1)
+    assert output.max_force == 0.05  # a refused change leaves the limits as they were
