@@ -3,6 +3,7 @@ from its bytes (the bridge's path), refusals naming the field."""
 import numpy as np
 import pytest
 from geometry_msgs.msg import Point
+from msg_samples import AXES
 from rclpy.serialization import deserialize_message, serialize_message
 from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import Marker, UVCoordinate
@@ -15,8 +16,6 @@ from msg_defs.local_model import (
     local_model_marker,
     marker_to_local_model,
 )
-
-AXES = [(0, 0, 1), (0, 0, -1), (1, 0, 0), (-1, 0, 0), (0, 1, 0), (0.3, -0.2, -0.9)]
 
 
 def plane_model(point, normal):
