@@ -26,3 +26,18 @@ def test_device_map_round_trips_and_refuses_a_bad_message():
     message.layout.dim = message.layout.dim[:2]
     with pytest.raises(ValueError, match="layout"):
         device_map_from_message(message)
+
+
+def test_a_device_map_message_is_labelled_and_a_zero_rotation_is_refused_by_name():
+    from liver_sim.base.geometry.device_map import DeviceMap
+
+    message = device_map_message(DeviceMap([0.0, 0.0, 0.0, 1.0], [0.1, -0.2, 0.3], 2.0))
+    assert [(d.label, d.size) for d in message.layout.dim] == [("rotation_xyzw", 4), ("translation_m", 3),
+                                                                ("scale", 1)]
+    assert list(message.data) == [0.0, 0.0, 0.0, 1.0, 0.1, -0.2, 0.3, 2.0]
+    message.data[3] = 0.0
+    with pytest.raises(ValueError, match="^device map rotation_xyzw must be a non-zero quaternion"):
+        device_map_from_message(message)
+    message.data = [0.0, 0.0, 0.0, 1.0, 0.1, -0.2, 0.3]
+    with pytest.raises(ValueError, match=r"^device map data must have shape \(8\), got \(7,\)"):
+        device_map_from_message(message)

@@ -1,10 +1,11 @@
-"""msg_defs.point_cloud: node positions as PointCloud2 and back, foreign layouts, refusals naming the field."""
+"""msg_defs.point_cloud: node positions as PointCloud2 (a message, or its bytes) and back, foreign layouts, refusals
+naming the field."""
 import numpy as np
 import pytest
 from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import PointCloud2, PointField
 
-from msg_defs.point_cloud import nodes_to_pointcloud2, pointcloud2_to_nodes
+from msg_defs.point_cloud import nodes_pointcloud2_bytes, nodes_to_pointcloud2, pointcloud2_to_nodes
 from msg_defs.stamps import seconds_from_stamp
 
 
@@ -76,3 +77,15 @@ def test_malformed_pointcloud_is_refused_naming_the_field(changes, message):
 def test_pointcloud_builder_refuses_what_would_not_be_finite_float32(positions, message):
     with pytest.raises(ValueError, match=message):
         nodes_to_pointcloud2(positions, 0.0, "liver")
+
+
+def test_the_cloud_bytes_are_the_cloud_message_for_every_stamp_and_position_of_a_node_count(rng):
+    """The bytes come from a template cached per node count and frame: each call writes its own stamp and points."""
+    for stamp in ((1, 2), 3.5, (4, 999_999_999)):
+        positions = rng.normal(scale=0.1, size=(50, 3))
+        data = nodes_pointcloud2_bytes(positions, stamp, "liver")
+        assert deserialize_message(data, PointCloud2) == nodes_to_pointcloud2(positions, stamp, "liver")
+    other = nodes_pointcloud2_bytes(np.ones((2, 3)), (1, 2), "world")
+    assert deserialize_message(other, PointCloud2) == nodes_to_pointcloud2(np.ones((2, 3)), (1, 2), "world")
+    with pytest.raises(ValueError, match=r"^positions must be finite \(float32\)"):
+        nodes_pointcloud2_bytes(np.full((50, 3), 1e39), (1, 2), "liver")
