@@ -235,3 +235,19 @@ def test_after_a_restart_in_contact_a_passive_update_builds_the_contact_again_fr
             tick.restart()  # a stall of the loop, 5 mm deep
     assert forces[599] == pytest.approx(0.95, abs=0.02), "pressed in by the hand: the full force"
     assert max(forces[601:]) < 0.01, "after the restart: no force the hand did not build"
+
+
+def test_a_comparison_bridge_that_drives_no_device_is_not_refused_for_passivity_at_run_time():
+    comparison = DEFAULTS.replace(drives_device=False)
+    assert checked_change(comparison, {"max_force_n": 1.0}, scale=4.0).max_force_n == 1.0  # felt as 760 N/m
+    with pytest.raises(ValueError, match="not passive"):
+        checked_change(DEFAULTS, {"max_force_n": 1.0}, scale=4.0)
+    with pytest.raises(ValueError, match="would loosen"):  # the envelope holds all the same
+        checked_change(comparison, {"max_force_n": 2.5}, scale=4.0)
+
+
+def test_the_longest_hold_with_local_model_none_is_the_physics_period_or_the_stall_bound():
+    none = DEFAULTS.replace(local_model="none")
+    assert hold_time_s(none) == pytest.approx(1.0 / 150.0)               # 6.7 ms > stall_bound_s 5 ms
+    assert hold_time_s(none.replace(physics_rate_hz=1000.0)) == 0.005    # then the stall bound is longer
+    assert hold_time_s(none.replace(physics_rate_hz=1000.0, stall_bound_s=0.002)) == pytest.approx(0.002)
