@@ -1,10 +1,13 @@
 """haptic_bridge.passivity: the observer's pairing of motion with the command in effect at the device, the
 controller on measured motion only, and the windowed judgement of generated energy on synthetic traces."""
+import math
+
 import numpy as np
 import pytest
 
 from haptic_bridge.passivity import (
     GENERATED_LIMIT_J,
+    LATENCY_SMOOTHING,
     WINDOW_S,
     GenerationMonitor,
     PassivityObserver,
@@ -111,3 +114,18 @@ def test_the_monitor_folds_what_the_loop_recorded_into_the_largest_window():
         if k % 250 == 0:
             monitor.update()
     assert monitor.update() == pytest.approx(0.001) and monitor.at_s == pytest.approx(899 * T)
+
+
+def test_the_latency_is_the_arrival_minus_the_stamp_smoothed_and_never_negative():
+    observer = PassivityObserver(T)
+    assert math.isnan(observer.report()["device_latency_s"])  # no sample yet
+    observer.sample(1.000, 1.010, (0.0, 0.0, 0.0))
+    assert observer.latency_s == pytest.approx(0.010)           # the first sample's own
+    observer.sample(1.001, 1.031, (0.0, 0.0, 0.0))              # 30 ms this time: moved a fraction of the way
+    smoothed = 0.010 + LATENCY_SMOOTHING * (0.030 - 0.010)
+    assert observer.latency_s == pytest.approx(smoothed)
+    observer.sample(1.002, 1.001, (0.0, 0.0, 0.0))              # arrived "before" its stamp: counted as 0
+    assert observer.latency_s == pytest.approx(smoothed * (1.0 - LATENCY_SMOOTHING))
+    observer.sample(0.5, 0.52, (0.0, 0.0, 0.0))                 # the device's clock stepped back: anew
+    assert observer.latency_s == pytest.approx(0.02)
+    assert observer.report()["device_latency_s"] == pytest.approx(0.02)
