@@ -23,8 +23,8 @@ from liver_sim.base.local_model import LocalModel
 
 DEFAULTS = BridgeParameters.defaults()
 TICKS = itertools.count(0.0, 0.001)
-#: The tick period (s) at the default rate_hz.
-T = 0.001
+#: The tick period (s) at the default rate_hz: 1 ms.
+T = 1.0 / DEFAULTS.rate_hz
 
 
 def test_passivity_is_checked_at_the_longest_hold_not_the_nominal_period():
