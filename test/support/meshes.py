@@ -11,6 +11,27 @@ from liver_sim.mesh.tetmesh import signed_volumes
 KUHN_TETS = np.array([[0, 1, 3, 7], [0, 1, 5, 7], [0, 2, 3, 7], [0, 2, 6, 7], [0, 4, 5, 7], [0, 4, 6, 7]])
 
 
+#: Side (m) of the cube of :func:`cube_arrays`.
+CUBE_EDGE_M = 0.1
+
+
+def cube_arrays():
+    """A 0.1 m cube as 8 nodes and 6 positively oriented tets around its main diagonal (0-7)."""
+    points = CUBE_EDGE_M * np.array([[i & 1, (i >> 1) & 1, (i >> 2) & 1] for i in range(8)], dtype=float)
+    axis_orders = ([0, 1, 2], [0, 2, 1], [1, 0, 2], [1, 2, 0], [2, 0, 1], [2, 1, 0])
+    tets = np.array([np.cumsum([0] + [1 << axis for axis in axes]) for axes in axis_orders])
+    negative = signed_volumes(points, tets) < 0
+    tets[negative] = tets[negative][:, [0, 1, 3, 2]]
+    return points, tets
+
+
+def inverted_cube_arrays():
+    """The cube with tet 0 written inverted (two nodes swapped)."""
+    points, tets = cube_arrays()
+    tets[0] = tets[0][[1, 0, 2, 3]]
+    return points, tets
+
+
 def box_mesh(nx: int, ny: int, nz: int, spacing_m: float) -> TetMesh:
     """A grid of nx × ny × nz cubes of side spacing_m, each cut into Kuhn's six tets."""
     grid = np.stack(np.meshgrid(np.arange(nx + 1), np.arange(ny + 1), np.arange(nz + 1), indexing="ij"), -1)

@@ -9,30 +9,12 @@ import trimesh
 
 from liver_sim.mesh import io as mesh_io
 from liver_sim.mesh.io import load_mesh, write_mesh
-from liver_sim.mesh.signed_distance import SurfaceSignedDistance
 from liver_sim.mesh.tetmesh import MeshError, TetMesh, signed_volumes
 
-from meshes import write_sphere_surface
+from meshes import CUBE_EDGE_M, cube_arrays, inverted_cube_arrays, write_sphere_surface
 
-EDGE = 0.1  # m, cube side
+EDGE = CUBE_EDGE_M
 SPHERE_RADIUS = 0.05  # m
-
-
-def cube_arrays():
-    """A 0.1 m cube as 8 nodes and 6 positively oriented tets around its main diagonal (0-7)."""
-    points = EDGE * np.array([[i & 1, (i >> 1) & 1, (i >> 2) & 1] for i in range(8)], dtype=float)
-    axis_orders = ([0, 1, 2], [0, 2, 1], [1, 0, 2], [1, 2, 0], [2, 0, 1], [2, 1, 0])
-    tets = np.array([np.cumsum([0] + [1 << axis for axis in axes]) for axes in axis_orders])
-    negative = signed_volumes(points, tets) < 0
-    tets[negative] = tets[negative][:, [0, 1, 3, 2]]
-    return points, tets
-
-
-def inverted_cube_arrays():
-    """The cube with tet 0 written inverted (two nodes swapped)."""
-    points, tets = cube_arrays()
-    tets[0] = tets[0][[1, 0, 2, 3]]
-    return points, tets
 
 
 def write_meshio(path, points, cells, **kwargs):
@@ -80,12 +62,6 @@ def test_volume_formats_load_and_reorient_the_inverted_tet(tmp_path, name, other
     assert len(mesh.skin) == 12 and mesh.watertight
 
 
-def test_the_volumes_of_reoriented_tets_are_the_inputs_volumes_exactly():
-    points, tets = inverted_cube_arrays()
-    mesh = TetMesh.from_arrays(points, tets)
-    np.testing.assert_array_equal(mesh.volumes, np.abs(signed_volumes(points, tets)))
-
-
 def test_gmsh_v1_reader_maps_node_labels(tmp_path):
     points, tets = cube_arrays()
     labels = np.array([70, 10, 30, 80, 20, 50, 40, 60])  # node i is written as labels[i]
@@ -115,18 +91,6 @@ def test_gmsh_v1_reader_refuses_wrong_count(tmp_path):
     path.write_text("$NOD\n5\n1 0 0 0\n2 1 0 0\n3 0 1 0\n4 0 0 1\n$ENDNOD\n"
                     "$ELM\n1\n1 4 1 1 4 1 2 3 4\n$ENDELM\n")
     assert_refused(path, "$NOD announces 5 entries")
-
-
-def test_signed_distance_to_a_sphere_surface():
-    sphere = trimesh.creation.icosphere(subdivisions=4, radius=SPHERE_RADIUS)
-    distance = SurfaceSignedDistance(np.asarray(sphere.vertices), np.asarray(sphere.faces))
-    rng = np.random.default_rng(1)
-    directions = rng.normal(size=(500, 3))
-    directions /= np.linalg.norm(directions, axis=1, keepdims=True)
-    radii = rng.uniform(0.0, 3 * SPHERE_RADIUS, size=500)
-    values = distance(directions * radii[:, None])
-    np.testing.assert_allclose(values, radii - SPHERE_RADIUS, atol=SPHERE_RADIUS * 2e-3)
-    assert distance(np.zeros((2, 2, 3))).shape == (2, 2)
 
 
 @pytest.mark.parametrize("suffix", [".stl", ".obj", ".ply", ".off"])
