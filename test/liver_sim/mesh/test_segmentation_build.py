@@ -9,6 +9,7 @@ import nibabel
 import nrrd
 import numpy as np
 import pytest
+from label_volumes import centred_affine, rasterise, write_nifti, write_nrrd
 
 from liver_sim.cli.main import main
 from liver_sim.mesh.anatomical_support import read_support, support_path
@@ -26,7 +27,6 @@ BUMP_CENTRE_MM = np.array([18.0, -10.0, 14.0])
 BUMP_RADIUS_MM = 9.0
 BUMP_BLEND_MM = 6.0
 TARGET_TETS = 6000
-RAS_TO_LPS = np.diag([-1.0, -1.0, 1.0, 1.0])
 
 
 def organ(lps_mm):
@@ -43,32 +43,8 @@ def bumped_organ(lps_mm):
 
 
 def grid_affine(shape, rotation=np.eye(3)):
-    """Voxel index → LPS (mm): `rotation` × the anisotropic spacing, centred on the origin."""
-    affine = np.eye(4)
-    affine[:3, :3] = rotation @ np.diag(SPACING_MM)
-    affine[:3, 3] = -affine[:3, :3] @ ((np.array(shape) - 1) / 2.0)
-    return affine
-
-
-def rasterise(shape, affine_lps, *shapes):
-    """uint8 labels: label k + 1 where shapes[k] holds the voxel centre (later shapes win)."""
-    index = np.indices(shape).reshape(3, -1).T.astype(float)
-    lps = index @ affine_lps[:3, :3].T + affine_lps[:3, 3]
-    labels = np.zeros(len(index), dtype=np.uint8)
-    for value, inside in enumerate(shapes, start=1):
-        labels[inside(lps)] = value
-    return labels.reshape(shape)
-
-
-def write_nifti(path, labels, affine_lps):
-    nibabel.save(nibabel.Nifti1Image(labels, RAS_TO_LPS @ affine_lps), str(path))
-    return path
-
-
-def write_nrrd(path, labels, affine_lps):
-    nrrd.write(str(path), labels, {"space": "left-posterior-superior", "space directions": affine_lps[:3, :3].T,
-                                   "space origin": affine_lps[:3, 3]})
-    return path
+    """Voxel index → LPS (mm): `rotation` × the anisotropic SPACING_MM, centred on the origin."""
+    return centred_affine(shape, SPACING_MM, rotation)
 
 
 def rotation(axis, degrees):
