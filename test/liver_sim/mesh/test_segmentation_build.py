@@ -156,6 +156,37 @@ def test_a_second_label_holds_the_organ_where_it_touches_it(tmp_path):
     assert "label 2" in summary["support"]
 
 
+def test_regions_given_replace_the_bare_area(tmp_path):
+    path, _ = lps_file(tmp_path)
+    # spheres of 1 cm over the organ's right and left ends, 3 cm from its centre (liver frame, m)
+    regions = [(-0.03, 0.0, 0.0, 0.01, 2e6), (0.03, 0.0, 0.0, 0.01, 3e6)]
+    summary = build(tmp_path, path, support_regions=regions)
+    assert summary["support_regions"] == [list(region) for region in regions]
+    assert "2 region(s) given with --support-regions" in summary["support"]
+    assert read_support(support_path(summary["out"]))["support_regions"] == [v for region in regions for v in region]
+    mesh = load_mesh(summary["out"])
+    skin = mesh.points[mesh.skin_nodes]
+    held = [np.linalg.norm(skin - region[:3], axis=1) <= region[3] for region in regions]
+    assert held[0].any() and held[1].any()  # each end is held
+    assert summary["support_skin_nodes"] == int((held[0] | held[1]).sum())
+
+
+def test_regions_that_hold_no_skin_node_are_refused_and_nothing_is_written(tmp_path):
+    path, _ = lps_file(tmp_path)
+    with pytest.raises(ValueError, match=r"the support regions hold no skin node of the mesh \(support: 1 region"):
+        build(tmp_path, path, support_regions=[(0.5, 0.5, 0.5, 0.01, 1e6)])
+    assert list((tmp_path / "out").iterdir()) == []
+
+
+def test_a_second_label_with_regions_or_the_organs_own_label_is_refused(tmp_path):
+    path, _ = lps_file(tmp_path)
+    with pytest.raises(ValueError, match=r"^give either --support-label or --support-regions, not both$"):
+        build(tmp_path, path, support_label=2, support_regions=[(0.0, 0.0, 0.0, 0.01, 1e6)])
+    with pytest.raises(ValueError, match=r"^--support-label 1 is the organ's own label"):
+        build(tmp_path, path, label=1, support_label=1)
+    assert list((tmp_path / "out").iterdir()) == []
+
+
 def test_a_cut_off_organ_is_closed_and_the_faces_are_named(tmp_path):
     # the scan ends 12 mm below the top of the organ: the superior face of the volume cuts it
     shape = (100, 80, 17)
