@@ -5,7 +5,7 @@ import scipy.sparse
 import scipy.sparse.csgraph
 
 from liver_sim.mesh import TetMesh
-from liver_sim.mesh.tetmesh import signed_volumes
+from liver_sim.mesh.tetmesh import TET_FACES, signed_volumes
 
 # Kuhn's split of a unit cube (corner index = 4·i + 2·j + k) into six tets.
 KUHN_TETS = np.array([[0, 1, 3, 7], [0, 1, 5, 7], [0, 2, 3, 7], [0, 2, 6, 7], [0, 4, 5, 7], [0, 4, 6, 7]])
@@ -99,3 +99,29 @@ def assert_same_state(state: dict, model) -> None:
     for a, b in zip(state.pop("arrays"), now.pop("arrays"), strict=True):
         np.testing.assert_array_equal(a, b)
     assert state == now
+
+
+def perturbed_state(mesh: TetMesh, seed: int = 1) -> tuple[np.ndarray, np.ndarray]:
+    """(x, v) of `mesh` off rest: its points moved by 3 mm and velocities of 5 cm/s (normal draws, `seed`)."""
+    rng = np.random.default_rng(seed)
+    x = mesh.points + rng.normal(scale=0.003, size=mesh.points.shape)
+    v = rng.normal(scale=0.05, size=mesh.points.shape)
+    return x, v
+
+
+def face_keys(faces) -> set:
+    """The faces (F, 3) as a set of sorted node triples."""
+    return {tuple(sorted(f)) for f in np.asarray(faces).tolist()}
+
+
+def interior_faces(tets: np.ndarray) -> np.ndarray:
+    """The faces (sorted node triples) that two of `tets` share."""
+    faces = np.sort(tets[:, TET_FACES].reshape(-1, 3), axis=1)
+    unique, counts = np.unique(faces, axis=0, return_counts=True)
+    return unique[counts == 2]
+
+
+def opened_faces(old_tets: np.ndarray, new_tets: np.ndarray, parent: np.ndarray) -> list:
+    """Old interior faces whose two tets no longer share them after the change (`parent`: new node → old)."""
+    still = face_keys(parent[interior_faces(new_tets)])
+    return [f for f in face_keys(interior_faces(old_tets)) if f not in still]

@@ -1,87 +1,12 @@
-"""The organ's support (physics.tissue.organ_support) and `liver-sim validate` on the default liver (B1–B4, R1 with the
-liver's materials, the local model's continuity)."""
+"""`liver-sim validate` on the default liver, held by its support (B1–B4, R1 with the liver's materials, the local
+model's continuity): the whole model (the support's parts: tissue/test_organ_support.py)."""
 import json
 
 import numpy as np
 import pytest
 
 from liver_sim.cli.main import main
-from liver_sim.mesh.liver_shape import default_liver
-from liver_sim.physics.model import LiverModel
-from liver_sim.physics.parameters import model_params
-from liver_sim.physics.settings import ModelParams
-from liver_sim.physics.solver import implicit_kernels, reference
-from liver_sim.physics.solver.records import Operator
-from liver_sim.physics.structure import default_fixed_nodes
-from liver_sim.physics.tissue.organ_support import SupportArrays, build_support, support_forces
-from liver_sim.sessions.parameters import node_parameters
 from liver_sim.studies.validate import figures_json
-
-
-def random_support(count=6, nodes=20, seed=0):
-    rng = np.random.default_rng(seed)
-    x, v = rng.normal(size=(nodes, 3)), rng.normal(size=(nodes, 3))
-    support = SupportArrays(rng.choice(nodes, count, replace=False).astype(np.int64), rng.normal(size=(count, 3)),
-                            rng.uniform(10, 100, count), rng.uniform(0.1, 1, count))
-    return x, v, support
-
-
-def test_support_force_and_jacobian_in_both_integrators():
-    x, v, support = random_support()
-    expected = reference.support_forces(x, v, support)
-    f = np.zeros_like(x)
-    support_forces(x, v, *support, f)
-    np.testing.assert_allclose(f, expected, rtol=1e-12)
-    inv_mass = np.ones(len(x))
-    inv_mass[support.nodes[0]] = 0.0  # a held node: no force, no matrix entry
-
-    def implicit_terms(xs, vs, y, h=0.01):
-        f, ky = np.zeros_like(xs), np.zeros_like(xs)
-        none = np.zeros(0, np.uint32)
-        op = Operator.allocate(none, none, len(xs))
-        implicit_kernels.support_terms(xs, vs, y, inv_mass, h, support, f, ky, op, True)
-        return f, ky, op.shift, op.diagonal
-
-    direction = np.random.default_rng(1).normal(size=x.shape)
-    f, ky, shift, diagonal = implicit_terms(x, v, direction)
-    free = inv_mass > 0.0
-    np.testing.assert_allclose(f[free], expected[free], rtol=1e-12)
-    eps = 1e-6
-    dfdx = (implicit_terms(x + eps * direction, v, direction)[0] - implicit_terms(x - eps * direction, v,
-                                                                                  direction)[0]) / (2 * eps)
-    np.testing.assert_allclose(ky, dfdx, atol=1e-6)
-    k, c = np.zeros(len(x)), np.zeros(len(x))
-    k[support.nodes], c[support.nodes] = support.stiffness_n_per_m, support.damping_ns_per_m
-    np.testing.assert_allclose(shift, np.where(free, 1.0 + 0.01 * c + 1e-4 * k, 1.0))
-    assert shift[support.nodes[0]] == 1.0 and not f[support.nodes[0]].any()
-
-
-def test_the_organ_support_holds_the_default_liver_and_the_paper_scene_stays_selectable():
-    liver = default_liver()
-    organ, paper = LiverModel(liver), LiverModel(liver, ModelParams(support="paper"))
-    support = organ.structure.support
-    assert organ.structure.fixed_nodes.size == 0 and len(support.nodes) >= 20
-    assert np.isin(support.nodes, liver.skin_nodes).all() and (support.stiffness_n_per_m > 0).all()
-    # the bare area and the vena cava are posterior: most of the tie stiffness holds the posterior face
-    posterior = liver.points[support.nodes, 1] > 0.02
-    assert support.stiffness_n_per_m[posterior].sum() > 0.8 * support.stiffness_n_per_m.sum()
-    assert np.array_equal(paper.structure.fixed_nodes, default_fixed_nodes(liver))
-    assert len(paper.structure.support.nodes) == 0
-    # regions that hold no skin node of a mesh: the paper's scene
-    far = ModelParams(support_regions=((1.0, 1.0, 1.0, 0.01, 1e6),))
-    assert len(build_support(liver, liver.skin, far).nodes) == 0
-    assert np.array_equal(LiverModel(liver, far).structure.fixed_nodes, default_fixed_nodes(liver))
-
-
-def test_support_parameters_are_checked_and_the_config_gives_the_defaults():
-    assert model_params(node_parameters()["liver_physics"]) == ModelParams()
-    values = node_parameters()["liver_physics"].replace(support_regions=[0.0, 0.0, 0.0, 0.01])
-    with pytest.raises(ValueError, match="support_regions"):
-        model_params(values)
-    with pytest.raises(ValueError, match="support_regions"):
-        ModelParams(support_regions=((0.0, 0.0, 0.0, -0.01, 1.0),)).validate()
-    with pytest.raises(ValueError, match="support"):
-        ModelParams(support="pinned").validate()
 
 
 @pytest.fixture(scope="module")

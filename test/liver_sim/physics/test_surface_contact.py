@@ -1,11 +1,12 @@
 """Contact of the rigid tools with the skin triangles (Eq. 3 at the nearest surface points, barycentric
-weights): continuous over edges and corners, never sinking between nodes, mesh-independent."""
+weights) on the whole model: never sinking between nodes, sliding without losing the force, mesh-independent (the
+kernels' continuity over edges and corners: contact/test_kernels.py)."""
 import numpy as np
 import pytest
 
 from liver_sim.mesh.landmarks import press_anchor
-from liver_sim.mesh.liver_shape import build_liver, default_liver
-from liver_sim.physics.contact.tool_geometry import ToolPose, ToolShape, probe_contacts, tool_sweep
+from liver_sim.mesh.liver_shape import build_liver
+from liver_sim.physics.contact.tool_geometry import ToolPose, ToolShape
 from liver_sim.physics.model import LiverModel
 from liver_sim.physics.settings import ModelParams
 from liver_sim.physics.structure import default_fixed_nodes
@@ -65,38 +66,6 @@ def places(mesh):
     corners = mesh.points[triangle]
     return {"node": anchor[:2], "triangle": corners.mean(axis=0)[:2],
             "edge": ((corners[0] + corners[1]) / 2)[:2]}
-
-
-@pytest.fixture(scope="module")
-def liver():
-    return default_liver()
-
-
-def penalty_along(liver, steps_m):
-    """Σ share·λ·δ·n of the sphere's probe (N) at tips along a line over the dome, 8 mm into the rest skin."""
-    params = ModelParams()
-    anchor, shape, skin = press_anchor(liver), ToolShape(), np.asarray(liver.skin, np.int64)
-    totals = []
-    for s in steps_m:
-        tool = tool_sweep(shape, ToolPose(anchor + [s, 0.3 * s, shape.radius_m - 0.008]), None, params, 0.02,
-                          liver.points, skin)
-        probe_contacts(liver.points, np.zeros_like(liver.points), tool, np.zeros(3), 0.0)
-        assert tool.share.sum() == pytest.approx(1.0) and (tool.depth > 0.0).any()
-        np.testing.assert_allclose(tool.weights.sum(axis=1), 1.0)
-        totals.append(params.contact_stiffness_n_per_m * ((tool.share * np.maximum(tool.depth, 0.0))[:, None]
-                                                           * tool.normal).sum(axis=0))
-    return np.linalg.norm(np.diff(totals, axis=0), axis=1)
-
-
-def test_a_sphere_sliding_over_a_fixed_skin_meets_it_continuously(liver):
-    """No jump, no double counting: across the edges and corners of 6 cm of skin, the largest change of
-    the penalty between tips 0.1 mm apart shrinks ~5× when they are 0.02 mm apart (a jump would not shrink:
-    a per-triangle count jumps at every edge) and stays below what the facets' turning explains."""
-    coarse = penalty_along(liver, np.arange(-0.03, 0.03, 1e-4))
-    worst = np.argmax(coarse)
-    fine = penalty_along(liver, -0.03 + worst * 1e-4 + np.arange(0.0, 1e-4 + 1e-9, 2e-5))
-    assert fine.max() < 0.35 * coarse.max()
-    assert coarse.max() < 5.0 * ModelParams().contact_stiffness_n_per_m * 1e-4
 
 
 @pytest.mark.parametrize("integrator", ["implicit_euler", "symplectic_euler"])

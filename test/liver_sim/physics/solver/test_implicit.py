@@ -1,47 +1,20 @@
-"""Linearised backward Euler: against a dense NumPy assembly, stability at one step per frame, energy,
-held nodes, the contact Jacobian, and a press and release against symplectic Euler at 72 substeps."""
+"""Linearised backward Euler (physics.solver.implicit): against a dense NumPy assembly, stability at one step per
+frame, energy, held nodes, and a press and release against symplectic Euler at 72 substeps."""
 import numpy as np
 import pytest
+from implicit_scene import tiny_scene
 
 from liver_sim.mesh.landmarks import press_anchor
 from liver_sim.mesh.liver_shape import default_liver
-from liver_sim.physics.contact.rows import Contacts
 from liver_sim.physics.contact.tool_geometry import ToolPose, ToolShape, contact_rows, tool_sweep
 from liver_sim.physics.model import LiverModel
 from liver_sim.physics.settings import ModelParams
-from liver_sim.physics.solver import explicit_kernels, implicit_kernels, pcg, reference
+from liver_sim.physics.solver import explicit_kernels, reference
 from liver_sim.physics.solver.implicit import ImplicitEuler
-from liver_sim.physics.solver.records import ContactRows, Operator
-from liver_sim.physics.tissue.fem_kernels import TetArrays
-from liver_sim.physics.tissue.springs import build_springs
 from liver_sim.physics.tools.tool import Tool
 from liver_sim.tool.scripts import ScriptSettings, make_script
 
-from meshes import box_mesh
-
 FRAME_S = 1.0 / 150.0
-
-
-def tiny_scene(offset_m=0.002, speed_m_s=0.05):
-    """A 2×1×1 box of 12 tets, perturbed and moving, node 0 held, a 1-node and a 3-node contact."""
-    mesh = box_mesh(2, 1, 1, 0.02)
-    springs = build_springs(mesh, ModelParams())
-    rng = np.random.default_rng(3)
-    x = mesh.points + rng.normal(scale=offset_m, size=mesh.points.shape)
-    v = rng.normal(scale=speed_m_s, size=x.shape)
-    inv_mass = 1.0 / mesh.lumped_masses(1060.0)
-    inv_mass[0] = 0.0
-    v[0] = 0.0
-    top = np.flatnonzero(mesh.points[:, 2] > 0.019)
-    normal = np.array([[0.0, 0.0, -1.0], [0.1, 0.0, -1.0] / np.linalg.norm([0.1, 0.0, -1.0])])
-    nodes = np.array([[top[0], -1, -1], top[1:4]])
-    weights = np.array([[1.0, 0.0, 0.0], [0.2, 0.5, 0.3]])
-    offset = np.array([normal[e] @ (weights[e][n >= 0] @ x[n[n >= 0]]) + 0.001  # 1 mm deep
-                       for e, n in enumerate(nodes)])
-    contacts = Contacts(nodes, weights, normal, offset, np.array([0.01, -0.02]), np.array([300.0, 200.0]),
-                        np.array([1.0, 0.5]))
-    external = rng.normal(scale=0.01, size=x.shape)
-    return mesh, springs, x, v, inv_mass, contacts, external
 
 
 def dense_reference_step(springs, x, v, inv_mass, contacts, external, h, c_env, gravity):
@@ -190,37 +163,6 @@ def test_held_nodes_stay_put(liver):
     np.testing.assert_array_equal(v[held], 0.01)
 
 
-def test_contact_jacobian_matches_finite_differences():
-    mesh, springs, x, v, inv_mass, contacts, external = tiny_scene()
-    inv_mass = np.ones(len(x))
-
-    def force(xs, vs):
-        f = np.zeros_like(xs)
-        implicit_kernels.contact_forces(xs, vs, np.zeros_like(xs), inv_mass, 0.0,
-                                        ContactRows.of(contacts, np.zeros(len(contacts))), f, np.zeros_like(xs))
-        return f
-
-    def operator(coefficient, p):
-        """The solver's contact term of A·p with per-element coefficient (springs and mass left out)."""
-        out = np.zeros_like(p)
-        none = np.zeros(0, np.uint32)
-        springs_none = Operator.allocate(none, none, len(p))._replace(shift=np.zeros(len(p)))
-        pcg.apply(springs_none, inv_mass, ContactRows.of(contacts, coefficient), TetArrays.none(), 0.0, p, out)
-        return out
-
-    direction = np.random.default_rng(5).normal(size=x.shape)
-    eps = 1e-7
-    dfdx = (force(x + eps * direction, v) - force(x - eps * direction, v)) / (2 * eps)
-    dfdv = (force(x, v + eps * direction) - force(x, v - eps * direction)) / (2 * eps)
-    assert np.abs(dfdx).max() > 1.0  # both contacts active
-    np.testing.assert_allclose(-operator(contacts.stiffness_n_per_m, direction), dfdx, atol=1e-6)
-    np.testing.assert_allclose(-operator(contacts.damping_ns_per_m, direction), dfdv, atol=1e-6)
-    ky = np.zeros_like(x)
-    implicit_kernels.contact_forces(x, v, direction, inv_mass, 0.0, ContactRows.of(contacts, np.zeros(len(contacts))),
-                                    np.zeros_like(x), ky)
-    np.testing.assert_allclose(ky, dfdx, atol=1e-6)
-
-
 def test_press_and_release_matches_symplectic_euler_at_72_substeps():
     mesh = default_liver()
     # the conditions this solver-level check was written for
@@ -276,15 +218,6 @@ def test_bdf2_is_second_order_and_falls_back_to_backward_euler(liver):
     x += 1e-6  # a state set from outside: the next step has no history
     solver.step(history, x, v, liver.state.inv_mass, np.zeros_like(x), 0.1, 0.0, np.zeros(3))
     assert not history.second_order
-
-
-def test_the_default_is_one_implicit_step_per_frame_and_the_explicit_ones_keep_their_substeps():
-    params = ModelParams()
-    assert (params.integrator, params.substeps) == ("implicit_euler", 1)
-    assert params.with_changes(integrator="symplectic_euler").substeps == 72
-    assert params.with_changes(integrator="explicit_euler", substeps=90).substeps == 90
-    model = LiverModel(default_liver())
-    assert model.structure.stable_dt_s == np.inf and model.structure.implicit
 
 
 def demo_script(mesh, tool):

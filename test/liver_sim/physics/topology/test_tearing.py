@@ -1,65 +1,24 @@
 """P13 of docs/paper.md: tearing (paper §2.6) by face separation and node duplication, and topology changes of the
 model."""
 import contextlib
-import dataclasses
 import math
 from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from pulls import pull_the_dome, pulled_bar
 
-from liver_sim.base.local_model import penetration
-from liver_sim.mesh.landmarks import press_anchor
 from liver_sim.mesh.liver_shape import default_liver
-from liver_sim.mesh.tetmesh import TET_FACES, TetMesh
+from liver_sim.mesh.tetmesh import TET_FACES
 from liver_sim.physics import frame as frame_module
 from liver_sim.physics import structure as structure_module
 from liver_sim.physics.contact.tool_geometry import ToolPose
 from liver_sim.physics.model import LiverModel
 from liver_sim.physics.settings import ModelParams
-from liver_sim.physics.tools.tool import Tool
 from liver_sim.physics.tools.use import ToolUse
-from liver_sim.physics.topology.change import separate_faces
-from liver_sim.physics.topology.tearing import TearDetector, duplication_change
+from liver_sim.physics.topology.tearing import TearDetector
 
-from meshes import assert_same_state, assert_sound, box_mesh, components, model_state
-
-SPACING_M = 0.02
-NX, NY, NZ = 10, 3, 3
-
-
-def face_keys(faces):
-    return {tuple(sorted(f)) for f in np.asarray(faces).tolist()}
-
-
-def interior_faces(tets):
-    faces = np.sort(tets[:, TET_FACES].reshape(-1, 3), axis=1)
-    unique, counts = np.unique(faces, axis=0, return_counts=True)
-    return unique[counts == 2]
-
-
-def opened_faces(old_tets, new_tets, parent):
-    """Old interior faces whose two tets no longer share them after the change."""
-    still = face_keys(parent[interior_faces(new_tets)])
-    return [f for f in face_keys(interior_faces(old_tets)) if f not in still]
-
-
-def bar_params(**changes):
-    bar = box_mesh(NX, NY, NZ, SPACING_M)
-    fixed = tuple(np.flatnonzero(bar.points[:, 0] < 1e-9).tolist())
-    # the pulls below were set for the paper's per-spring constants and an explicit step
-    params = ModelParams(fixed_nodes=fixed, spring_constants="paper", integrator="symplectic_euler", **changes)
-    stable = LiverModel(bar, params).structure.stable_dt_s
-    return bar, params.with_changes(substeps=math.ceil(1.0 / (params.frame_rate_hz * 0.6 * stable)))
-
-
-def pulled_bar(force_n, **changes):
-    """The bar, left end fixed, its last layer of cubes pulled along +x (force ∝ node mass)."""
-    bar, params = bar_params(**changes)
-    model = LiverModel(bar, params)
-    pulled = model.structure.masses_kg * (bar.points[:, 0] > (NX - 1) * SPACING_M - 1e-9)
-    model.state.external_forces_n[:, 0] = force_n * pulled / pulled.sum()
-    return model
+from meshes import assert_same_state, assert_sound, box_mesh, face_keys, model_state, opened_faces
 
 
 @contextlib.contextmanager
@@ -76,52 +35,6 @@ def recording_changes():
     with pytest.MonkeyPatch.context() as patch:
         patch.setattr(frame_module, "apply_change", spy)
         yield records
-
-
-# --- separate_faces -----------------------------------------------------------------------------
-
-def test_one_face_cut_between_two_tets():
-    points = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [0.3, 0.3, -1.0]])
-    mesh = TetMesh.from_arrays(points, [[0, 1, 2, 3], [0, 2, 1, 4]])
-    tets, parent, _ = separate_faces(mesh.tets, [[2, 0, 1]])
-    assert np.array_equal(parent[:5], np.arange(5))
-    assert sorted(parent[5:].tolist()) == [0, 1, 2]
-    assert not set(tets[0].tolist()) & set(tets[1].tolist())
-    torn = TetMesh.from_arrays(mesh.points[parent], tets)
-    assert len(torn.points) == len(parent) and len(torn.skin) == 8
-    assert_sound(torn)
-
-
-def test_non_interior_faces_are_ignored():
-    mesh = box_mesh(2, 2, 2, 0.01)
-    tets, parent, _ = separate_faces(mesh.tets, mesh.skin[:5])
-    assert np.array_equal(tets, mesh.tets) and np.array_equal(parent, np.arange(len(mesh.points)))
-
-
-def test_crack_ending_inside_keeps_the_skin_manifold():
-    mesh = box_mesh(4, 4, 4, 0.01)
-    faces = mesh.tets[:, TET_FACES].reshape(-1, 3)
-    corners = mesh.points[faces]
-    on_plane = np.isclose(corners[:, :, 0], 0.02).all(axis=1)
-    crack = faces[on_plane & (corners[:, :, 1] <= 0.02 + 1e-9).all(axis=1)]  # half the plane
-    tets, parent, _ = separate_faces(mesh.tets, crack)
-    torn = TetMesh.from_arrays(mesh.points[parent], tets)
-    assert len(torn.points) > len(mesh.points)
-    assert opened_faces(mesh.tets, tets, parent)
-    assert components(tets, len(parent))[0] == 1  # still one piece
-    assert_sound(torn)
-
-
-def test_random_cuts_keep_every_skin_edge_on_two_triangles():
-    mesh = default_liver()
-    faces = interior_faces(mesh.tets)
-    rng = np.random.default_rng(3)
-    for fraction in (0.05, 0.2, 0.5):
-        cut = faces[rng.random(len(faces)) < fraction]
-        tets, parent, _ = separate_faces(mesh.tets, cut)
-        opened = opened_faces(mesh.tets, tets, parent)
-        assert face_keys(opened) <= face_keys(cut)
-        assert_sound(TetMesh.from_arrays(mesh.points[parent], tets))
 
 
 # --- stretch ------------------------------------------------------------------------------------
@@ -164,15 +77,6 @@ def test_stretch_is_zero_under_rigid_motion():
 
 
 # --- the model ----------------------------------------------------------------------------------
-
-def test_tearing_parameters_are_validated():
-    for name in ("tear_strain_parenchyma", "tear_strain_capsule"):
-        for bad in (0.0, -1.0, math.nan, math.inf):
-            with pytest.raises(ValueError, match=name):
-                ModelParams(**{name: bad}).validate()
-    with pytest.raises(ValueError, match="tearing"):
-        ModelParams(tearing=1).validate()
-
 
 @pytest.fixture(scope="module")
 def torn_bar():
@@ -234,78 +138,6 @@ def test_opened_faces_carry_no_capsule_springs(torn_bar):
     assert wound_only
 
 
-def test_momentum_and_mass_carry_over_a_duplication():
-    model = pulled_bar(16.0)
-    for _ in range(5):
-        model.step_frame()
-    model.state.velocities += np.random.default_rng(1).normal(0.0, 0.01, model.state.velocities.shape)
-    model.state.velocities[model.structure.fixed_nodes] = 0.0
-    mesh = model.structure.mesh
-    faces = mesh.tets[:, TET_FACES].reshape(-1, 3)
-    plane = np.isclose(mesh.points[faces][:, :, 0], 5 * SPACING_M).all(axis=1)
-    change = duplication_change(mesh.points, mesh.tets, model.structure.capsule_triangles, faces[plane])
-    momentum = (model.structure.masses_kg[:, None] * model.state.velocities).sum(axis=0)
-    old_masses = model.structure.masses_kg.copy()
-    mass, force = old_masses.sum(), model.state.external_forces_n.sum(axis=0)
-    positions = model.state.positions.copy()
-    model.apply(change)
-    assert components(model.structure.mesh.tets, len(model.state.positions))[0] == 2
-    assert model.structure.masses_kg.sum() == pytest.approx(mass, rel=1e-12)
-    assert np.allclose((model.structure.masses_kg[:, None] * model.state.velocities).sum(axis=0), momentum,
-                       rtol=1e-12, atol=1e-15)
-    assert np.allclose(model.state.external_forces_n.sum(axis=0), force, rtol=1e-12)
-    assert np.array_equal(model.state.positions, positions[change.node_sources[:, 0]])
-    source = change.node_sources[:, 0]
-    copies = np.bincount(source)[source]
-    floor = 0.5 * np.minimum(model.structure.params.min_node_mass_fraction * old_masses.mean(),
-                             old_masses[source] / copies)
-    assert (model.structure.masses_kg >= floor * (1 - 1e-12)).all()
-    assert model.structure.version == 1
-    assert_sound(model.structure.mesh)
-    model.reset()
-    assert np.array_equal(model.state.positions, model.structure.mesh.points)
-    for _ in range(100):
-        assert model.step_frame().divergence is None
-
-
-def test_copies_of_fixed_nodes_stay_fixed():
-    mesh = box_mesh(2, 2, 2, 0.02)
-    centre = int(np.argmin(np.linalg.norm(mesh.points - 0.02, axis=1)))
-    model = LiverModel(mesh, ModelParams(fixed_nodes=(centre,)))
-    faces = mesh.tets[:, TET_FACES].reshape(-1, 3)
-    plane = np.isclose(mesh.points[faces][:, :, 0], 0.02).all(axis=1)
-    change = duplication_change(mesh.points, mesh.tets, model.structure.capsule_triangles, faces[plane])
-    model.apply(change)
-    copies = np.flatnonzero(change.node_sources[:, 0] == centre)
-    assert len(copies) == 2
-    assert np.array_equal(model.structure.fixed_nodes, copies) and (model.state.inv_mass[copies] == 0.0).all()
-
-
-def test_apply_topology_change_is_all_or_nothing(monkeypatch):
-    model = pulled_bar(16.0)
-    for _ in range(3):
-        model.step_frame()
-    mesh = model.structure.mesh
-    faces = mesh.tets[:, TET_FACES].reshape(-1, 3)
-    plane = np.isclose(mesh.points[faces][:, :, 0], 5 * SPACING_M).all(axis=1)
-    change = duplication_change(mesh.points, mesh.tets, model.structure.capsule_triangles, faces[plane])
-    before = model_state(model)
-
-    def broken(*args, **kwargs):  # build_structure calls it after carrying the node state over
-        raise RuntimeError("injected")
-
-    monkeypatch.setattr(structure_module, "build_springs", broken)
-    with pytest.raises(RuntimeError, match="injected"):
-        model.apply(change)
-    assert_same_state(dict(before, arrays=list(before["arrays"])), model)
-    with pytest.raises(ValueError, match="node_sources"):  # checked before the model is touched
-        model.apply(dataclasses.replace(change, node_sources=change.node_sources[:-1]))
-    assert_same_state(before, model)
-    monkeypatch.undo()
-    model.apply(change)
-    assert model.structure.version == 1 and len(model.state.positions) == len(change.rest_points)
-
-
 @pytest.mark.parametrize("integrator", ["implicit_euler", "symplectic_euler"])
 def test_default_liver_tears_under_a_strong_pull_and_keeps_a_manifold_skin(integrator):
     liver = default_liver()
@@ -324,37 +156,6 @@ def test_default_liver_tears_under_a_strong_pull_and_keeps_a_manifold_skin(integ
     assert_sound(model.structure.mesh)
     if integrator == "implicit_euler":  # a large tear: still one step per frame
         assert model.structure.params.substeps == 1
-
-
-def pull_the_dome(tearing):
-    """The default liver grasped at its dome and pulled 8 cm up over 400 frames; (model, tool use, results,
-    tool tips)."""
-    liver = default_liver()
-    model = LiverModel(liver, ModelParams(tearing=tearing), Tool(use=ToolUse("grasp", grasp_margin_m=0.005)))
-    dome = press_anchor(liver)
-    start = dome + [0.0, 0.0, model.tool.shape.radius_m - 0.004]
-    assert model.grasp(ToolPose(start)) > 0
-    tips = [start + [0.0, 0.0, 0.08 * min(1.0, k / 400)] for k in range(450)]
-    return model, model.tool.use, [model.step_frame(ToolPose(tip)) for tip in tips], tips
-
-
-def test_grasped_nodes_follow_the_tool_and_pull_it_back_towards_the_liver():
-    model, use, results, tips = pull_the_dome(tearing=False)
-    held = model.state.held_nodes
-    offsets = model.state.positions[held] - tips[-1]
-    np.testing.assert_allclose(offsets, model.structure.mesh.points[held] - tips[0], atol=1e-12)  # carried rigidly
-    assert not any(r.divergence or r.topology_changed for r in results)
-    assert results[-1].tool_force_n[2] < -1.0       # the tissue pulls the tool back down
-    # the local model renders the pull: the bridge's λ·depth·n for the tool sphere is the tissue's force
-    last = results[-1].local_model
-    depth, direction = penetration(last, tips[-1], model.tool.shape.radius_m)
-    np.testing.assert_allclose(model.structure.params.contact_stiffness_n_per_m * depth * direction,
-                               results[-1].tool_force_n, rtol=1e-9)
-    model.release()
-    assert model.state.held_nodes.size == 0 and (model.state.inv_mass[held] > 0).all()
-    for _ in range(150):
-        model.step_frame()
-    assert model.state.positions[held, 2].max() < tips[-1][2] - 0.03  # let go, the dome falls back
 
 
 def test_a_grasped_and_pulled_liver_tears_and_stays_sound():

@@ -339,7 +339,8 @@ from liver_sim.physics.topology.tearing import tear
 from test_cutting import liver_top_path, mean_edge_m
 
 def versions():
-    modules = [importlib.import_module(f"liver_sim.physics.{m.name}") for m in pkgutil.iter_modules(physics.__path__)]
+    modules = [importlib.import_module(m.name)  # every room's modules, not only those at physics' root
+               for m in pkgutil.walk_packages(physics.__path__, "liver_sim.physics.")]
     return {f"{m.__name__}.{name}": len(f.signatures) for m in modules for name, f in vars(m).items()
             if isinstance(f, numba.core.registry.CPUDispatcher)}
 
@@ -359,7 +360,7 @@ print(json.dumps({name: n for name, n in versions().items() if n != before.get(n
 def test_after_the_warm_up_a_cut_and_a_tear_compile_nothing():
     """The model's warm-up compiles what a frame, a tear and a cut run: a kernel compiled inside the 150 Hz loop
     stalls it for seconds. In a fresh interpreter, so that kernels other tests compiled do not count."""
-    support = Path(__file__).resolve().parents[2] / "support"
+    support = Path(__file__).resolve().parents[3] / "support"  # test/support
     result = subprocess.run([sys.executable, "-c", COMPILES_AFTER_WARM_UP], cwd=Path(__file__).parent,
                             env={**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, (
                                 str(support), os.environ.get("PYTHONPATH"))))},

@@ -61,15 +61,6 @@ def test_material_springs_read_back_their_properties_on_average():
     assert eta == pytest.approx(tissue.parenchyma_viscosity_pa_s)
 
 
-def test_validate_names_the_parameter():
-    with pytest.raises(ValueError, match="parenchyma_young_modulus_kpa"):
-        TissueProperties(parenchyma_young_modulus_kpa=-1.0).validate()
-    with pytest.raises(ValueError, match="parenchyma_poisson_ratio"):
-        ModelParams(tissue=TissueProperties(parenchyma_poisson_ratio=0.5)).validate()
-    with pytest.raises(ValueError, match="spring_constants"):
-        ModelParams(spring_constants="per_spring").validate()
-
-
 def test_poisson_ratio_sets_the_indentation_modulus():
     # the network (ν = 1/4) is given E·(1 − 1/16)/(1 − ν²): the same E/(1 − ν²) as the tissue under a sphere
     for nu in (0.25, 0.45, 0.49):

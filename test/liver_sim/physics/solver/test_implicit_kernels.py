@@ -1,0 +1,79 @@
+"""The implicit step's kernels (physics.solver.implicit_kernels): the contacts' force and Jacobian against finite
+differences, the Newton residual, the advance of the free nodes and BDF2's extrapolated start, by hand."""
+import numpy as np
+import pytest
+from implicit_scene import tiny_scene
+
+from liver_sim.physics.solver import implicit_kernels, pcg
+from liver_sim.physics.solver.records import ContactRows, Operator
+from liver_sim.physics.tissue.fem_kernels import TetArrays
+
+
+def test_contact_jacobian_matches_finite_differences():
+    mesh, springs, x, v, inv_mass, contacts, external = tiny_scene()
+    inv_mass = np.ones(len(x))
+
+    def force(xs, vs):
+        f = np.zeros_like(xs)
+        implicit_kernels.contact_forces(xs, vs, np.zeros_like(xs), inv_mass, 0.0,
+                                        ContactRows.of(contacts, np.zeros(len(contacts))), f, np.zeros_like(xs))
+        return f
+
+    def operator(coefficient, p):
+        """The solver's contact term of A·p with per-element coefficient (springs and mass left out)."""
+        out = np.zeros_like(p)
+        none = np.zeros(0, np.uint32)
+        springs_none = Operator.allocate(none, none, len(p))._replace(shift=np.zeros(len(p)))
+        pcg.apply(springs_none, inv_mass, ContactRows.of(contacts, coefficient), TetArrays.none(), 0.0, p, out)
+        return out
+
+    direction = np.random.default_rng(5).normal(size=x.shape)
+    eps = 1e-7
+    dfdx = (force(x + eps * direction, v) - force(x - eps * direction, v)) / (2 * eps)
+    dfdv = (force(x, v + eps * direction) - force(x, v - eps * direction)) / (2 * eps)
+    assert np.abs(dfdx).max() > 1.0  # both contacts active
+    np.testing.assert_allclose(-operator(contacts.stiffness_n_per_m, direction), dfdx, atol=1e-6)
+    np.testing.assert_allclose(-operator(contacts.damping_ns_per_m, direction), dfdv, atol=1e-6)
+    ky = np.zeros_like(x)
+    implicit_kernels.contact_forces(x, v, direction, inv_mass, 0.0, ContactRows.of(contacts, np.zeros(len(contacts))),
+                                    np.zeros_like(x), ky)
+    np.testing.assert_allclose(ky, dfdx, atol=1e-6)
+
+
+def test_the_newton_rhs_is_h_f_minus_the_momentum_change_on_free_nodes():
+    v0 = np.zeros((2, 3))
+    v = np.array([[1.0, 0.0, 0.0], [5.0, 5.0, 5.0]])
+    f = np.array([[3.0, 4.0, 0.0], [9.0, 9.0, 9.0]])
+    rhs = np.full((2, 3), 7.0)
+    # node 0 (m = 2 kg): h·f − m·(v − v0) = 0.5·(3, 4, 0) − 2·(1, 0, 0) = (−0.5, 2, 0), |rhs|/h = √4.25/0.5
+    worst = implicit_kernels.newton_rhs(v, v0, f, np.array([0.5, 0.0]), 0.5, rhs)
+    np.testing.assert_allclose(rhs, [[-0.5, 2.0, 0.0], [0.0, 0.0, 0.0]])  # node 1 held: 0
+    assert worst == pytest.approx(np.sqrt(4.25) / 0.5)
+
+
+def test_advance_moves_the_free_nodes_from_the_steps_start_and_leaves_the_held_ones():
+    x0 = np.array([[0.0, 0.0, 0.0], [1.0, 1.0, 1.0]])
+    x, v = x0 + 9.0, np.array([[1.0, 0.0, 0.0], [2.0, 2.0, 2.0]])
+    dv = np.array([[0.5, 1.0, 0.0], [4.0, 4.0, 4.0]])
+    implicit_kernels.advance(x, x0, v, v.copy(), dv, np.array([1.0, 0.0]), 0.1)
+    np.testing.assert_allclose(v, [[1.5, 1.0, 0.0], [2.0, 2.0, 2.0]])  # v ← v + Δv
+    np.testing.assert_allclose(x, [[0.15, 0.1, 0.0], [10.0, 10.0, 10.0]])  # x ← x0 + h·v; held: as it was
+
+
+def test_bdf2_starts_from_the_extrapolated_state_only_after_the_last_step():
+    x, v = np.array([[4.0, 0.0, 0.0], [1.0, 1.0, 1.0]]), np.array([[2.0, 0.0, 0.0], [0.0, 0.0, 0.0]])
+    x_prev, v_prev = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 0.0]]), np.array([[-1.0, 0.0, 0.0], [3.0, 3.0, 3.0]])
+    inv_mass = np.array([1.0, 0.0])
+    incoming = x.copy(), v.copy()
+    assert implicit_kernels.bdf2_start(x, v, incoming[0], incoming[1], x_prev, v_prev, inv_mass, True)
+    np.testing.assert_allclose(x[0], [5.0, 0.0, 0.0])  # (4·4 − 1)/3
+    np.testing.assert_allclose(v[0], [3.0, 0.0, 0.0])  # (4·2 + 1)/3
+    np.testing.assert_array_equal(x[1], incoming[0][1])  # held: not extrapolated
+    np.testing.assert_array_equal(x_prev, incoming[0])  # the next step's x₋, v₋: what came in
+    np.testing.assert_array_equal(v_prev, incoming[1])
+    moved = incoming[0] + [[1e-9, 0.0, 0.0], [0.0, 0.0, 0.0]]  # not where the last step left it: backward Euler
+    x, v = incoming[0].copy(), incoming[1].copy()
+    assert not implicit_kernels.bdf2_start(x, v, moved, incoming[1], x_prev, v_prev, inv_mass, True)
+    np.testing.assert_array_equal(x, incoming[0])
+    assert not implicit_kernels.bdf2_start(x, v, x.copy(), v.copy(), x_prev, v_prev, inv_mass, False)
+    np.testing.assert_array_equal(x, incoming[0])
