@@ -194,8 +194,11 @@ def test_a_map_flood_from_before_the_bridge_starts_does_not_displace_the_genuine
     bridge = start_bridge(ros_env)
     try:
         rig.wait_for_force(CONTACT, bridge)
-        status = fresh_loop_status(rig, bridge)
-        assert int(status["device_maps_taken"]) == 1 and int(status["refused_device_map"]) > 0
+        # the flooder's writer is matched on its own time: wait until its maps reach the bridge and are refused
+        rig.wait_until(lambda: int((rig.loop_status() or {}).get("refused_device_map", 0)) > 0,
+                       "the flood's maps refused", bridge)
+        rig.wait_for_force(CONTACT, bridge)
+        assert int(fresh_loop_status(rig, bridge)["device_maps_taken"]) == 1
     finally:
         stop(bridge)
         flooder.close()
