@@ -39,6 +39,9 @@ TAUBIN_NU = 0.53
 TAUBIN_ITERATIONS = 10
 #: A voxel axis counts as fine (in the bridge-cutting cross) when its spacing is at most this times the finest.
 FINE_AXIS_RATIO = 1.5
+#: Voxels beyond the kept part but joined to it through the label, fewer than this in one piece, were trimmed off its
+#: surface (a spike, a pole voxel along a coarse axis): not a part of their own.
+MIN_PART_VOXELS = 27
 #: Stages :func:`mesh_from_label` reports through its `progress` callback.
 STAGES = ("components", "surface", "tetrahedra", "distance")
 Progress = Callable[[int, int, str], None]
@@ -165,7 +168,9 @@ def _touched_faces(mask: np.ndarray, affine: np.ndarray) -> tuple:
 def _largest_component(mask: np.ndarray, spacing_mm: np.ndarray) -> tuple[np.ndarray, list[int]]:
     """(kept, other voxel counts): the largest face-connected part of `mask` opened with the cross of the fine axes
     (spacing within FINE_AXIS_RATIO of the finest), which cuts bridges one fine voxel thin and trims single voxels off
-    the surface; the other parts are the mask's voxels beyond one cross step of the kept one, by component."""
+    the surface; the other parts are the mask's voxels beyond one cross step of the kept one, by component, but for
+    those joined to it through `mask` that are smaller than MIN_PART_VOXELS (trimmed off its surface: a spike, a pole
+    voxel along a coarse axis)."""
     fine = spacing_mm <= FINE_AXIS_RATIO * spacing_mm.min()
     cross = np.zeros((3, 3, 3), dtype=bool)
     cross[1, 1, 1] = True
@@ -176,8 +181,13 @@ def _largest_component(mask: np.ndarray, spacing_mm: np.ndarray) -> tuple[np.nda
     opened = ndimage.binary_opening(mask, structure=cross)
     core = _largest(opened) if opened.any() else mask
     parts, count = ndimage.label(mask & ~ndimage.binary_dilation(core, structure=cross))
-    others = [int(n) for n in np.bincount(parts.ravel())[1:]] if count else []
-    return core, others
+    if not count:
+        return core, []
+    whole, _ = ndimage.label(mask)
+    joined = np.zeros(count + 1, dtype=bool)
+    joined[np.unique(parts[(whole == whole[core][0]) & (parts > 0)])] = True
+    sizes = np.bincount(parts.ravel(), minlength=count + 1)
+    return core, [int(sizes[k]) for k in range(1, count + 1) if not joined[k] or sizes[k] >= MIN_PART_VOXELS]
 
 
 def _largest(mask: np.ndarray) -> np.ndarray:

@@ -104,6 +104,17 @@ def test_other_parts_are_dropped_and_reported_and_a_cavity_is_filled():
     assert built.mesh.watertight and np.ptp(built.mesh.points, axis=0).max() * 1e3 < 2 * RADIUS_MM + 4
 
 
+def test_a_ball_whose_poles_are_single_voxels_is_one_part():
+    # 14 mm on slices of 2 mm: the slices through the poles hold one voxel each, joined to the ball along the coarse
+    # axis that the opening's cross leaves out; they are trimmed off its surface, not parts of their own
+    poles = volume(ball(CENTRE_LPS_MM, 14.0))
+    labels = poles.labels
+    assert [int(labels[:, :, k].sum()) for k in (6, 20)] == [1, 1]
+    built = build(poles)
+    assert built.other_components_ml == ()
+    assert built.kept_volume_ml == pytest.approx(labels.sum() * voxel_ml(), rel=0.02)
+
+
 def test_a_ball_cut_by_the_scan_is_closed_and_the_face_named_by_the_patients_side():
     # voxel i = 0 lies furthest left (steps to the right): a ball reaching past it is cut on its left
     cut = volume(ball(ORIGIN_LPS_MM + STEPS_MM * (8, 19, 13), RADIUS_MM))
