@@ -1,4 +1,5 @@
 """The node network as real processes on loopback, each test in its own ROS_DOMAIN_ID (no timing thresholds)."""
+import math
 import os
 import subprocess
 import time
@@ -295,12 +296,13 @@ def test_loop_bench_reports_every_figure_against_its_target(ros_domain_id, tmp_p
     assert {"liver_physics: loop", "haptic_bridge: loop", "liver_tool: loop", "phantom_sim: loop"} <= set(loops)
     # the Fig. 8 baseline is computed offline: no second live bridge
     assert not any("without_local_model" in name for name in loops)
-    assert results["fig8_baseline"].startswith("offline") and results["largest_jump_without_local_model_n"] >= 0.0
+    assert results["fig8_baseline"].startswith("offline")
+    assert math.isfinite(results["largest_jump_without_local_model_n"])
     # what each process cost, beside the figures
     assert {"liver_physics", "haptic_bridge", "liver_tool", "phantom_sim", "listener"} == set(report["processes"])
     for cost in report["processes"].values():
         assert set(cost) == {"cpu_share_of_one_core", "voluntary_switches_per_s", "involuntary_switches_per_s"}
-        assert cost["cpu_share_of_one_core"] >= 0.0 and cost["voluntary_switches_per_s"] >= 0.0
+        assert cost["cpu_share_of_one_core"] > 0.0 and cost["voluntary_switches_per_s"] > 0.0  # each ran, and slept
     assert report["processes"]["haptic_bridge"]["voluntary_switches_per_s"] > 0.0  # a 1 kHz loop sleeps
     assert report["cores_used"] > 0.0 and len(report["load_average"]["before"]) == 3
     # every node froze its collector and runs no automatic full collection; gaps are counted by cause
