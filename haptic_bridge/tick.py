@@ -164,12 +164,14 @@ class BridgeTick:
     `device_map` maps the force into the device frame (default: the identity, as offline); None renders zero
     until :meth:`set_device_map`. A different map replaces the one in use only once the force has ramped to zero
     (`map_waiting` meanwhile), then the force rises again over the soft start. Refuses (ValueError naming the
-    parameter) a non-passive local-model stiffness and a rate limit too low for the watchdog ramp; the node also
-    checks the passivity of `none` (:func:`check_passivity`), which offline baselines that drive no device skip.
+    parameter) a rate limit too low for the watchdog ramp, and, when it drives a device (`drives_device`), a
+    non-passive local-model stiffness; the node also checks the passivity of `none` (:func:`check_passivity`), which
+    offline baselines that drive no device skip. A bridge that drives no device reports a non-passive rendering in
+    its diagnostics instead.
     """
 
     def __init__(self, p: BridgeParameters, device_map: DeviceMap | None = DeviceMap()):
-        if p.local_model != "none":
+        if p.local_model != "none" and p.drives_device:
             check_passivity(p, 1.0 if device_map is None else device_map.scale)
         self.p = p
         self.mode = p.local_model

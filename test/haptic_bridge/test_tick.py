@@ -246,6 +246,14 @@ def test_a_comparison_bridge_that_drives_no_device_is_not_refused_for_passivity_
         checked_change(comparison, {"max_force_n": 2.5}, scale=4.0)
 
 
+def test_a_comparison_bridge_starts_with_a_rendering_it_reports_as_not_passive():
+    stiff = DEFAULTS.replace(stiffness_n_per_m=700.0)
+    with pytest.raises(ValueError, match="stiffness_n_per_m"):
+        BridgeTick(stiff)  # on a device: refused
+    comparison = BridgeTick(stiff.replace(drives_device=False))  # no device: it starts
+    assert "stiffness_n_per_m" in passivity_problem(comparison.p)  # and the problem stays reportable
+
+
 def test_the_longest_hold_with_local_model_none_is_the_physics_period_or_the_stall_bound():
     none = DEFAULTS.replace(local_model="none")
     assert hold_time_s(none) == pytest.approx(1.0 / 150.0)               # 6.7 ms > stall_bound_s 5 ms
