@@ -216,18 +216,23 @@ class ProgressBar:
 
 
 def add_validate_command(commands) -> None:
-    """``liver-sim validate [behaviour|indentation] [--sizes N …] [--json] [--out DIR]``: behaviours B1–B4, traction
+    """``liver-sim validate [behaviour|indentation] [--sizes N …] [--radius M] [--depths M …] [--json] [--out DIR]``:
+    behaviours B1–B4, traction
     with the liver's materials and the local model's continuity; or the sphere pressed into a block (indentation),
     each figure beside its threshold."""
     parser = commands.add_parser("validate", help="the paper's behaviours (B1-B4), traction with the liver's "
                                  "materials and the local model's continuity, or (indentation) a sphere pressed "
                                  "into a block against Hertz, as figures against thresholds")
     parser.add_argument("section", nargs="?", choices=("behaviour", "indentation"), default="behaviour",
-                        help="behaviour (default): B1-B4, R1 with the materials, continuity; indentation: the "
-                             "15 mm sphere pressed 1-5 mm into a bonded 12 x 12 x 6 cm block, per mesh size, "
-                             "against Hertz, and the held tool's settling")
+                        help="behaviour (default): B1-B4, R1 with the materials, continuity; indentation: a sphere "
+                             "(the tool's, 15 mm) pressed 1-5 mm into a bonded 12 x 12 x 6 cm block, per mesh size, "
+                             "against Hertz and a linear P1 solve on the same tets, and the held tool's settling")
     parser.add_argument("--sizes", type=positive_int, nargs="+", default=None, metavar="TETS",
                         help="indentation: the block's mesh sizes (tetrahedra; default 5000 20000 80000)")
+    parser.add_argument("--radius", type=positive_float, default=None, metavar="M",
+                        help="indentation: the sphere's radius (m; default 0.015, the tool's; 0.005: a probe tip)")
+    parser.add_argument("--depths", type=positive_float, nargs="+", default=None, metavar="M",
+                        help="indentation: the depths the sphere is stepped to (m; default 0.001 ... 0.005)")
     parser.add_argument("--json", action="store_true", help="print the figures as JSON on stdout (progress on stderr)")
     parser.add_argument("--out", type=Path, default=None, metavar="DIR",
                         help="write the plots and validate.json (indentation.json) to DIR")
@@ -242,10 +247,13 @@ def validate(args) -> int:
         print(text, file=stream, flush=True)
 
     if args.section == "indentation":
-        from liver_sim.studies.indentation import DEFAULT_SIZES, main_indentation
-        return main_indentation(tuple(args.sizes or DEFAULT_SIZES), args.json, args.out, progress=progress)
-    if args.sizes:
-        raise SystemExit(f"{PROG}: error: --sizes is for validate indentation")
+        from liver_sim.studies.indentation import DEFAULT_SIZES, DEPTHS_M, SPHERE_RADIUS_M, main_indentation
+        depths = tuple(sorted(args.depths or DEPTHS_M))
+        return main_indentation(tuple(args.sizes or DEFAULT_SIZES), args.json, args.out, progress=progress,
+                                radius_m=args.radius or SPHERE_RADIUS_M, depths_m=depths)
+    for option in ("sizes", "radius", "depths"):
+        if getattr(args, option) is not None:
+            raise SystemExit(f"{PROG}: error: --{option} is for validate indentation")
     from liver_sim.studies.validate import main_validate
     return main_validate(args.json, args.out, progress=progress)
 

@@ -29,14 +29,16 @@ from liver_sim.mesh.tetmesh import TetMesh
 from liver_sim.physics.contact.tool_geometry import ToolPose, ToolShape
 from liver_sim.physics.model import LiverModel
 from liver_sim.physics.settings import ModelParams
+from liver_sim.physics.tools.tool import Tool
 from liver_sim.studies.indentation_reference import sphere_indentation
 
 #: The block (m): 12 × 12 cm wide, 6 cm thick, its bottom at z = 0.
 BLOCK_SIZE_M = (0.12, 0.12, 0.06)
 #: The mesh sizes of the default run (target tetrahedra).
 DEFAULT_SIZES = (5_000, 20_000, 80_000)
-#: The depths (m) the sphere is stepped to.
+#: The depths (m) the sphere is stepped to, and its radius (m): the default tool's.
 DEPTHS_M = (0.001, 0.002, 0.003, 0.004, 0.005)
+SPHERE_RADIUS_M = ToolShape().radius_m
 #: Each step's move (s), from the last depth (or 2 mm above the surface) to the next.
 STEP_S = 0.2
 #: Static equilibrium: over this window (s) the force changes by less than this fraction of itself, and no node
@@ -138,24 +140,25 @@ def _sink_m(model: LiverModel) -> float:
     return max(deepest, 0.0)
 
 
-def reference_forces_n(mesh: TetMesh, params: ModelParams, depths_m=DEPTHS_M) -> list[float]:
+def reference_forces_n(mesh: TetMesh, params: ModelParams, depths_m=DEPTHS_M,
+                       radius_m: float = SPHERE_RADIUS_M) -> list[float]:
     """The reference force (N) at each depth on `mesh`: studies.indentation_reference with the parenchyma's E and ν
-    and the default tool's radius, the bottom bonded."""
+    and a sphere of `radius_m`, the bottom bonded."""
     tissue = params.tissue
     return [row["force_n"] for row in sphere_indentation(
         mesh, tissue.parenchyma_young_modulus_kpa * 1e3, tissue.parenchyma_poisson_ratio,
-        ToolShape().radius_m, depths_m, bottom_nodes(mesh))]
+        radius_m, depths_m, bottom_nodes(mesh))]
 
 
 def indent(mesh: TetMesh, params: ModelParams, depths_m=DEPTHS_M, progress=None,
-           reference_n=None) -> dict:
-    """The block test on `mesh` with `params` (block_params applied): a DepthRow per depth, the exponent and the
-    force trace (time s, depth m, force N per frame); `reference_n` the reference force per depth
-    (reference_forces_n, computed when not given)."""
+           reference_n=None, radius_m: float = SPHERE_RADIUS_M) -> dict:
+    """The block test on `mesh` with `params` (block_params applied) and a sphere of `radius_m`: a DepthRow per
+    depth, the exponent and the force trace (time s, depth m, force N per frame); `reference_n` the reference force
+    per depth (reference_forces_n, computed when not given)."""
     if reference_n is None:
-        reference_n = reference_forces_n(mesh, params, depths_m)
+        reference_n = reference_forces_n(mesh, params, depths_m, radius_m)
     fixed = bottom_nodes(mesh)
-    model = LiverModel(mesh, block_params(params).with_changes(fixed_nodes=fixed))
+    model = LiverModel(mesh, block_params(params).with_changes(fixed_nodes=fixed), Tool(ToolShape(radius_m=radius_m)))
     p = model.structure.params
     radius = model.tool.shape.radius_m
     top = float(mesh.points[:, 2].max())
@@ -221,7 +224,7 @@ def indent(mesh: TetMesh, params: ModelParams, depths_m=DEPTHS_M, progress=None,
     depth = np.array([r.depth_m for r in rows])
     force = np.array([r.force_n for r in rows])
     exponent = float(np.polyfit(np.log(depth), np.log(np.maximum(force, 1e-12)), 1)[0]) if len(rows) > 1 else math.nan
-    return {"mesh": mesh.source, "tetrahedra": int(len(mesh.tets)), "skin_edge_m": edge_m,
+    return {"mesh": mesh.source, "tetrahedra": int(len(mesh.tets)), "skin_edge_m": edge_m, "sphere_radius_m": radius,
             "rows": [asdict(r) for r in rows], "exponent": exponent,
             "trace": {"time_s": trace_t, "depth_m": trace_d, "force_n": trace_f}}
 
@@ -237,18 +240,24 @@ def variants(base: ModelParams) -> dict:
             "springs default, probe contact": base.with_changes(contact_model="probe")}
 
 
-def run_indentation(sizes=DEFAULT_SIZES, params: ModelParams | None = None, progress=None) -> dict:
-    """Every variant on the block of every size: {variant: [indent(...) per mesh]} (meshed once each, its reference
-    forces solved once)."""
+def default_variant(params: ModelParams) -> str:
+    """The name of the variant (`variants`) that is `params` itself: the product's own tissue and contact."""
+    return next(name for name, variant in variants(params).items() if variant == params)
+
+
+def run_indentation(sizes=DEFAULT_SIZES, params: ModelParams | None = None, progress=None,
+                    radius_m: float = SPHERE_RADIUS_M, depths_m=DEPTHS_M) -> dict:
+    """Every variant on the block of every size, a sphere of `radius_m` stepped to `depths_m`: {variant:
+    [indent(...) per mesh]} (meshed once each, its reference forces solved once)."""
     params = params or ModelParams()
     runs = {name: [] for name in variants(params)}
     for size in sizes:
         mesh = block_mesh(size)
-        reference = reference_forces_n(mesh, params)
+        reference = reference_forces_n(mesh, params, depths_m, radius_m)
         for name, variant in variants(params).items():
             if progress:
                 progress(f"{name}: {mesh.source}, {len(mesh.tets)} tets")
-            runs[name].append(indent(mesh, variant, progress=progress, reference_n=reference))
+            runs[name].append(indent(mesh, variant, depths_m, progress, reference, radius_m))
     return runs
 
 
@@ -335,6 +344,12 @@ def unresolved_notes(runs: dict) -> list[str]:
     return notes
 
 
+def over_reference(row: dict) -> float | None:
+    """A DepthRow's force over the reference's, None where no node of the mesh lies under the sphere (the
+    reference, nodes only, feels nothing there)."""
+    return row["force_n"] / row["reference_n"] if row["reference_n"] > 0.0 else None
+
+
 def reference_notes(runs: dict) -> list[str]:
     """A line per run: its force over the reference's on the same tets at each depth (what the product's law and
     contact add to the textbook model, the mesh's own error apart)."""
@@ -342,7 +357,8 @@ def reference_notes(runs: dict) -> list[str]:
     for name, meshes in runs.items():
         for run in meshes:
             notes.append(f"{name}, {run['tetrahedra']} tets: F/reference "
-                         + ", ".join(f"{r['force_n'] / r['reference_n']:.2f}" for r in run["rows"])
+                         + ", ".join("-" if (ratio := over_reference(r)) is None else f"{ratio:.2f}"
+                                     for r in run["rows"])
                          + " at " + ", ".join(f"{r['depth_m'] * 1e3:.0f}" for r in run["rows"]) + " mm")
     return notes
 
@@ -379,12 +395,14 @@ def write_plot(runs: dict, out_dir: Path) -> Path:
     return path
 
 
-def main_indentation(sizes, json_output: bool, out_dir, progress=print) -> int:
-    """The `liver-sim validate indentation` command: run every variant on every mesh size and the liver holds,
-    print the figures (JSON on stdout with `json_output`), write indentation.json and indentation.png to out_dir;
-    0 when every figure meets its target, else 1."""
+def main_indentation(sizes, json_output: bool, out_dir, progress=print, radius_m: float = SPHERE_RADIUS_M,
+                      depths_m=DEPTHS_M) -> int:
+    """The `liver-sim validate indentation` command: run every variant on every mesh size (a sphere of `radius_m`
+    stepped to `depths_m`) and the liver holds, print the figures (JSON on stdout with `json_output`: the figures,
+    `default_variant` (the product's own tissue and contact), the sphere, the runs with each row's force over the
+    reference), write indentation.json and indentation.png to out_dir; 0 when every figure meets its target, else 1."""
     from liver_sim.studies.validate import figures_json
-    runs = run_indentation(sizes, progress=progress)
+    runs = run_indentation(sizes, progress=progress, radius_m=radius_m, depths_m=depths_m)
     holds = {}
     for model in ("surface", "probe"):
         progress(f"default liver, capsule on, {model} contact: {LIVER_DEPTH_M * 1e3:.0f} mm press and hold")
@@ -395,8 +413,11 @@ def main_indentation(sizes, json_output: bool, out_dir, progress=print) -> int:
     notes = unresolved_notes(runs) + reference_notes(runs)
     for note in notes:
         progress("  note: " + note)
-    result = {**figures_json(figures), "notes": notes,
-              "runs": {name: [{k: v for k, v in run.items() if k != "trace"} for run in meshes]
+    result = {**figures_json(figures), "notes": notes, "default_variant": default_variant(ModelParams()),
+              "sphere_radius_m": radius_m, "depths_m": list(depths_m),
+              "runs": {name: [{**{k: v for k, v in run.items() if k not in ("trace", "rows")},
+                               "rows": [{**row, "force_over_reference": over_reference(row)}
+                                        for row in run["rows"]]} for run in meshes]
                        for name, meshes in runs.items()},
               "liver_holds": {name: {k: v for k, v in hold.items() if k != "force_trace_n"}
                               for name, hold in holds.items()}}

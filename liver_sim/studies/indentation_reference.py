@@ -46,7 +46,8 @@ def sphere_indentation(mesh: TetMesh, young_pa: float, poisson: float, radius_m:
     The candidates are the top-face nodes under the sphere; with G the compliance among them (the z displacement
     of i under a unit z force at j, from one factorisation of the stiffness, a column per node ever held) and p ≥ 0
     the sphere's push on the held set H, G_HH·p = −t_H puts them on the sphere (t: the z displacement that does);
-    a held node with p < 0 is let go, a free candidate with −G_iH·p > t_i is held, until neither happens."""
+    a held node with p < 0 is let go, a free candidate with −G_iH·p > t_i is held, until neither happens. Where no
+    node lies under the sphere, nothing is held and the force is 0 (the mesh cannot resolve that contact)."""
     stiffness = stiffness_matrix(mesh, young_pa, poisson)
     points = mesh.points
     bonded = np.asarray(bonded_nodes, dtype=np.int64)
@@ -68,7 +69,7 @@ def sphere_indentation(mesh: TetMesh, young_pa: float, poisson: float, radius_m:
                 unit = np.zeros(len(free))
                 unit[rows_z[j]] = 1.0
                 columns[j] = factor.solve(unit)[rows_z]
-        return np.stack([columns[j] for j in held], axis=1)
+        return np.stack([columns[j] for j in held], axis=1) if len(held) else np.zeros((len(candidates), 0))
 
     rows = []
     for depth in depths_m:

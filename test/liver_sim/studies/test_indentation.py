@@ -4,8 +4,17 @@ import math
 
 import pytest
 
+from liver_sim.cli.main import main
 from liver_sim.physics.settings import ModelParams
-from liver_sim.studies.indentation import block_mesh, bonded_layer_factor, hertz_force_n, indent, variants
+from liver_sim.studies.indentation import (
+    block_mesh,
+    bonded_layer_factor,
+    default_variant,
+    hertz_force_n,
+    indent,
+    reference_forces_n,
+    variants,
+)
 
 
 def test_hertz_force_of_the_default_sphere_at_5_mm():
@@ -45,3 +54,31 @@ def test_the_surface_contact_needs_the_implicit_integrator_and_a_known_model():
         ModelParams(contact_model="surface", integrator="symplectic_euler").validate()
     with pytest.raises(ValueError, match="contact_model"):
         ModelParams(contact_model="volume").validate()
+
+
+def test_the_default_variant_is_the_products_own_tissue_and_contact():
+    for params in (ModelParams(), ModelParams(contact_model="surface")):
+        name = default_variant(params)
+        assert variants(params)[name] == params and params.contact_model in name
+
+
+def test_a_probe_tip_is_pressed_and_referenced_at_its_own_radius():
+    params = variants(ModelParams())["springs default, surface contact"]
+    # on 3 000 tets no node lies under a 5 mm sphere 1 mm deep: the reference (nodes only) feels nothing
+    assert reference_forces_n(block_mesh(3000), params, (0.001,), 0.005) == [0.0]
+    mesh = block_mesh(8000)
+    tip, ball = (reference_forces_n(mesh, params, (0.001,), radius) for radius in (0.005, 0.015))
+    assert 0.0 < tip[0] < ball[0]  # a smaller sphere meets less tissue at the same depth
+    run = indent(mesh, params, depths_m=(0.001,), reference_n=tip, radius_m=0.005)
+    row = run["rows"][0]
+    assert run["sphere_radius_m"] == 0.005 and row["reference_n"] == tip[0]
+    tissue = params.tissue
+    assert row["hertz_n"] == pytest.approx(hertz_force_n(tissue.parenchyma_young_modulus_kpa * 1e3,
+                                                         tissue.parenchyma_poisson_ratio, 0.005, 0.001))
+    assert row["force_n"] > 0.0 and row["settled"]
+
+
+def test_the_sphere_options_are_for_the_indentation_only(capsys):
+    for option in (["--radius", "0.005"], ["--depths", "0.001"]):
+        with pytest.raises(SystemExit, match=f"{option[0]} is for validate indentation"):
+            main(["validate", *option])
