@@ -1,6 +1,7 @@
 """The haptic bridge's parameters (no ROS): declared by the `haptic_bridge` node, read by BridgeTick and by
-the offline sessions (liver_sim.sessions), so both refuse the same values. Topic names and the source nodes are
-relative: a bridge started in a namespace (`__ns:=/left`) takes them there, one in the root namespace today's.
+the offline sessions (liver_sim.sessions), so both refuse the same values. Topic names and the device's and the
+map's source nodes are relative: a bridge started in a namespace (`__ns:=/left`) takes them there, one in the root
+namespace today's. The model's source is absolute (`/liver_physics`): one physics node serves every bridge.
 
 The device map is not among them: the bridge takes the one `liver_tool` publishes on device_map_topic
 (latched), so the map that places the tool and the map that turns the force can never differ."""
