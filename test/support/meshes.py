@@ -1,4 +1,6 @@
 """Small tet meshes built in the tests themselves, and the checks that a mesh (or a model) is sound."""
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 import scipy.sparse
@@ -91,6 +93,26 @@ def model_state(model) -> dict:
               structure.capsule_triangles, springs.node_i, springs.node_j, springs.rest_length_m)
     return {"arrays": [a.copy() for a in arrays], "substeps": model.structure.params.substeps,
             "stable_dt_s": model.structure.stable_dt_s, "topology_version": model.structure.version}
+
+
+def fail_topology_changes(monkeypatch) -> list:
+    """Make every topology change fail midway (build_springs raises after the node state was carried over) and
+    record the model's state (model_state) as each change begins, into the list returned."""
+    from liver_sim.physics import frame as frame_module
+    from liver_sim.physics import structure as structure_module
+    before = []
+    apply = frame_module.apply_change
+
+    def record_then_apply(structure, state, change):
+        before.append(model_state(SimpleNamespace(structure=structure, state=state)))
+        return apply(structure, state, change)
+
+    def broken(*args, **kwargs):
+        raise RuntimeError("injected")
+
+    monkeypatch.setattr(frame_module, "apply_change", record_then_apply)
+    monkeypatch.setattr(structure_module, "build_springs", broken)
+    return before
 
 
 def assert_same_state(state: dict, model) -> None:

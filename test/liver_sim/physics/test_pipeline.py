@@ -1,7 +1,6 @@
 """The physics frame pipeline (no ROS): pose gate, pose timeout, tool use, surface flag, marker decimation."""
 import subprocess
 import sys
-from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -9,13 +8,11 @@ import pytest
 from liver_sim.mesh.io import load_mesh
 from liver_sim.mesh.landmarks import press_anchor
 from liver_sim.mesh.tetmesh import MeshError
-from liver_sim.physics import frame as frame_module
-from liver_sim.physics import structure as structure_module
 from liver_sim.physics.parameters import PhysicsParameters, build_model
 from liver_sim.physics.pipeline import FramePipeline
 from liver_sim.tool.scripts import ScriptSettings, make_script
 
-from meshes import assert_same_state, model_state
+from meshes import assert_same_state, fail_topology_changes
 
 
 def values(**changes):
@@ -92,18 +89,7 @@ def test_a_cut_failing_midway_leaves_the_model_as_it_was_is_counted_and_the_fram
     cut = values(tool_mode="cut", cut_depth_m=0.012)
     pipeline = FramePipeline(build_model(cut), cut)
     model = pipeline.model
-    before = []
-    apply = frame_module.apply_change
-
-    def record_then_apply(structure, state, change):
-        before.append(model_state(SimpleNamespace(structure=structure, state=state)))
-        return apply(structure, state, change)
-
-    def broken(*args, **kwargs):  # build_structure calls it after carrying the node state over
-        raise RuntimeError("injected")
-
-    monkeypatch.setattr(frame_module, "apply_change", record_then_apply)
-    monkeypatch.setattr(structure_module, "build_springs", broken)
+    before = fail_topology_changes(monkeypatch)
     script = make_script("press_slide_release", ScriptSettings(
         anchor_m=tuple(press_anchor(model.structure.mesh)), depth_m=0.012, slide_m=0.03, approach_s=0.1, press_s=0.3,
         hold_s=0.05, slide_s=0.5, withdraw_s=0.1, rest_s=0.2))

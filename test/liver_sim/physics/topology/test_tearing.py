@@ -2,7 +2,6 @@
 model."""
 import contextlib
 import math
-from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -11,14 +10,20 @@ from pulls import pull_the_dome, pulled_bar
 from liver_sim.mesh.liver_shape import default_liver
 from liver_sim.mesh.tetmesh import TET_FACES
 from liver_sim.physics import frame as frame_module
-from liver_sim.physics import structure as structure_module
 from liver_sim.physics.contact.tool_geometry import ToolPose
 from liver_sim.physics.model import LiverModel
 from liver_sim.physics.settings import ModelParams
 from liver_sim.physics.tools.use import ToolUse
 from liver_sim.physics.topology.tearing import TearDetector
 
-from meshes import assert_same_state, assert_sound, box_mesh, face_keys, model_state, opened_faces
+from meshes import (
+    assert_same_state,
+    assert_sound,
+    box_mesh,
+    face_keys,
+    fail_topology_changes,
+    opened_faces,
+)
 
 
 @contextlib.contextmanager
@@ -171,18 +176,7 @@ def test_a_grasped_and_pulled_liver_tears_and_stays_sound():
 
 def test_a_tear_failing_midway_leaves_the_model_as_it_was_and_the_bar_tears_once_it_can(monkeypatch):
     model = pulled_bar(16.0, tearing=True, tear_strain_parenchyma=0.15, tear_strain_capsule=0.2)
-    before = []
-    apply = frame_module.apply_change
-
-    def record_then_apply(structure, state, change):
-        before.append(model_state(SimpleNamespace(structure=structure, state=state)))
-        return apply(structure, state, change)
-
-    def broken(*args, **kwargs):  # build_structure calls it after carrying the node state over
-        raise RuntimeError("injected")
-
-    monkeypatch.setattr(frame_module, "apply_change", record_then_apply)
-    monkeypatch.setattr(structure_module, "build_springs", broken)
+    before = fail_topology_changes(monkeypatch)
     for _ in range(300):
         result = model.step_frame()
         if before:
