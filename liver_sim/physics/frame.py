@@ -24,8 +24,13 @@ import numpy as np
 
 from liver_sim.base.local_model import LocalModel
 from liver_sim.physics.contact.kernels import TOOL_NONE, ToolSweep
-from liver_sim.physics.contact.rows import Contacts, contact_force_n, joined, pushing
-from liver_sim.physics.contact.tool_geometry import ToolPose, contact_rows, probe_contacts
+from liver_sim.physics.contact.rows import Contacts, contact_force_n, joined, pushing, split
+from liver_sim.physics.contact.tool_geometry import (
+    ToolPose,
+    contact_rows,
+    probe_contacts,
+    update_multipliers,
+)
 from liver_sim.physics.solver.explicit_kernels import max_speed, run_frame
 from liver_sim.physics.state import State, ToolState, carried_state, rest_state
 from liver_sim.physics.structure import Structure, build_structure
@@ -185,26 +190,36 @@ def integrate(structure: Structure, state: State, tools: Sequence[ToolSweep],
 
 def implicit_frame(structure: Structure, state: State, tools: Sequence[ToolSweep],
                    substeps: int) -> tuple[list[np.ndarray], list[Contacts]]:
-    """`substeps` backward-Euler steps, each with every tool's contacts with the skin triangles, taken where its
-    probes are at the end of the step (contact.tool_geometry.contact_rows), in one set of rows (contact.rows.joined);
-    the probes' geometry at the end is left in the tools' arrays (as run_frame does).  Returns each tool's contact
-    force on the liver at the end (N: the step's own with one tool in contact, else each tool's rows' force at
-    the end state, contact.rows.contact_force_n) and its rows of the last step."""
+    """`substeps` backward-Euler steps, each with every tool's contacts with the skin, taken where its probes are at
+    the end of the step (contact.tool_geometry.contact_rows), in one set of rows (contact.rows.joined); with the
+    surface contact, each tool's augmented Lagrange multipliers (ToolState.contact_multipliers_n) updated after each
+    step (contact.tool_geometry.update_multipliers); the probes' geometry at the end is left in the tools' arrays
+    (as run_frame does).  Returns each tool's contact force on the liver at the end (N: the step's own with one tool
+    in contact, else each tool's rows' force at the end state, contact.rows.contact_force_n) and its rows of the
+    last step."""
     params = structure.params
     dt = params.dt_s
     gravity = np.asarray(params.gravity_m_s2, dtype=np.float64)
     x, v = state.positions, state.velocities
-    areas = structure.skin_node_area_m2 if params.contact_model == "surface" else None
+    surface = params.contact_model == "surface"
+    areas = structure.skin_node_area_m2 if surface else None
+    if surface:
+        for tool_state in state.tools:
+            if tool_state.contact_multipliers_n is None or len(tool_state.contact_multipliers_n) != len(x):
+                tool_state.contact_multipliers_n = np.zeros(len(x))
     rows = [Contacts.none() for _ in tools]
     liver_force = np.zeros(3)
     for step in range(substeps):
         rows = [Contacts.none() if tool.kind == TOOL_NONE else contact_rows(
-            x, v, tool, tool.velocity_m_s * ((step + 1) * dt), dt, areas, params.contact_stiffness_per_area_n_per_m3)
-            for tool in tools]
-        touching = [r for r in rows if len(r)]
+            x, v, tool, tool.velocity_m_s * ((step + 1) * dt), dt, areas, params.contact_stiffness_per_area_n_per_m3,
+            tool_state.contact_multipliers_n) for tool, tool_state in zip(tools, state.tools)]
+        together = joined([r for r in rows if len(r)])
         liver_force = structure.solver.step(state.history, x, v, state.inv_mass, state.external_forces_n, dt,
-                                            params.environment_damping_per_s, gravity,
-                                            joined(touching))
+                                            params.environment_damping_per_s, gravity, together)
+        rows = split(together, [len(r) for r in rows])  # as the step left them (surface rows rebuilt at its end)
+        if surface:
+            for r, tool_state in zip(rows, state.tools):
+                update_multipliers(r, x, tool_state.contact_multipliers_n)
     for tool in tools:
         if tool.kind != TOOL_NONE:  # the contact geometry the local model is fitted to
             probe_contacts(x, v, tool, tool.velocity_m_s * (substeps * dt), dt)

@@ -28,7 +28,9 @@ class ToolState:
     frame's `sweep` (its probes, candidate triangles and contact rows); its use's `in_contact` at the last frame,
     the `cut_path` (P, 3) m of a cutting stroke so far, the `held_nodes` it grasped and their `grasp_offsets` in
     the tool frame (m); and the tissue's compliance under it (physics.tools.local_stiffness): the last solve's
-    `compliance_m_per_n` (None: none yet), its `compliance_guess` (N, 3) and the frames since."""
+    `compliance_m_per_n` (None: none yet), its `compliance_guess` (N, 3) and the frames since; with the surface
+    contact, its augmented Lagrange multipliers `contact_multipliers_n` (N,) N per node (None: none yet;
+    contact.tool_geometry.contact_rows)."""
 
     previous_pose: ToolPose | None = None
     sweep: ToolSweep | None = None
@@ -39,6 +41,7 @@ class ToolState:
     compliance_m_per_n: float | None = None
     compliance_guess: np.ndarray | None = None
     frames_since_solve: int = 0
+    contact_multipliers_n: np.ndarray | None = None
 
     @property
     def holding(self) -> bool:
@@ -97,9 +100,9 @@ def carried_state(structure: Structure, state: State, nodes: NodeState) -> State
     """`state` on the new `structure`, its node state carried over (`nodes`: physics.topology.change.carry_over):
     the same held nodes (a change keeps the numbers of the nodes it does not add) and clock, the tools' poses,
     sweeps, strokes and grasps, the implicit step from no history (backward Euler from the carried state) and the
-    tissue's compliance under each tool unknown (it is of the old network)."""
+    tissue's compliance and contact multipliers under each tool unknown (they are of the old network)."""
     tools = tuple(replace(tool, cut_path=list(tool.cut_path), compliance_m_per_n=None, compliance_guess=None,
-                          frames_since_solve=0)
+                          frames_since_solve=0, contact_multipliers_n=None)
                   for tool in state.tools)
     return State(nodes.positions, nodes.velocities, nodes.external_forces_n, state.held_nodes,
                  inverse_masses(structure, state.held_nodes), structure.solver.new_history(), tools,

@@ -21,6 +21,14 @@ class Contacts:
     nodes (K, 3) int64 (−1 pads), weights (K, 3), normal (K, 3) unit vectors into the liver,
     offset_m (K,) o, normal_speed_m_s (K,) s (the tool surface's speed along n),
     stiffness_n_per_m (K,) k, damping_ns_per_m (K,) c.
+
+    A row on the tool's true surface (a skin node against a ball swept along the segment `core_m` (K, 2, 3), of
+    `radius_m` (K,) > 0, moving at `core_velocity_m_s` (K, 3)) is rebuilt at every iterate of the step
+    (implicit_kernels.surface_rows): n = (x − c)/|x − c| with c the point of the core nearest the node,
+    o = r + n·c + `bias_m`, s = n·v_core, so that its depth is r − |x − c| + bias.  Rows of radius 0 keep the
+    geometry they were given.  `multiplier_key` (K,) int64: the node whose augmented Lagrange multiplier the row's
+    bias (the multiplier over k) comes from and goes back to (contact.tool_geometry.update_multipliers), −1 for
+    none.
     """
 
     nodes: np.ndarray
@@ -30,6 +38,20 @@ class Contacts:
     normal_speed_m_s: np.ndarray
     stiffness_n_per_m: np.ndarray
     damping_ns_per_m: np.ndarray
+    core_m: np.ndarray = None
+    radius_m: np.ndarray = None
+    core_velocity_m_s: np.ndarray = None
+    bias_m: np.ndarray = None
+    multiplier_key: np.ndarray = None
+
+    def __post_init__(self):
+        count = len(self.offset_m)
+        for name, shape in (("core_m", (count, 2, 3)), ("radius_m", (count,)), ("core_velocity_m_s", (count, 3)),
+                            ("bias_m", (count,))):
+            if getattr(self, name) is None:
+                object.__setattr__(self, name, np.zeros(shape))
+        if self.multiplier_key is None:
+            object.__setattr__(self, "multiplier_key", np.full(count, -1, dtype=np.int64))
 
     @classmethod
     def none(cls) -> "Contacts":
@@ -61,6 +83,15 @@ def joined(rows: Sequence[Contacts]) -> Contacts:
     if len(rows) == 1:
         return rows[0]
     return Contacts(*(np.concatenate([getattr(r, name) for r in rows]) for name in Contacts.__dataclass_fields__))
+
+
+def split(contacts: Contacts, counts: Sequence[int]) -> list[Contacts]:
+    """`contacts` cut into consecutive parts of `counts` rows (the inverse of `joined`; the parts share its arrays)."""
+    if len(counts) == 1:
+        return [contacts]
+    edges = np.cumsum([0, *counts])
+    return [Contacts(*(getattr(contacts, name)[first:last] for name in Contacts.__dataclass_fields__))
+            for first, last in zip(edges[:-1], edges[1:])]
 
 
 def row_forces_n(contacts: Contacts, x: np.ndarray, v: np.ndarray) -> np.ndarray:

@@ -172,8 +172,17 @@ def probe_contacts(x: np.ndarray, v: np.ndarray, tool: ToolSweep, shift: np.ndar
     probe_geometry(x, v, tool, shift, dt)
 
 
+#: The surface contact (contact_rows): skin nodes within this of the tool's surface get a row (m), and a face row
+#: pushes only the part of its dip beyond this allowance (m), fading out as the face's nodes come into contact.
+SURFACE_MARGIN_M = 1e-3
+FACE_ALLOWANCE_M = 5e-5
+#: A face row fades out as the nearest of its nodes comes within this of the ball's surface (m).
+FACE_FADE_M = 2e-4
+
+
 def contact_rows(x: np.ndarray, v: np.ndarray, tool: ToolSweep, shift: np.ndarray, dt: float,
-                     node_area_m2: np.ndarray | None = None, stiffness_per_area_n_per_m3: float = 0.0) -> Contacts:
+                 node_area_m2: np.ndarray | None = None, stiffness_per_area_n_per_m3: float = 0.0,
+                 multipliers_n: np.ndarray | None = None) -> Contacts:
     """The tool's contacts with the skin for implicit.ImplicitEuler, its probes moved by `shift` (where they are at
     the end of the step), linearised about the skin where its velocity takes it in `dt` (x̂ = x + dt·v, so the
     contacts that touch at the end of the step are those that act): Eq. 3, F = max(0, k·δ + c·δ̇) per element,
@@ -181,16 +190,20 @@ def contact_rows(x: np.ndarray, v: np.ndarray, tool: ToolSweep, shift: np.ndarra
 
     Without `node_area_m2` (contact_model 'probe', and always for a box, whose probes are points): the rows of
     kernels.probe_geometry with a share, k = share·λ, c = share·μ: one penalty per probe.
-    With it (contact_model 'surface'), a ball meets the skin as a surface, k = k_A·A per element (k_A
-    `stiffness_per_area_n_per_m3`: a pressure per depth, the same on every mesh), c = k·μ/λ:
-    * every skin node inside a probe's ball (node_depths), pushed out along n = (x̂ − p)/|x̂ − p|,
-      δ = r − |x̂ − p|, A its `node_area_m2`;
-    * every face and edge the ball presses: the rows with a `surface_weight` (a face's interior, half an edge
-      for each of its two faces; a corner is its node's), A that weight × the candidate triangles' mean area (one
-      area for all, so that a closest point passing from a face to its edge does not change its stiffness), the
-      depth less what the triangle's nodes carry, δ − Σ w_a·δ_a⁺ (a ball on a flat face sags into it between the nodes:
-      that much only), so that where the mesh resolves the contact the nodes carry it, and a face where the
-      contact is smaller than the face."""
+    With it (contact_model 'surface'), a ball (sphere, capsule) meets the skin on its true surface, the ball of
+    radius r swept along its core segment (the first to the last probe), k = k_A·A per row (k_A
+    `stiffness_per_area_n_per_m3`, a pressure per depth, the same on every mesh), c = k·μ/λ:
+    * every skin node of the candidate triangles within SURFACE_MARGIN_M of the surface gets a row on it, δ = r −
+      |x − c| (c the core's point nearest x), A its `node_area_m2`, rebuilt at every iterate of the step
+      (implicit_kernels.surface_rows) and biased by its augmented Lagrange multiplier (`multipliers_n` (N,) N, the
+      node's force the last step left: update_multipliers), so that a held contact's penetration vanishes with a
+      moderate penalty;
+    * a face's row (kernels.probe_geometry's closest point, A its `surface_weight` × the candidates' mean area)
+      only as a safety net where the ball sinks into a face whose nodes it does not reach (a small tool on large
+      faces): it pushes the dip beyond FACE_ALLOWANCE_M, at full stiffness while its nodes are all FACE_FADE_M or
+      more outside the ball, fading to 0 as the nearest one (its depth plus its multiplier over k) reaches the
+      ball, so that where the nodes take the contact they alone carry it, as a P1 discretisation of the contact
+      does (a face between nodes on the ball dips by up to about L²/(6r), L its longest edge)."""
     ahead = x + dt * v
     probe_contacts(ahead, v, tool, shift, 0.0)
     ratio = tool.damping_ns_per_m / tool.stiffness_n_per_m if tool.stiffness_n_per_m > 0.0 else 0.0
@@ -198,44 +211,71 @@ def contact_rows(x: np.ndarray, v: np.ndarray, tool: ToolSweep, shift: np.ndarra
         stiffness = tool.share * tool.stiffness_n_per_m
         return Contacts(*contact_elements(ahead, tool.nodes, tool.weights, tool.normal, tool.depth, stiffness,
                                           tool.share * tool.damping_ns_per_m, tool.velocity_m_s))
-    candidates = max(len(tool.triangles), 1)
-    nodes, normal, depth, probe = node_depths(ahead, tool, shift)
-    carried = np.zeros((tool.probes.shape[0], len(x)))
-    carried[probe, nodes] = depth
-    rows = np.arange(len(tool.depth))
-    residual = tool.depth - (tool.weights * carried[(rows // candidates)[:, None], tool.nodes]).sum(axis=1)
-    area = np.full(len(rows), triangle_areas(ahead, tool.skin[tool.triangles]).mean() if len(rows) else 0.0)
-    stiffness = np.where(residual > 0.0, stiffness_per_area_n_per_m3 * tool.surface_weight * area, 0.0)
-    face_nodes, weights, face_normal, offset, speed, face_k, face_c = contact_elements(
-        ahead, tool.nodes, tool.weights, tool.normal, residual, stiffness, stiffness * ratio, tool.velocity_m_s)
-    count = len(nodes)
+    if multipliers_n is None:
+        multipliers_n = np.zeros(len(x))
+    core = np.stack([tool.probes[0] + shift, tool.probes[-1] + shift])
+    nodes, normal, depth = surface_depths(ahead, tool, core)
+    node_k = stiffness_per_area_n_per_m3 * node_area_m2[nodes]
+    bias = np.divide(multipliers_n[nodes], node_k, out=np.zeros(len(nodes)), where=node_k > 0.0)
+    reach = np.full(len(x), -np.inf)  # each node's depth with its multiplier's (its elastic force over k)
+    reach[nodes] = depth + bias
+    face = tool.skin[tool.triangles]
+    fade = np.clip(-reach[face].max(axis=1, initial=-np.inf) / FACE_FADE_M, 0.0, 1.0)
+    residual = tool.depth - FACE_ALLOWANCE_M
+    area = triangle_areas(ahead, face).mean() if len(face) else 0.0
+    row_fade = fade[np.arange(len(residual)) % len(face)] if len(face) else np.zeros(len(residual))
+    stiffness = np.where(residual > 0.0, stiffness_per_area_n_per_m3 * tool.surface_weight * area * row_fade, 0.0)
+    face_rows = Contacts(*contact_elements(ahead, tool.nodes, tool.weights, tool.normal, residual, stiffness,
+                                           stiffness * ratio, tool.velocity_m_s))
+    near = depth > -SURFACE_MARGIN_M
+    nodes, normal, depth, node_k, bias = nodes[near], normal[near], depth[near], node_k[near], bias[near]
+    count, faces = len(nodes), len(face_rows)
     padded = np.full((count, 3), -1, dtype=np.int64)
     padded[:, 0] = nodes
     node_weights = np.zeros((count, 3))
     node_weights[:, 0] = 1.0
-    node_k = stiffness_per_area_n_per_m3 * node_area_m2[nodes]
-    return Contacts(np.concatenate([face_nodes, padded]), np.concatenate([weights, node_weights]),
-                    np.concatenate([face_normal, normal]),
-                    np.concatenate([offset, depth + np.einsum("ij,ij->i", normal, ahead[nodes])]),
-                    np.concatenate([speed, normal @ tool.velocity_m_s]), np.concatenate([face_k, node_k]),
-                    np.concatenate([face_c, node_k * ratio]))
+    return Contacts(np.concatenate([face_rows.nodes, padded]), np.concatenate([face_rows.weights, node_weights]),
+                    np.concatenate([face_rows.normal, normal]),
+                    np.concatenate([face_rows.offset_m, depth + bias + np.einsum("ij,ij->i", normal, ahead[nodes])]),
+                    np.concatenate([face_rows.normal_speed_m_s, normal @ tool.velocity_m_s]),
+                    np.concatenate([face_rows.stiffness_n_per_m, node_k]),
+                    np.concatenate([face_rows.damping_ns_per_m, node_k * ratio]),
+                    np.concatenate([np.zeros((faces, 2, 3)), np.broadcast_to(core, (count, 2, 3))]),
+                    np.concatenate([np.zeros(faces), np.full(count, tool.radius_m)]),
+                    np.concatenate([np.zeros((faces, 3)), np.broadcast_to(tool.velocity_m_s, (count, 3))]),
+                    np.concatenate([np.zeros(faces), bias]),
+                    np.concatenate([np.full(faces, -1, dtype=np.int64), nodes]))
 
 
-def node_depths(x: np.ndarray, tool: ToolSweep, shift: np.ndarray) -> tuple[np.ndarray, ...]:
-    """The nodes of the tool's candidate triangles inside a probe's ball (probes moved by `shift`): (nodes,
-    outward normals n = (x − p)/|x − p|, depths δ = r − |x − p| > 0, the probe of each), one row per node and
-    probe it is inside; none for a box (its probes are points)."""
-    empty = (np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros(0), np.zeros(0, np.int64))
-    if tool.radius_m <= 0.0 or not len(tool.triangles):
-        return empty
-    candidates = np.unique(tool.skin[tool.triangles])
-    offsets = x[candidates][None, :, :] - (tool.probes + shift)[:, None, :]
-    distance = np.linalg.norm(offsets, axis=2)
-    probe, index = np.nonzero((distance < tool.radius_m) & (distance > 1e-12))
-    if not len(probe):
-        return empty
-    return (candidates[index], offsets[probe, index] / distance[probe, index][:, None],
-            tool.radius_m - distance[probe, index], probe)
+def update_multipliers(contacts: Contacts, x: np.ndarray, multipliers_n: np.ndarray) -> None:
+    """The augmented Lagrange multipliers (N) after a step that ends at x, in place: each entry the largest elastic
+    force k·(o − n·Σ w_a·x_a), clipped at 0, of the rows it biases (their multiplier included in o); 0 for an entry
+    no row takes."""
+    multipliers_n[:] = 0.0
+    keyed = contacts.multiplier_key >= 0
+    if not keyed.any():
+        return
+    used = contacts.nodes[keyed] >= 0
+    points = (np.where(used, contacts.weights[keyed], 0.0)[:, :, None]
+              * x[np.where(used, contacts.nodes[keyed], 0)]).sum(axis=1)
+    along = np.einsum("ij,ij->i", contacts.normal[keyed], points)
+    np.maximum.at(multipliers_n, contacts.multiplier_key[keyed],
+                  np.maximum(contacts.stiffness_n_per_m[keyed] * (contacts.offset_m[keyed] - along), 0.0))
+
+
+def surface_depths(x: np.ndarray, tool: ToolSweep, core: np.ndarray) -> tuple[np.ndarray, ...]:
+    """The nodes of the tool's candidate triangles and, for each, its outward normal n = (x − c)/|x − c| from the
+    point c of the `core` segment (2, 3) nearest it, and its depth δ = r − |x − c| in the tool's ball (m, negative
+    outside); a node on the core itself is left out."""
+    nodes = np.unique(tool.skin[tool.triangles]) if len(tool.triangles) else np.zeros(0, np.int64)
+    axis = core[1] - core[0]
+    length2 = float(axis @ axis)
+    points = x[nodes]
+    t = np.clip((points - core[0]) @ axis / length2, 0.0, 1.0) if length2 > 0.0 else np.zeros(len(nodes))
+    offsets = points - (core[0] + t[:, None] * axis)
+    distance = np.linalg.norm(offsets, axis=1)
+    keep = distance > 1e-12
+    return nodes[keep], offsets[keep] / distance[keep, None], tool.radius_m - distance[keep]
 
 
 def force_local_model(shape: ToolShape, pose: ToolPose, tool: ToolSweep, force_on_tool_n: np.ndarray,

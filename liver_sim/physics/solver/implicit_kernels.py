@@ -31,6 +31,34 @@ from liver_sim.physics.tissue.spring_law import spring_terms
 
 
 @numba.njit(cache=True)
+def surface_rows(x, rows):
+    """Rebuild the rows on the tool's true surface (radius > 0: a node against a ball swept along its core
+    segment, contact.rows.Contacts) at x: c the core's point nearest the node, n = (x − c)/|x − c|,
+    offset = r + n·c + bias, speed = n·v_core (a node on the core keeps its last normal)."""
+    nodes, normal, offset, speed, core, radius = rows.nodes, rows.normal, rows.offset, rows.speed, rows.core, \
+        rows.radius
+    for e in range(nodes.shape[0]):
+        if radius[e] <= 0.0:
+            continue
+        n = nodes[e, 0]
+        ax, ay, az = core[e, 0, 0], core[e, 0, 1], core[e, 0, 2]
+        ux, uy, uz = core[e, 1, 0] - ax, core[e, 1, 1] - ay, core[e, 1, 2] - az
+        length2 = ux * ux + uy * uy + uz * uz
+        t = 0.0
+        if length2 > 0.0:
+            t = min(max(((x[n, 0] - ax) * ux + (x[n, 1] - ay) * uy + (x[n, 2] - az) * uz) / length2, 0.0), 1.0)
+        cx, cy, cz = ax + t * ux, ay + t * uy, az + t * uz
+        dx, dy, dz = x[n, 0] - cx, x[n, 1] - cy, x[n, 2] - cz
+        distance = math.sqrt(dx * dx + dy * dy + dz * dz)
+        if distance <= 1e-12:
+            continue
+        nx, ny, nz = dx / distance, dy / distance, dz / distance
+        normal[e, 0], normal[e, 1], normal[e, 2] = nx, ny, nz
+        offset[e] = radius[e] + nx * cx + ny * cy + nz * cz + rows.bias[e]
+        speed[e] = nx * rows.core_velocity[e, 0] + ny * rows.core_velocity[e, 1] + nz * rows.core_velocity[e, 2]
+
+
+@numba.njit(cache=True)
 def contact_forces(x, v, y, inv_mass, h, rows, f, ky):
     """Add the active contacts' force at (x, v) to f and K·y to ky (`rows` a records.ContactRows);
     rows.coefficient[e] = h·c + h²·k when active (at x + h·y), else 0.  Returns the total contact force on the liver
@@ -187,8 +215,9 @@ def implicit_step(x, v, inv_mass, loads, h, tissue, op, rows, coarse, warm, sett
     """One linearised backward-Euler step of x, v in place (see the module docstring), then Newton
     iterations while the nonlinear residual exceeds settings.newton_tolerance_n (N) on some node, up to
     settings.max_newton (`settings` a records.SolveSettings).  `loads` (records.Loads) act beside the `tissue`
-    (records.Tissue: springs, support, the tetrahedra of the 'fem' law), `rows` the contacts (records.ContactRows),
-    `op` (records.Operator) receives the system.  `coarse`: the preconditioner's coarse space
+    (records.Tissue: springs, support, the tetrahedra of the 'fem' law), `rows` the contacts
+    (records.ContactRows; those on the tool's true surface rebuilt at every iterate, surface_rows), `op`
+    (records.Operator) receives the system.  `coarse`: the preconditioner's coarse space
     (physics.solver.coarse_space; none: block-Jacobi alone).  `warm` holds the previous Δv (start of the solve;
     overwritten).  `scratch` (records.Scratch): `partial` pcg.SERIAL for one thread, else (threads, N, 3): the solve
     on the threads (pcg.pcg_parallel).  Returns (contact force on the liver at the new state (3,), CG iterations,
@@ -223,6 +252,7 @@ def implicit_step(x, v, inv_mass, loads, h, tissue, op, rows, coarse, warm, sett
             total_iterations += pcg(op, inv_mass, rows, tet_law, tet_weight, scratch.preconditioner, coarse, rhs,
                                     warm, settings, vectors, scratch.partial)
         advance(x, x0, v, v0, warm, inv_mass, h)
+        surface_rows(x, rows)
         assemble(x, v, zero, inv_mass, loads, h, springs, op, f, ky, False)
         support_terms(x, v, zero, inv_mass, h, support, f, ky, op, False)
         tet_terms(x, v, zero, inv_mass, h, tet_law, f, ky, op.diagonal, False)

@@ -39,8 +39,9 @@ class Operator(NamedTuple):
 
 class ContactRows(NamedTuple):
     """The penalty rows of contact.rows.Contacts for the kernels (`nodes` (K, 3) int64 with −1 pads, `weights`,
-    `normal` (K, 3), `offset` o, `speed` s, `stiffness` k, `damping` c (K,)) and each row's `coefficient` (K,) in A,
-    h·c + h²·k while active, else 0 (written by implicit_kernels.contact_forces)."""
+    `normal` (K, 3), `offset` o, `speed` s, `stiffness` k, `damping` c (K,); the tool's surface of the rows rebuilt
+    at each iterate, `core` (K, 2, 3), `radius` (K,), `core_velocity` (K, 3), `bias` (K,)) and each row's
+    `coefficient` (K,) in A, h·c + h²·k while active, else 0 (written by implicit_kernels.contact_forces)."""
 
     nodes: np.ndarray
     weights: np.ndarray
@@ -49,13 +50,19 @@ class ContactRows(NamedTuple):
     speed: np.ndarray
     stiffness: np.ndarray
     damping: np.ndarray
+    core: np.ndarray
+    radius: np.ndarray
+    core_velocity: np.ndarray
+    bias: np.ndarray
     coefficient: np.ndarray
 
     @classmethod
     def of(cls, contacts, coefficient: np.ndarray) -> "ContactRows":
-        """The rows of `contacts` (contact.rows.Contacts) with each row's `coefficient` in the system."""
+        """The rows of `contacts` (contact.rows.Contacts) with each row's `coefficient` in the system (its arrays
+        shared: the step rebuilds the surface rows' geometry in them)."""
         return cls(contacts.nodes, contacts.weights, contacts.normal, contacts.offset_m, contacts.normal_speed_m_s,
-                   contacts.stiffness_n_per_m, contacts.damping_ns_per_m, coefficient)
+                   contacts.stiffness_n_per_m, contacts.damping_ns_per_m, contacts.core_m, contacts.radius_m,
+                   contacts.core_velocity_m_s, contacts.bias_m, coefficient)
 
 
 class Loads(NamedTuple):

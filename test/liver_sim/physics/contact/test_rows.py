@@ -1,9 +1,17 @@
 """Contact rows (physics.contact.rows): 1-node rows, the penalty of each row by hand, the force of the pushing rows
-clipped at zero, the rows of several tools joined and those that push kept."""
+clipped at zero, the rows of several tools joined and split again, and those that push kept."""
 import numpy as np
 import pytest
 
-from liver_sim.physics.contact.rows import Contacts, contact_force_n, joined, node_contacts, pushing, row_forces_n
+from liver_sim.physics.contact.rows import (
+    Contacts,
+    contact_force_n,
+    joined,
+    node_contacts,
+    pushing,
+    row_forces_n,
+    split,
+)
 
 X = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 0.01], [0.0, 0.0, 0.02], [1.0, 1.0, 1.0]])
 V = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 0.1], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]])
@@ -52,3 +60,15 @@ def test_the_tool_speed_along_the_normal_adds_damping(speed, expected):
     contacts = rows()
     contacts.normal_speed_m_s[0] = speed  # the tool withdrawing at 0.2 m/s: 0.4 − 2·0.2 = 0
     assert row_forces_n(contacts, X, V)[0] == pytest.approx(expected)
+
+
+def test_split_undoes_joined_and_shares_its_arrays():
+    first, second = rows(), node_contacts(np.array([3]), np.array([[1.0, 0.0, 0.0]]), [0.5], [0.0], 10.0, 0.0)
+    together = joined([first, second])
+    parts = split(together, [len(first), len(second)])
+    for part, original in zip(parts, (first, second)):
+        for name in Contacts.__dataclass_fields__:
+            np.testing.assert_array_equal(getattr(part, name), getattr(original, name))
+    together.offset_m[2] = 0.7  # a step rebuilding the joined rows rebuilds each tool's
+    assert parts[1].offset_m[0] == 0.7
+    assert split(first, [len(first)])[0] is first

@@ -7,8 +7,11 @@ import pytest
 from contact_slab import DEPTH, STIFFNESS, one_step_model
 
 from liver_sim.base.local_model import penetration
+from liver_sim.physics.contact.kernels import ToolSweep
+from liver_sim.physics.contact.rows import Contacts
 from liver_sim.physics.contact.tool_geometry import (
     BOX_PROBE_SPACING_M,
+    SURFACE_MARGIN_M,
     TOOL_JUMP_M,
     ToolPose,
     ToolShape,
@@ -17,8 +20,10 @@ from liver_sim.physics.contact.tool_geometry import (
     contact_rows,
     fit_sphere,
     pull_local_model,
+    surface_depths,
     tool_probes,
     tool_sweep,
+    update_multipliers,
 )
 from liver_sim.physics.model import LiverModel
 from liver_sim.physics.settings import ModelParams
@@ -146,3 +151,56 @@ def test_the_pull_local_model_is_the_plane_the_tool_sinks_into_by_pull_over_stif
     np.testing.assert_allclose(local.point, [0.0, 0.0, 0.1 + 0.015 - 0.01])  # tip − (r − depth)·n
     assert penetration(local, pose.position, 0.015)[0] == pytest.approx(0.01)
     assert not pull_local_model(pose, np.zeros(3), 300.0, 0.015).valid
+
+
+def test_surface_contact_rows_sit_on_the_balls_true_surface(slab):
+    """contact_model 'surface': a row per skin node within the margin, its depth r − |x − c| from the ball's centre,
+    its normal radial, stiffness k_A·A, its bias the node's multiplier over k; no face row where the nodes reach the
+    ball (the slab's 2 cm faces are larger than this 1 cm ball at 2 mm, so faces with no node inside push)."""
+    params = ModelParams(contact_stiffness_n_per_m=STIFFNESS, contact_damping_ns_per_m=2.0)
+    skin = np.ascontiguousarray(slab.skin, dtype=np.int64)
+    centre = np.array([0.04, 0.04, 0.04 + 0.01 - DEPTH])  # over a grid vertex: it is inside the ball
+    sweep = tool_sweep(ToolShape(radius_m=0.01), ToolPose(centre), None, params, 0.02, slab.points, skin)
+    areas = np.full(len(slab.points), 1e-4)
+    multipliers = np.zeros(len(slab.points))
+    vertex = int(np.argmin(np.linalg.norm(slab.points - [0.04, 0.04, 0.04], axis=1)))
+    multipliers[vertex] = 0.3
+    rows = contact_rows(slab.points, np.zeros_like(slab.points), sweep, np.zeros(3), 1e-3, areas, 3e7, multipliers)
+    surface = rows.radius_m > 0.0
+    nodes = rows.nodes[surface, 0]
+    distance = np.linalg.norm(slab.points[nodes] - centre, axis=1)
+    assert (distance < 0.01 + SURFACE_MARGIN_M).all() and vertex in nodes
+    depth = rows.offset_m[surface] - np.einsum("ij,ij->i", rows.normal[surface], slab.points[nodes])
+    bias = np.where(nodes == vertex, 0.3 / (3e7 * 1e-4), 0.0)
+    np.testing.assert_allclose(depth, 0.01 - distance + bias, atol=1e-12)
+    np.testing.assert_allclose(rows.normal[surface], (slab.points[nodes] - centre) / distance[:, None], atol=1e-12)
+    np.testing.assert_allclose(rows.stiffness_n_per_m[surface], 3e7 * 1e-4)
+    np.testing.assert_allclose(rows.core_m[surface], np.broadcast_to([centre, centre], (surface.sum(), 2, 3)))
+    np.testing.assert_array_equal(rows.multiplier_key[surface], nodes)
+    assert (rows.multiplier_key[~surface] == -1).all()
+    faces = ~surface
+    for row in np.flatnonzero(faces & (rows.stiffness_n_per_m > 0.0)):
+        assert vertex not in rows.nodes[row]  # the faces round the vertex inside the ball are the node's
+
+
+def test_the_multipliers_take_the_largest_elastic_force_of_the_rows_they_bias():
+    x = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 0.01], [1.0, 0.0, 0.0]])
+    rows = Contacts(np.array([[0, -1, -1], [1, -1, -1], [2, -1, -1], [0, 1, -1], [0, 1, -1]]),
+                    np.array([[1.0, 0, 0], [1.0, 0, 0], [1.0, 0, 0], [0.5, 0.5, 0], [0.5, 0.5, 0]]),
+                    np.tile([0.0, 0.0, 1.0], (5, 1)), np.array([0.001, 0.005, 0.5, 0.007, 0.008]), np.zeros(5),
+                    np.full(5, 100.0), np.zeros(5), multiplier_key=np.array([0, 1, -1, 4, 4]))
+    multipliers = np.full(6, 9.0)
+    update_multipliers(rows, x, multipliers)
+    # node 0 pushed 1 mm: 0.1 N; node 1 pulled apart: 0; entry 4, the larger of its two rows' 0.2 and 0.3 N
+    np.testing.assert_allclose(multipliers, [0.1, 0.0, 0.0, 0.0, 0.3, 0.0])
+
+
+def test_surface_depths_measure_from_a_capsules_shaft():
+    x = np.array([[0.0, 0.0, 0.0], [0.02, 0.0, 0.004], [0.05, 0.0, 0.0], [0.01, 0.003, 0.0]])
+    sweep = ToolSweep(2, np.array([[0.0, 0.0, 0.005], [0.03, 0.0, 0.005]]), 0.004, np.zeros(3), 1.0, 0.0,
+                      np.array([[0, 1, 2], [0, 2, 3]]), np.array([0, 1]), *([np.zeros(0)] * 7))
+    nodes, normal, depth = surface_depths(x, sweep, sweep.probes)
+    np.testing.assert_array_equal(nodes, [0, 1, 2, 3])
+    expected = [0.004 - 0.005, 0.004 - 0.001, 0.004 - math.hypot(0.02, 0.005), 0.004 - math.hypot(0.003, 0.005)]
+    np.testing.assert_allclose(depth, expected, atol=1e-12)
+    np.testing.assert_allclose(normal[1], [0.0, 0.0, -1.0], atol=1e-12)

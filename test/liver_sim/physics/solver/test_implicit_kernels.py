@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 from implicit_scene import tiny_scene
 
+from liver_sim.physics.contact.rows import Contacts
 from liver_sim.physics.solver import implicit_kernels, pcg
 from liver_sim.physics.solver.records import ContactRows, Operator
 from liver_sim.physics.tissue.fem_kernels import TetArrays
@@ -77,3 +78,20 @@ def test_bdf2_starts_from_the_extrapolated_state_only_after_the_last_step():
     np.testing.assert_array_equal(x, incoming[0])
     assert not implicit_kernels.bdf2_start(x, v, x.copy(), v.copy(), x_prev, v_prev, inv_mass, False)
     np.testing.assert_array_equal(x, incoming[0])
+
+
+def test_surface_rows_are_rebuilt_on_the_tools_true_surface_at_the_iterate():
+    """A node row on a ball of radius 1 cm swept from (0, 0, 0) to (0.02, 0, 0): at the iterate its normal is radial
+    from the shaft, its depth r − |x − c| plus its bias, its speed the core's along n; a row of radius 0 keeps its
+    geometry."""
+    x = np.array([[0.01, 0.0, 0.006], [0.03, 0.0, 0.0]])
+    contacts = Contacts(np.array([[0, -1, -1], [1, -1, -1]]), np.tile([1.0, 0.0, 0.0], (2, 1)),
+                        np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]), np.array([0.0, 0.123]), np.zeros(2),
+                        np.array([100.0, 100.0]), np.zeros(2),
+                        np.array([[[0.0, 0.0, 0.0], [0.02, 0.0, 0.0]]] * 2), np.array([0.01, 0.0]),
+                        np.array([[0.0, 0.0, -0.5], [0.0, 0.0, 0.0]]), np.array([2e-4, 0.0]))
+    implicit_kernels.surface_rows(x, ContactRows.of(contacts, np.zeros(2)))
+    np.testing.assert_allclose(contacts.normal, [[0.0, 0.0, 1.0], [0.0, 1.0, 0.0]], atol=1e-15)
+    depth = contacts.offset_m[0] - contacts.normal[0] @ x[0]
+    assert depth == pytest.approx(0.01 - 0.006 + 2e-4, abs=1e-15)
+    assert contacts.normal_speed_m_s[0] == pytest.approx(-0.5) and contacts.offset_m[1] == 0.123
