@@ -28,9 +28,12 @@ INTEGRATORS = tuple(INTEGRATOR_SUBSTEPS)
 SPRING_CONSTANTS = ("material", "paper")
 #: The parenchyma's law: 'springs', the paper's Eq. 1 springs on the tet edges (physics.tissue.springs,
 #: physics.tissue.materials); 'fem', co-rotational linear tetrahedra with the tissue's E, ν and η
-#: (physics.tissue.fem_kernels; implicit integrator and material constants only).  The capsule is Eq. 1 springs on the
-#: skin edges with either.
-TISSUE_LAWS = ("springs", "fem")
+#: (physics.tissue.fem_kernels); 'neo_hookean', stable neo-Hookean tetrahedra with the same constants
+#: (physics.tissue.neo_hookean).  The two continuum laws need the implicit integrator and material constants.  The
+#: capsule is Eq. 1 springs on the skin edges with any.
+TISSUE_LAWS = ("springs", "fem", "neo_hookean")
+#: The laws whose parenchyma is tetrahedra (physics.tissue.fem_kernels.TetArrays) rather than springs.
+CONTINUUM_LAWS = ("fem", "neo_hookean")
 #: How the tool meets the skin (contact.tool_geometry.contact_rows): 'probe', Eq. 3 as the paper has it, one penalty λ
 #: per contact probe at its closest points; 'surface', a ball meets the skin as a surface, a penalty per unit area at
 #: every skin node and face it presses (implicit integrator only).
@@ -184,8 +187,10 @@ class ModelParams:
     'paper': §3.1's scene, `fixed_nodes` None fixes the central tet (as it does when the regions hold no
     capsule node).
     `tissue_law` 'springs' (default): the parenchyma is Eq. 1 springs on the tet edges; 'fem': co-rotational linear
-    tetrahedra with the tissue's E, ν (up to 0.499) and Kelvin–Voigt η (physics.tissue.fem_kernels), the capsule staying
-    springs (implicit integrator and material constants only).
+    tetrahedra with the tissue's E, ν (up to 0.499) and Kelvin–Voigt η (physics.tissue.fem_kernels); 'neo_hookean':
+    stable neo-Hookean tetrahedra (hyperelastic, Hooke's law with the same E, ν at small strain, defined through
+    inversion) with the same constants (physics.tissue.neo_hookean); with either the capsule stays springs (implicit
+    integrator and material constants only).
     `contact_model` 'probe' (default): Eq. 3 with one penalty `contact_stiffness_n_per_m` per contact probe;
     'surface': a ball tool (sphere, capsule) meets the skin as a surface, `contact_stiffness_per_area_n_per_m3` per
     unit area of every node and face it presses (contact.tool_geometry.contact_rows; implicit integrator only).
@@ -199,8 +204,9 @@ class ModelParams:
                                      "properties and the mesh; paper: the paper's per-spring constants below",
                                      choices=SPRING_CONSTANTS)
     tissue_law: str = declared("springs", description="the parenchyma: springs (Eq. 1 on the tet edges, the paper's) "
-                               "or fem (co-rotational linear tetrahedra with parenchyma E, ν and η; implicit_euler and "
-                               "material only)", choices=TISSUE_LAWS)
+                               "or fem (co-rotational linear tetrahedra with parenchyma E, ν and η) or neo_hookean "
+                               "(stable neo-Hookean tetrahedra, the same constants); the last two implicit_euler and "
+                               "material only", choices=TISSUE_LAWS)
     tissue: TissueProperties = nested(TissueProperties(), "")
     capsule: SpringLaw = nested(SpringLaw(lambda1_n=1430.0, lambda2_n=10.0, mu_ns_per_m=0.02), "capsule_")
     parenchyma: SpringLaw = nested(SpringLaw(lambda1_n=71.5, lambda2_n=0.5, mu_ns_per_m=5.0), "parenchyma_")
@@ -302,9 +308,10 @@ class ModelParams:
         self.tissue.validate()
         if self.tissue_law not in TISSUE_LAWS:
             raise ValueError(f"parameter tissue_law must be one of {TISSUE_LAWS}, got {self.tissue_law!r}")
-        if self.tissue_law == "fem" and (self.integrator != "implicit_euler" or self.spring_constants != "material"):
-            raise ValueError("parameter tissue_law 'fem' needs integrator 'implicit_euler' and spring_constants "
-                             f"'material', got {self.integrator!r} and {self.spring_constants!r}")
+        if self.tissue_law in CONTINUUM_LAWS and (self.integrator != "implicit_euler"
+                                                  or self.spring_constants != "material"):
+            raise ValueError(f"parameter tissue_law {self.tissue_law!r} needs integrator 'implicit_euler' and "
+                             f"spring_constants 'material', got {self.integrator!r} and {self.spring_constants!r}")
         if self.contact_model not in CONTACT_MODELS:
             raise ValueError(f"parameter contact_model must be one of {CONTACT_MODELS}, got {self.contact_model!r}")
         if self.contact_model == "surface" and self.integrator != "implicit_euler":

@@ -15,7 +15,7 @@ import numba
 import numpy as np
 
 from liver_sim.mesh.tetmesh import TetMesh
-from liver_sim.physics.settings import ModelParams
+from liver_sim.physics.settings import CONTINUUM_LAWS, ModelParams
 from liver_sim.physics.solver.explicit_kernels import StepSettings, WorkArrays
 from liver_sim.physics.solver.implicit import ImplicitEuler
 from liver_sim.physics.tissue.fem_kernels import build_tets
@@ -152,9 +152,10 @@ def build_structure(mesh: TetMesh, params: ModelParams, capsule_triangles: np.nd
     n = len(mesh.points)
     tissue = params.tissue
     tets = None
-    if params.tissue_law == "fem":
+    if params.tissue_law in CONTINUUM_LAWS:
         tets = build_tets(mesh.points, mesh.tets, tissue.parenchyma_young_modulus_kpa * 1e3,
-                          tissue.parenchyma_poisson_ratio, tissue.parenchyma_viscosity_pa_s)
+                          tissue.parenchyma_poisson_ratio, tissue.parenchyma_viscosity_pa_s,
+                          neo_hookean=params.tissue_law == "neo_hookean")
     return Structure(mesh, params, capsule, masses_kg, fixed_nodes, springs,
                      spring_arrays(springs),
                      support, parallel, bound, version,

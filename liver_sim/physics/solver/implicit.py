@@ -59,7 +59,8 @@ class StepHistory:
     """What a step leaves the next one on the same nodes and elements: `warm`, the Δv (N, 3) that starts its CG
     solve; BDF2's `states`, (x, v) of the last step and (x₋, v₋) of the one before, with its length `dt_s` (0: none,
     the next step is backward Euler); `rotations`, the unit quaternions (M, 4: x, y, z, w) of the 'fem' law's
-    elements that start the next extraction of their rotations (physics.tissue.fem_kernels; identity at rest); and
+    elements that start the next extraction of their rotations (physics.tissue.fem_kernels; identity at rest; the
+    'neo_hookean' law's elements leave them be); and
     what the last step took: `cg_iterations`, `newton_iterations`, its final `residual_n` (N) and whether it was
     BDF2 (`second_order`).  Part of the model's state; a new one (ImplicitEuler.new_history) after a topology
     change."""
@@ -86,12 +87,12 @@ class StepHistory:
 
 class ImplicitEuler:
     """Linearised backward Euler on one spring network, its support (none by default) and the tetrahedra of the
-    'fem' law (physics.tissue.fem_kernels; none by default): its per-spring matrix blocks, element rotations and work
-    arrays, which depend on the topology only; with `second_order`, BDF2 from the second step on (see the module
-    docstring), from the StepHistory each step is given; its PCG's `preconditioner` (settings.PRECONDITIONERS:
-    'auto' is two-level from TWO_LEVEL_MIN_NODES nodes on), with the
-    two-level one a coarse space per step length, built at its first step (physics.solver.coarse_space).  Build a new
-    one after a topology change."""
+    'fem' or 'neo_hookean' law (physics.tissue.fem_kernels; none by default): its per-spring matrix blocks, element
+    rotations and work arrays, which depend on the topology only; with `second_order`, BDF2 from the second step on
+    (see the module docstring), from the StepHistory each step is given; its PCG's `preconditioner`
+    (settings.PRECONDITIONERS: 'auto' is two-level from TWO_LEVEL_MIN_NODES nodes on), with the two-level one
+    a coarse space per step length, built at its first step (physics.solver.coarse_space).  Build a new one after a
+    topology change."""
 
     def __init__(self, springs: SpringNetwork, n_nodes: int, cg_tolerance: float = 1e-3,
                  max_cg_iterations: int = 500, newton_tolerance_n: float = 1e-2, max_newton: int = 2,
@@ -297,6 +298,7 @@ class ImplicitEuler:
                               preconditioner="two_level",
                               tets=self.tets._replace(quaternion=self.tets.quaternion.copy(),
                                                       rotation=self.tets.rotation.copy(),
-                                                      rotated_gradients=self.tets.rotated_gradients.copy()))
+                                                      rotated_gradients=self.tets.rotated_gradients.copy(),
+                                                      tangent=self.tets.tangent.copy()))
         probe.step(probe.new_history(), x, v, np.ones(self.n_nodes), np.zeros_like(x), 1e-3, 0.0, np.zeros(3),
                    contacts)

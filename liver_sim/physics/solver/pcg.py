@@ -1,7 +1,7 @@
 """Preconditioned conjugate gradients, matrix-free, on the implicit step's system A = M − h·D − h²·K
 (physics.solver.implicit_kernels): A·p, the preconditioners, the solve.  The operator's parts: the springs (u, iso,
-axial per spring: physics.tissue.spring_law.spring_apply), the tetrahedra of the 'fem' law (physics.tissue.fem_kernels,
-none with the springs' law), the contacts.
+axial per spring: physics.tissue.spring_law.spring_apply), the tetrahedra of the 'fem' or 'neo_hookean' law
+(physics.tissue.fem_kernels, none with the springs' law), the contacts.
 
 The solve starts from the previous step's Δv and stops at ‖r‖ ≤ cg_tolerance·‖b‖ (default 1e-3; the Newton residual
 check guards the result).  Preconditioner: block-Jacobi (the 3×3 diagonal blocks, contacts included), and on larger
@@ -87,7 +87,7 @@ def _apply(op, inv_mass, rows, tet_law, tet_weight, p, out, partial):
 @numba.njit(cache=True)
 def apply(op, inv_mass, rows, tet_law, tet_weight, p, out):
     """out = A·p, matrix-free (`op` a records.Operator, `rows` a records.ContactRows): shift·p, each spring's
-    B·(p_i − p_j) to i and its opposite to j, the tetrahedra of the 'fem' law (`tet_law`, a fem_kernels.TetArrays,
+    B·(p_i − p_j) to i and its opposite to j, the tetrahedra of a continuum law (`tet_law`, a fem_kernels.TetArrays,
     scaled by `tet_weight` = h² + h·τ; fem_kernels.tet_apply) and the active contacts' (h·c + h²·k)·w_a·w_b·nnᵀ.
     p must vanish on held nodes; out does there too."""
     _apply(op, inv_mass, rows, tet_law, tet_weight, p, out, np.zeros((1, 0, 3)))

@@ -75,8 +75,8 @@ class Loads(NamedTuple):
 
 class Tissue(NamedTuple):
     """The laws a step sums: the `springs` (spring_law.SpringArrays), the organ's `support`
-    (organ_support.SupportArrays) and the tetrahedra of the 'fem' law (`tets`, fem_kernels.TetArrays; none with the
-    springs' law)."""
+    (organ_support.SupportArrays) and the tetrahedra of the 'fem' or 'neo_hookean' law (`tets`,
+    fem_kernels.TetArrays; none with the springs' law)."""
 
     springs: SpringArrays
     support: SupportArrays

@@ -13,6 +13,9 @@ Its stiffness, the rotation held fixed (the usual co-rotational tangent), K_ab·
 and D = τ·K; in the implicit system A = M − h·D − h²·K the element adds (h² + h·τ)·V·R·C_ab·Rᵀ, whose diagonal
 blocks are (h² + h·τ)·V·((λ + μ)·(R·g_a)(R·g_a)ᵀ + μ·|g_a|²·I).  Every block is symmetric positive semi-definite.
 Held nodes (inv_mass 0) keep y = 0 and get no block (their rows and columns are the identity, physics.solver.implicit).
+
+The elements of tissue_law 'neo_hookean' share these arrays (TetArrays.neo_hookean set, their tangents in `tangent`);
+`tet_terms` and `tet_apply` hand them to that law's kernels (physics.tissue.neo_hookean).
 """
 from __future__ import annotations
 
@@ -23,6 +26,7 @@ import numba
 import numpy as np
 
 from liver_sim.mesh.tetmesh import signed_volumes
+from liver_sim.physics.tissue.neo_hookean import neo_hookean_apply, neo_hookean_terms
 
 #: Iterations and tolerance (rad) of the rotation's extraction per step (warm-started: one or two suffice).
 ROTATION_ITERATIONS = 20
@@ -30,10 +34,12 @@ ROTATION_TOLERANCE = 1e-8
 
 
 class TetArrays(NamedTuple):
-    """The tetrahedra of the 'fem' law for the kernels: `tets` (M, 4) int64, rest `volume_m3` (M,), shape-function
-    `gradients` (M, 4, 3) 1/m, Lamé `lame_lambda_pa` and `lame_mu_pa`, Kelvin–Voigt `viscous_time_s` τ; and the
-    per-step `quaternion` (M, 4: x, y, z, w), `rotation` (M, 3, 3) and `rotated_gradients` R·g_a (M, 4, 3) of each
-    element (scratch the step overwrites, the quaternion the warm start of the next)."""
+    """The tetrahedra of the 'fem' or 'neo_hookean' law for the kernels: `tets` (M, 4) int64, rest `volume_m3` (M,),
+    shape-function `gradients` (M, 4, 3) 1/m, Lamé `lame_lambda_pa` and `lame_mu_pa`, Kelvin–Voigt `viscous_time_s` τ;
+    the per-step `quaternion` (M, 4: x, y, z, w), `rotation` (M, 3, 3) and `rotated_gradients` R·g_a (M, 4, 3) of each
+    element (scratch the step overwrites, the quaternion the warm start of the next; the neo-Hookean law leaves
+    them at rest, R = I); `neo_hookean`, whether the elements are that law's, and then their projected tangents
+    `tangent` (M, 9, 9) Pa of the last assembly (physics.tissue.neo_hookean; (0, 9, 9) for the co-rotational law)."""
 
     tets: np.ndarray
     volume_m3: np.ndarray
@@ -44,18 +50,21 @@ class TetArrays(NamedTuple):
     quaternion: np.ndarray
     rotation: np.ndarray
     rotated_gradients: np.ndarray
+    neo_hookean: bool
+    tangent: np.ndarray
 
     @classmethod
     def none(cls) -> "TetArrays":
         """No element (the springs' law)."""
         return cls(np.zeros((0, 4), np.int64), np.zeros(0), np.zeros((0, 4, 3)), 0.0, 0.0, 0.0, np.zeros((0, 4)),
-                   np.zeros((0, 3, 3)), np.zeros((0, 4, 3)))
+                   np.zeros((0, 3, 3)), np.zeros((0, 4, 3)), False, np.zeros((0, 9, 9)))
 
 
 def build_tets(points: np.ndarray, tets: np.ndarray, young_pa: float, poisson: float,
-               viscosity_pa_s: float) -> TetArrays:
+               viscosity_pa_s: float, neo_hookean: bool = False) -> TetArrays:
     """The TetArrays of a mesh at rest (`points` m, positively oriented `tets`): volumes, gradients g_a (the rows of
-    Dm⁻ᵀ for a = 1..3, g_0 = −Σ), λ = E·ν/((1 + ν)(1 − 2ν)), μ = E/(2(1 + ν)), τ = η/E; rotations the identity."""
+    Dm⁻ᵀ for a = 1..3, g_0 = −Σ), λ = E·ν/((1 + ν)(1 − 2ν)), μ = E/(2(1 + ν)), τ = η/E; rotations the identity; with
+    `neo_hookean`, that law's elements, their tangents zero until the first assembly."""
     tets = np.ascontiguousarray(tets, dtype=np.int64)
     corners = points[tets]
     edges = np.transpose(corners[:, 1:] - corners[:, :1], (0, 2, 1))  # Dm: columns x_a − x_0
@@ -67,7 +76,8 @@ def build_tets(points: np.ndarray, tets: np.ndarray, young_pa: float, poisson: f
     return TetArrays(tets, signed_volumes(points, tets), np.ascontiguousarray(gradients),
                      young_pa * poisson / ((1.0 + poisson) * (1.0 - 2.0 * poisson)), young_pa / (2.0 * (1.0 + poisson)),
                      viscosity_pa_s / young_pa if young_pa > 0.0 else 0.0, quaternion,
-                     np.broadcast_to(np.eye(3), (count, 3, 3)).copy(), np.ascontiguousarray(gradients).copy())
+                     np.broadcast_to(np.eye(3), (count, 3, 3)).copy(), np.ascontiguousarray(gradients).copy(),
+                     bool(neo_hookean), np.zeros((count if neo_hookean else 0, 9, 9)))
 
 
 @numba.njit(cache=True, inline="always")
@@ -150,7 +160,11 @@ def _rotated_stress(r, grad, lam, mu, stress, rs):
 def tet_terms(x, v, y, inv_mass, h, law, f, ky, diagonal, assemble_matrix):
     """Add the elements' (`law`, a TetArrays) forces at (x, v) to f and K·y to ky (y zero on held nodes); with
     assemble_matrix, first the rotations R at x (into law.quaternion, law.rotation) and the diagonal blocks of
-    (h² + h·τ)·V·R·C_aa·Rᵀ to free nodes' `diagonal` (module docstring).  Without it the last rotations are used."""
+    (h² + h·τ)·V·R·C_aa·Rᵀ to free nodes' `diagonal` (module docstring).  Without it the last rotations are used.
+    The neo-Hookean law's elements: neo_hookean.neo_hookean_terms."""
+    if law.neo_hookean:
+        neo_hookean_terms(x, v, y, inv_mass, h, law, f, ky, diagonal, assemble_matrix)
+        return
     tets, volume, gradients, quaternion, rotation = law.tets, law.volume_m3, law.gradients, law.quaternion, law.rotation
     lam, mu, tau = law.lame_lambda_pa, law.lame_mu_pa, law.viscous_time_s
     grad = np.empty((3, 3))
@@ -213,7 +227,10 @@ def tet_terms(x, v, y, inv_mass, h, law, f, ky, diagonal, assemble_matrix):
 def tet_apply(law, weight, p, first, last, out):
     """out += Σ elements first..last−1 of weight·V·R·C·Rᵀ·p (`law` a TetArrays, weight = h² + h·τ; p zero on held
     nodes): the elements' part of A·p.  With the rotated gradients h_a = R·g_a and G = Σ_b p_b ⊗ h_b, R·C·Rᵀ·p gives
-    node a (λ·tr(G)·I + μ·(G + Gᵀ))·h_a."""
+    node a (λ·tr(G)·I + μ·(G + Gᵀ))·h_a.  The neo-Hookean law's elements: neo_hookean.neo_hookean_apply."""
+    if law.neo_hookean:
+        neo_hookean_apply(law, weight, p, first, last, out)
+        return
     tets, volume, rotated = law.tets, law.volume_m3, law.rotated_gradients
     lam, mu = law.lame_lambda_pa, law.lame_mu_pa
     for e in range(first, last):

@@ -16,7 +16,7 @@ import scipy.sparse
 import scipy.sparse.linalg
 
 from liver_sim.mesh.tetmesh import TRIANGLE_EDGES, TetMesh, isin_keys, unique_edges
-from liver_sim.physics.settings import ModelParams
+from liver_sim.physics.settings import CONTINUUM_LAWS, ModelParams
 from liver_sim.physics.tissue.materials import material_coefficients
 from liver_sim.physics.tissue.organ_support import SupportArrays
 
@@ -53,7 +53,8 @@ def build_springs(mesh: TetMesh, params: ModelParams, rest_points: np.ndarray | 
     by a tear or a cut is parenchyma surface and carries none.  Their coefficients: from
     `params.tissue` and the mesh (materials.material_coefficients) with spring_constants 'material',
     else the paper's `params.parenchyma` on every edge plus `params.capsule` on capsule edges.  With
-    `params.tissue_law` 'fem' the parenchyma is the elements' (physics.tissue.fem_kernels): capsule edges only.
+    `params.tissue_law` 'fem' or 'neo_hookean' the parenchyma is the elements' (physics.tissue.fem_kernels,
+    physics.tissue.neo_hookean): capsule edges only.
     """
     points = mesh.points if rest_points is None else rest_points
     edges = mesh.edges
@@ -67,7 +68,7 @@ def build_springs(mesh: TetMesh, params: ModelParams, rest_points: np.ndarray | 
     rest = np.linalg.norm(points[node_j] - points[node_i], axis=1)
     if params.spring_constants == "material":
         tissue = params.tissue
-        if params.tissue_law == "fem":  # the parenchyma is the elements': the capsule's springs only
+        if params.tissue_law in CONTINUUM_LAWS:  # the parenchyma is the elements': the capsule's springs only
             tissue = replace(tissue, parenchyma_young_modulus_kpa=0.0, parenchyma_viscosity_pa_s=0.0)
         lambda1, lambda2, mu = material_coefficients(mesh, tissue, rest_points, capsule_triangles)
     else:
@@ -76,7 +77,7 @@ def build_springs(mesh: TetMesh, params: ModelParams, rest_points: np.ndarray | 
         lambda2 = par.lambda2_n + cap.lambda2_n * on_skin
         mu = par.mu_ns_per_m + cap.mu_ns_per_m * on_skin
     parenchyma = len(edges)
-    if params.tissue_law == "fem":
+    if params.tissue_law in CONTINUUM_LAWS:
         keep = on_skin
         node_i, node_j, rest, lambda1, lambda2, mu = (np.ascontiguousarray(a[keep]) for a in
                                                       (node_i, node_j, rest, lambda1, lambda2, mu))

@@ -70,8 +70,10 @@ def test_the_elements_need_the_implicit_integrator_and_material_constants():
         ModelParams(tissue_law="fem", integrator="symplectic_euler").validate()
     with pytest.raises(ValueError, match="tissue_law"):
         ModelParams(tissue_law="fem", spring_constants="paper").validate()
+    with pytest.raises(ValueError, match="tissue_law 'neo_hookean'"):
+        ModelParams(tissue_law="neo_hookean", integrator="symplectic_euler").validate()
     with pytest.raises(ValueError, match="tissue_law"):
-        ModelParams(tissue_law="neo_hookean").validate()
+        ModelParams(tissue_law="hyperfoam").validate()
 
 
 def test_the_surface_contact_needs_the_implicit_integrator():

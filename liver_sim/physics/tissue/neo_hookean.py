@@ -1,0 +1,201 @@
+"""The parenchyma as stable neo-Hookean tetrahedra (tissue_law 'neo_hookean'): the hyperelastic continuum law beside
+the co-rotational one (physics.tissue.fem_kernels, which holds the elements' arrays and dispatches to these kernels).
+
+Each tetrahedron (rest volume V, shape-function gradients g_a, F = Σ x_a ⊗ g_a as in fem_kernels) stores the energy
+density of Smith, de Goes & Kim, "Stable Neo-Hookean Flesh Simulation" (ACM TOG 37(2), 2018), in the rest-stable form
+of Kim & Eberle, "Dynamic Deformables" (SIGGRAPH course 2022):
+
+    Ψ(F) = μ/2·(‖F‖² − 3) − μ·(J − 1) + λ̂/2·(J − 1)²,   J = det F,   λ̂ = λ + μ,
+
+(λ, μ) the small-strain Lamé constants from E and ν, so that its linearisation at F = I is Hooke's law with λ, μ.  No
+log and no division: it is defined through inversion (J ≤ 0).  Its first Piola stress and force on node a:
+
+    P = μ·F + s·∂J/∂F,   s = λ̂·(J − 1) − μ,   ∂J/∂F = [f₁×f₂ | f₂×f₀ | f₀×f₁] (columns; f_i the columns of F),
+    f_a = −V·P·g_a.
+
+Tangent ∂P/∂F = μ·I₉ + λ̂·vec(∂J/∂F)·vec(∂J/∂F)ᵀ + s·∂²J/∂F², indefinite in places, projected onto the positive
+semi-definite cone through its analytic eigensystem (Smith, de Goes & Kim, "Analytic eigensystems for isotropic
+distortion energies", ACM TOG 38(1), 2019; Kim & Eberle ch. 7).  With the rotation-variant SVD F = U·Σ·Vᵀ
+(det U = det V = +1, σ₂ carrying the sign of J) and, for each pair (i, j) with k the third index, u_i, v_j the columns
+of U, V:
+
+    twist  (u_i·v_jᵀ − u_j·v_iᵀ)/√2,  eigenvalue μ + s·σ_k;
+    flip   (u_i·v_jᵀ + u_j·v_iᵀ)/√2,  eigenvalue μ − s·σ_k;
+    scale  U·diag(q)·Vᵀ for the eigenpairs (w, q) of the 3×3 block ∂²Ψ/∂σ_i∂σ_j = μ·δ_ij + λ̂·γ_i·γ_j
+           + s·σ_k·(1 − δ_ij), γ_i = ∂J/∂σ_i = Π_{l≠i} σ_l.
+
+The element's tangent 𝐂̃ = Σ max(0, eigenvalue)·vec(mode)·vec(mode)ᵀ (9×9, row (i, j) ↔ 3i + j), kept per element
+from the last assembly.  Kelvin–Voigt viscosity stiffness-proportional as the co-rotational law's: P_v = τ·𝐂̃:Ḟ,
+Ḟ = Σ v_a ⊗ g_a, τ = η/E, so K_ab·y = −V·(𝐂̃:(y ⊗ g_b))·g_a, D = τ·K, and in A = M − h·D − h²·K the element adds
+(h² + h·τ)·V·g_aᵀ·𝐂̃·g_b, whose diagonal blocks are (h² + h·τ)·V·Σ_jl g_a[j]·g_a[l]·𝐂̃[(i, j), (k, l)].
+"""
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+#: The pairs (i, j) of singular values of the twist and flip modes, k the third index.
+PAIRS = ((1, 2, 0), (0, 2, 1), (0, 1, 2))
+
+
+@numba.njit(cache=True)
+def first_piola(f, mu, lam_hat, out):
+    """out ← P(F) = μ·F + (λ̂·(J − 1) − μ)·∂J/∂F (Pa; `f` 3×3, μ, λ̂ in Pa)."""
+    for j in range(3):
+        a, b = (j + 1) % 3, (j + 2) % 3
+        out[0, j] = f[1, a] * f[2, b] - f[2, a] * f[1, b]
+        out[1, j] = f[2, a] * f[0, b] - f[0, a] * f[2, b]
+        out[2, j] = f[0, a] * f[1, b] - f[1, a] * f[0, b]
+    jacobian = f[0, 0] * out[0, 0] + f[1, 0] * out[1, 0] + f[2, 0] * out[2, 0]
+    s = lam_hat * (jacobian - 1.0) - mu
+    for i in range(3):
+        for j in range(3):
+            out[i, j] = mu * f[i, j] + s * out[i, j]
+
+
+@numba.njit(cache=True)
+def eigensystem(f, mu, lam_hat, values, modes):
+    """values (9,) Pa and orthonormal modes (9, 3, 3) of the unprojected tangent at `f`: ∂P/∂F = Σ_m values[m]·
+    vec(modes[m])·vec(modes[m])ᵀ; the three scaling modes first, then twist and flip per pair of PAIRS (module
+    docstring)."""
+    u, sigma, vt = np.linalg.svd(f)
+    v = np.ascontiguousarray(vt.T)
+    if np.linalg.det(u) < 0.0:
+        u[:, 2] = -u[:, 2]
+        sigma[2] = -sigma[2]
+    if np.linalg.det(v) < 0.0:
+        v[:, 2] = -v[:, 2]
+        sigma[2] = -sigma[2]
+    s = lam_hat * (sigma[0] * sigma[1] * sigma[2] - 1.0) - mu
+    block = np.empty((3, 3))
+    for i, j, k in PAIRS:
+        block[i, j] = lam_hat * sigma[i] * sigma[j] * sigma[k] * sigma[k] + s * sigma[k]
+        block[j, i] = block[i, j]
+    for i, j, k in PAIRS:
+        block[k, k] = mu + lam_hat * (sigma[i] * sigma[j]) ** 2
+    scale, q = np.linalg.eigh(block)
+    root = 1.0 / math.sqrt(2.0)
+    for m in range(3):
+        values[m] = scale[m]
+        for r in range(3):
+            for c in range(3):
+                modes[m, r, c] = u[r, 0] * q[0, m] * v[c, 0] + u[r, 1] * q[1, m] * v[c, 1] + u[r, 2] * q[2, m] * v[c, 2]
+    for p in range(3):
+        i, j, k = PAIRS[p]
+        values[3 + 2 * p] = mu + s * sigma[k]
+        values[4 + 2 * p] = mu - s * sigma[k]
+        for r in range(3):
+            for c in range(3):
+                ij, ji = u[r, i] * v[c, j], u[r, j] * v[c, i]
+                modes[3 + 2 * p, r, c] = root * (ij - ji)
+                modes[4 + 2 * p, r, c] = root * (ij + ji)
+
+
+@numba.njit(cache=True)
+def projected_tangent(f, mu, lam_hat, values, modes, out):
+    """out (9, 9) ← 𝐂̃(F), the tangent with its negative eigenvalues clamped to 0 (Pa), exactly symmetric; `values`,
+    `modes` scratch for `eigensystem`."""
+    eigensystem(f, mu, lam_hat, values, modes)
+    out[:] = 0.0
+    for m in range(9):
+        w = values[m]
+        if w <= 0.0:
+            continue
+        mode = modes[m]
+        for r in range(9):
+            wr = w * mode[r // 3, r % 3]
+            for c in range(r, 9):
+                out[r, c] += wr * mode[c // 3, c % 3]
+    for r in range(9):
+        for c in range(r):
+            out[r, c] = out[c, r]
+
+
+@numba.njit(cache=True, inline="always")
+def _contract(tangent, grad, out):
+    """out ← 𝐂̃:grad, out[i, j] = Σ_kl 𝐂̃[(i, j), (k, l)]·grad[k, l]."""
+    for r in range(9):
+        total = 0.0
+        for c in range(9):
+            total += tangent[r, c] * grad[c // 3, c % 3]
+        out[r // 3, r % 3] = total
+
+
+@numba.njit(cache=True)
+def neo_hookean_terms(x, v, y, inv_mass, h, law, f, ky, diagonal, assemble_matrix):
+    """Add the elements' (`law`, a fem_kernels.TetArrays of this law) forces at (x, v) to f and K·y to ky (y zero on
+    held nodes); with assemble_matrix, first each element's projected tangent at x (into law.tangent) and the
+    diagonal blocks of (h² + h·τ)·V·g_aᵀ·𝐂̃·g_a to free nodes' `diagonal`.  Without it the last tangents are used
+    (for K·y and the viscous stress)."""
+    tets, volume, gradients, tangent = law.tets, law.volume_m3, law.gradients, law.tangent
+    mu, tau = law.lame_mu_pa, law.viscous_time_s
+    lam_hat = law.lame_lambda_pa + mu
+    weight = h * h + h * tau
+    grad = np.empty((3, 3))
+    rate = np.empty((3, 3))
+    probe = np.empty((3, 3))
+    stress = np.empty((3, 3))
+    contracted = np.empty((3, 3))
+    values = np.empty(9)
+    modes = np.empty((9, 3, 3))
+    for e in range(tets.shape[0]):
+        tet, g, c = tets[e], gradients[e], tangent[e]
+        grad[:] = 0.0
+        rate[:] = 0.0
+        probe[:] = 0.0
+        for a in range(4):
+            n = tet[a]
+            free = inv_mass[n] > 0.0
+            for i in range(3):
+                for j in range(3):
+                    grad[i, j] += x[n, i] * g[a, j]
+                    rate[i, j] += v[n, i] * g[a, j]
+                    if free:
+                        probe[i, j] += y[n, i] * g[a, j]
+        if assemble_matrix:
+            projected_tangent(grad, mu, lam_hat, values, modes, c)
+        first_piola(grad, mu, lam_hat, stress)
+        _contract(c, rate, contracted)
+        for i in range(3):
+            for j in range(3):
+                stress[i, j] += tau * contracted[i, j]
+        _contract(c, probe, contracted)  # 𝐂̃:Y, Y = Σ y_a ⊗ g_a
+        vol = volume[e]
+        for a in range(4):
+            n = tet[a]
+            for i in range(3):
+                f[n, i] -= vol * (stress[i, 0] * g[a, 0] + stress[i, 1] * g[a, 1] + stress[i, 2] * g[a, 2])
+                ky[n, i] -= vol * (contracted[i, 0] * g[a, 0] + contracted[i, 1] * g[a, 1] + contracted[i, 2] * g[a, 2])
+            if assemble_matrix and inv_mass[n] > 0.0:
+                for i in range(3):
+                    for k in range(3):
+                        total = 0.0
+                        for j in range(3):
+                            for l in range(3):
+                                total += g[a, j] * g[a, l] * c[3 * i + j, 3 * k + l]
+                        diagonal[n, i, k] += weight * vol * total
+
+
+@numba.njit(cache=True)
+def neo_hookean_apply(law, weight, p, first, last, out):
+    """out += Σ elements first..last−1 of weight·V·g_aᵀ·𝐂̃·g_b·p_b (`law` a fem_kernels.TetArrays of this law, weight =
+    h² + h·τ; p zero on held nodes): with G = Σ_b p_b ⊗ g_b, node a gets weight·V·(𝐂̃:G)·g_a."""
+    tets, volume, gradients, tangent = law.tets, law.volume_m3, law.gradients, law.tangent
+    grad = np.empty((3, 3))
+    stress = np.empty((3, 3))
+    for e in range(first, last):
+        tet, g = tets[e], gradients[e]
+        grad[:] = 0.0
+        for b in range(4):
+            n = tet[b]
+            for i in range(3):
+                for j in range(3):
+                    grad[i, j] += p[n, i] * g[b, j]
+        _contract(tangent[e], grad, stress)
+        scale = weight * volume[e]
+        for a in range(4):
+            n = tet[a]
+            for i in range(3):
+                out[n, i] += scale * (stress[i, 0] * g[a, 0] + stress[i, 1] * g[a, 1] + stress[i, 2] * g[a, 2])
