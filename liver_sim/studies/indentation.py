@@ -231,12 +231,13 @@ def indent(mesh: TetMesh, params: ModelParams, depths_m=DEPTHS_M, progress=None,
 
 def variants(base: ModelParams) -> dict:
     """{name: ModelParams} of the runs of `run_indentation` on `base`: the springs' linear law (cubic_ratio 0), their
-    default law, the co-rotational tetrahedra (tissue_law 'fem', the reference), each with the surface contact, and
-    the product's default (the probe contact) as it was."""
+    default law, the co-rotational tetrahedra (tissue_law 'fem', the reference) and the neo-Hookean ones, each with
+    the surface contact, and the product's default (the probe contact) as it was."""
     surface = base.with_changes(contact_model="surface")
     return {"springs linear, surface contact": surface.with_changes(tissue=replace(surface.tissue, cubic_ratio=0.0)),
             "springs default, surface contact": surface,
             "fem, surface contact": surface.with_changes(tissue_law="fem"),
+            "neo_hookean, surface contact": surface.with_changes(tissue_law="neo_hookean"),
             "springs default, probe contact": base.with_changes(contact_model="probe")}
 
 
