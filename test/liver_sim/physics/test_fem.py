@@ -1,6 +1,7 @@
-"""The default liver with tissue_law 'fem' as a whole model: pressed, cut and torn (the elements' law:
-tissue/test_fem_kernels.py)."""
+"""The default liver with tissue_law 'fem' or 'neo_hookean' as a whole model: pressed, cut and torn (the elements'
+laws: tissue/test_fem_kernels.py, tissue/test_neo_hookean.py)."""
 import numpy as np
+import pytest
 
 from liver_sim.mesh.landmarks import press_anchor, upper_skin_path
 from liver_sim.mesh.liver_shape import default_liver
@@ -9,9 +10,10 @@ from liver_sim.physics.model import LiverModel
 from liver_sim.physics.settings import ModelParams
 
 
-def test_the_liver_with_elements_is_pressed_cut_and_torn():
+@pytest.mark.parametrize("law", ("fem", "neo_hookean"))
+def test_the_liver_with_elements_is_pressed_cut_and_torn(law):
     mesh = default_liver()
-    model = LiverModel(mesh, ModelParams(tissue_law="fem", tearing=True))
+    model = LiverModel(mesh, ModelParams(tissue_law=law, tearing=True))
     anchor = press_anchor(mesh)
     radius = model.tool.shape.radius_m
     for frame in range(60):
@@ -22,6 +24,7 @@ def test_the_liver_with_elements_is_pressed_cut_and_torn():
     path = upper_skin_path(mesh, (-0.08, 0.0), (-0.02, 0.0))
     assert model.cut(path, 0.01)
     assert len(model.structure.solver.tets.tets) == len(model.structure.mesh.tets) > len(mesh.tets)
+    assert model.structure.solver.tets.neo_hookean == (law == "neo_hookean")  # the cut kept the law
     for _ in range(30):
         result = model.step_frame(None)
     assert result.divergence is None and np.isfinite(model.state.positions).all()
