@@ -8,7 +8,7 @@ import numpy as np
 from rclpy.serialization import deserialize_message
 from visualization_msgs.msg import Marker
 
-from liver_sim.base.checks import positive
+from liver_sim.base.checks import non_negative, positive
 from liver_sim.base.geometry.rotations import quaternion_from_z_axis, quaternion_to_matrix
 from liver_sim.base.local_model import LocalModel
 from msg_defs import cdr
@@ -21,8 +21,12 @@ SPHERE_COLOUR = (0.2, 0.5, 0.9, 0.3)
 PLANE_THICKNESS_M = 0.001
 #: The key of the local model's stiffness K (N/m) in the Marker's `text` ("key=value").
 STIFFNESS_KEY = "stiffness_n_per_m"
+#: The key of the model's depth (m) at the physics' pose (LocalModel.depth_m) in the Marker's `text`, beside K.
+DEPTH_KEY = "depth_m"
 #: The first STIFFNESS_KEY entry among the whitespace-separated entries of `text`, found without splitting it.
 _STIFFNESS_ENTRY = re.compile(rf"(?:^|\s){STIFFNESS_KEY}=(\S*)")
+#: The first DEPTH_KEY entry, found the same way.
+_DEPTH_ENTRY = re.compile(rf"(?:^|\s){DEPTH_KEY}=(\S*)")
 
 
 def local_model_marker(model: LocalModel, stamp, frame_id: str, lifetime_s: float,
@@ -32,7 +36,9 @@ def local_model_marker(model: LocalModel, stamp, frame_id: str, lifetime_s: floa
 
     plane: CUBE at `point`, orientation's z axis = outward `normal`, scale (patch, patch, 1 mm);
     sphere: SPHERE at `centre`, scale = diameter (m) on all axes; not valid: action DELETE.  The model's
-    stiffness K, when it has one, rides in `text` as "stiffness_n_per_m=<K>" (STIFFNESS_KEY).
+    stiffness K, when it has one, rides in `text` with its depth d at the physics' pose (m, LocalModel.depth_m) as
+    "stiffness_n_per_m=<K> depth_m=<d>" (STIFFNESS_KEY, DEPTH_KEY): K·d is the physics' force, which a bridge that
+    caps K needs to render it at that pose.
     """
     return deserialize_message(local_model_marker_bytes(model, stamp, frame_id, lifetime_s, patch_size_m), Marker)
 
@@ -55,7 +61,8 @@ def local_model_marker_bytes(model: LocalModel, stamp, frame_id: str, lifetime_s
         diameter = 2.0 * model.radius_m
         position = finite_floats(tuple(model.centre.tolist()), (3,), "LocalModel.centre")
         orientation, kind, scale, colour = (0.0, 0.0, 0.0, 1.0), Marker.SPHERE, (diameter,) * 3, SPHERE_COLOUR
-    text = f"{STIFFNESS_KEY}={model.stiffness_n_per_m!r}" if model.stiffness_n_per_m is not None else ""
+    text = "" if model.stiffness_n_per_m is None else \
+        f"{STIFFNESS_KEY}={model.stiffness_n_per_m!r} {DEPTH_KEY}={non_negative(model.depth_m, 'LocalModel.depth_m')!r}"
     return cdr.marker_bytes((sec, nanosec), frame_id, "local_model", 0, kind, Marker.ADD, (*position, *orientation),
                             scale, colour, lifetime, text)
 
@@ -73,12 +80,27 @@ def _marker_stiffness(text: str) -> float | None:
         raise ValueError(f"Marker.text {STIFFNESS_KEY} must be a finite number > 0, got {value[:40]!r}") from None
 
 
+def _marker_depth(text: str) -> float:
+    """The depth (m) at the physics' pose from a local-model Marker's `text`: 0 when it carries no DEPTH_KEY entry
+    (a Marker from before the entry, read as :meth:`LocalModel.plane` and :meth:`LocalModel.sphere` make it: no
+    depth seen); ValueError naming the field for a value that is not a finite number >= 0."""
+    found = _DEPTH_ENTRY.search(text)
+    if found is None:
+        return 0.0
+    value = found.group(1)
+    try:
+        return non_negative(float(value), f"Marker.text {DEPTH_KEY}")
+    except ValueError:
+        raise ValueError(f"Marker.text {DEPTH_KEY} must be a finite number >= 0, got {value[:40]!r}") from None
+
+
 def marker_to_local_model(msg: Marker) -> tuple[LocalModel | None, float]:
     """(local model, lifetime s) from a /liver/contact_plane Marker; the model is None for DELETE and
     DELETEALL (no surface near the tool).
 
     CUBE → LocalModel.plane(pose.position, normal = the orientation's z axis); SPHERE →
-    LocalModel.sphere(pose.position, radius = scale.x / 2); K from `text` (local_model_marker). A lifetime
+    LocalModel.sphere(pose.position, radius = scale.x / 2); K and depth_m from `text` (local_model_marker; no
+    depth_m entry: 0). A lifetime
     of 0 means "forever" to RViz: the caller decides what it trusts.
     """
     p, o = msg.pose.position, msg.pose.orientation
@@ -108,7 +130,9 @@ def _local_model(action: int, marker_type: int, position, orientation, scale_x: 
         raise ValueError(f"Marker.type is {marker_type}, expected CUBE ({Marker.CUBE}) or SPHERE ({Marker.SPHERE})")
     position = np.array(finite_floats(tuple(position), (3,), "Marker.pose.position"))
     orientation = unit_quaternion(tuple(orientation), "Marker.pose.orientation")
-    stiffness = _marker_stiffness(text)
+    stiffness, depth = _marker_stiffness(text), _marker_depth(text)
     if marker_type == Marker.CUBE:
-        return LocalModel.plane(position, quaternion_to_matrix(orientation)[:, 2], stiffness), lifetime_s
-    return LocalModel.sphere(position, positive(scale_x, "Marker.scale.x") / 2.0, stiffness), lifetime_s
+        model = LocalModel.plane(position, quaternion_to_matrix(orientation)[:, 2], stiffness)
+    else:
+        model = LocalModel.sphere(position, positive(scale_x, "Marker.scale.x") / 2.0, stiffness)
+    return (model if depth == 0.0 else LocalModel.derived(model, depth_m=depth)), lifetime_s

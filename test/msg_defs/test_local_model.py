@@ -10,6 +10,7 @@ from visualization_msgs.msg import Marker, UVCoordinate
 
 from liver_sim.base.local_model import LocalModel
 from msg_defs.local_model import (
+    DEPTH_KEY,
     PLANE_THICKNESS_M,
     STIFFNESS_KEY,
     local_model_from_bytes,
@@ -39,7 +40,7 @@ def _both_ways(marker):
     assert lifetime_from_bytes == pytest.approx(lifetime_s, abs=1e-12)
     assert (model is None) == (from_bytes is None)
     if model is not None:
-        for name in ("kind", "valid", "radius_m", "stiffness_n_per_m"):
+        for name in ("kind", "valid", "radius_m", "stiffness_n_per_m", "depth_m"):
             assert getattr(from_bytes, name) == getattr(model, name)
         for name in ("point", "normal", "centre"):
             np.testing.assert_array_equal(getattr(from_bytes, name), getattr(model, name))
@@ -146,3 +147,44 @@ def test_an_oversized_marker_is_refused_before_it_is_read():
 def test_the_stiffness_is_the_first_entry_with_its_key(text, stiffness):
     model, _ = _both_ways(_marker(text=text))
     assert model.stiffness_n_per_m == stiffness
+
+
+@pytest.mark.parametrize("kind", ["plane", "sphere"])
+def test_the_depth_at_the_physics_pose_travels_beside_the_stiffness(kind):
+    model = LocalModel(kind, True, np.array([0.0, 0.0, 0.05]), np.array([0.0, 0.0, 1.0]), np.zeros(3), 0.05,
+                       0.0023, True, 350.0)
+    marker = local_model_marker(model, 0.0, "liver", 0.05)
+    assert marker.text == f"{STIFFNESS_KEY}=350.0 {DEPTH_KEY}=0.0023"
+    read, _ = _both_ways(marker)
+    assert (read.stiffness_n_per_m, read.depth_m) == (350.0, 0.0023)
+
+
+def test_a_model_without_stiffness_carries_no_depth():
+    marker = local_model_marker(plane_model((0.0, 0.0, 0.0), (0.0, 0.0, 1.0)), 0.0, "liver", 0.05)
+    assert marker.text == ""
+    read, _ = _both_ways(marker)
+    assert read.stiffness_n_per_m is None and read.depth_m == 0.0
+
+
+@pytest.mark.parametrize("text, depth", [(f"{STIFFNESS_KEY}=34.5", 0.0),  # a Marker from before the entry
+                                         ("", 0.0), (f"{DEPTH_KEY}=0", 0.0), (f"x{DEPTH_KEY}=1", 0.0),
+                                         (f"note=1\t{DEPTH_KEY}=1e-3 {DEPTH_KEY}=2", 0.001)])
+def test_the_depth_is_the_first_entry_with_its_key_and_zero_without_one(text, depth):
+    model, _ = _both_ways(_marker(text=text))
+    assert model.depth_m == depth
+
+
+@pytest.mark.parametrize("value", ["nan", "inf", "-0.001", "deep", ""])
+def test_a_bad_depth_is_refused_by_name(value):
+    text = f"{STIFFNESS_KEY}=34.5 {DEPTH_KEY}={value}"
+    message = r"Marker\.text depth_m must be a finite number >= 0"
+    with pytest.raises(ValueError, match=message):
+        marker_to_local_model(_marker(text=text))
+    with pytest.raises(ValueError, match=message):
+        local_model_from_bytes(serialize_message(_marker(text=text)))
+
+
+def test_a_model_with_a_bad_depth_is_not_written():
+    model = LocalModel("plane", True, np.zeros(3), np.array([0.0, 0.0, 1.0]), np.zeros(3), 0.0, -0.001, True, 34.5)
+    with pytest.raises(ValueError, match=r"LocalModel\.depth_m must be finite and >= 0"):
+        local_model_marker(model, 0.0, "liver", 0.05)

@@ -106,8 +106,9 @@ def test_the_stiffness_travels_in_the_markers_text_and_bad_values_are_refused_by
 
     plane = LocalModel("plane", True, [0.0, 0.0, 0.1], [0.0, 0.0, 1.0], [0.0, 0.0, 0.1], 0.0, 0.002, True, 34.5)
     marker = local_model_marker(plane, stamp_from_seconds(0.0), "liver", 0.05)
-    assert marker.text == "stiffness_n_per_m=34.5"
+    assert marker.text == "stiffness_n_per_m=34.5 depth_m=0.002"
     assert marker_to_local_model(marker)[0].stiffness_n_per_m == 34.5
+    assert marker_to_local_model(marker)[0].depth_m == 0.002  # K·depth: the physics force
     marker.text = ""
     assert marker_to_local_model(marker)[0].stiffness_n_per_m is None  # rendered with the bridge's own K
     marker.text = "stiffness_n_per_m=nan"
