@@ -15,6 +15,40 @@ from liver_sim.base.checks import non_negative, positive
 from liver_sim.base.local_model import LocalModel
 
 
+def capped(model: LocalModel | None, cap_n_per_m: float) -> LocalModel | None:
+    """The model the bridge renders for the physics' `model` when it renders no stiffer than `cap_n_per_m` (N/m).
+
+    The physics places its model so that K·d = F, its contact force, d (`depth_m`) the tool's depth in the model at
+    the physics' pose. Rendered with K_r = min(K, cap) < K, that pose would feel (K_r/K)·F. So a model whose K is
+    above the cap becomes one of stiffness K_r whose surface lies s = d·(K/K_r − 1) further out along the normal
+    (plane: point and centre moved by s·normal; sphere, the liver inside: radius + s) and whose `depth_m` is
+    d + s = K·d/K_r: at the physics' pose it renders K_r·(d + s) = K·d = F, the physics force, and about that pose
+    a spring of the capped K_r, whose passivity the bridge checks. A model with K above the cap and no depth (d = 0:
+    no contact force, or a Marker that carries no depth) only takes K_r.
+
+    A model without K, with K at or below the cap, invalid, or None is returned as is (the same object): it renders
+    exactly as it did before models carried a depth; so is every model under a cap of 0 (which renders no force).
+    A capped model is its own capped model (idempotent).
+
+    The bridge caps each model as it arrives, before the glide (haptic_bridge.tick.BridgeTick.step): the glide then
+    moves the rendered surface, at the rendered K, from one update's to the next, which is the step it is there to
+    spread; capping the glided model instead would shift a blend of two surfaces by the target's depth, a jump at
+    the glide's start.
+    """
+    stiffness = None if model is None or not model.valid else model.stiffness_n_per_m
+    if stiffness is None or stiffness <= cap_n_per_m or not cap_n_per_m > 0.0:
+        return model  # (a cap of 0 renders no force: min(K, 0), as the renderer takes it)
+    depth = model.depth_m
+    if not depth > 0.0:
+        return LocalModel.derived(model, stiffness_n_per_m=cap_n_per_m)
+    shift = depth * (stiffness / cap_n_per_m - 1.0)
+    fields = {"stiffness_n_per_m": cap_n_per_m, "depth_m": depth + shift}
+    if model.kind == "plane":
+        point = model.point + shift * model.normal
+        return LocalModel.derived(model, point=point, centre=point, **fields)
+    return LocalModel.derived(model, radius_m=model.radius_m + shift, **fields)
+
+
 def blend(start: LocalModel | None, target: LocalModel, fraction: float) -> LocalModel:
     """The model `fraction` (clipped to 0..1) of the way from `start` to `target`.
 

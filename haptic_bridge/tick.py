@@ -12,7 +12,7 @@ import numpy as np
 
 from haptic_bridge.parameters import BridgeParameters
 from haptic_bridge.passivity import PassivityObserver
-from haptic_bridge.rendering import ModelGlide, PassiveModelUpdate, contact_force, max_passive_stiffness
+from haptic_bridge.rendering import ModelGlide, PassiveModelUpdate, capped, contact_force, max_passive_stiffness
 from haptic_bridge.safety import SafeForceOutput
 from liver_sim.base.emulated_link import LinkSettings
 from liver_sim.base.geometry.device_map import DeviceMap
@@ -106,7 +106,9 @@ def safe_output(p: BridgeParameters) -> SafeForceOutput:
 
 def rendered_stiffness(model: LocalModel | None, cap_n_per_m: float) -> float:
     """The K (N/m) a local model is rendered with: its own K capped at `cap_n_per_m` (the bridge's
-    stiffness_n_per_m, whose passivity is checked), the cap when it carries none."""
+    stiffness_n_per_m, whose passivity is checked), the cap when it carries none. The bridge renders a model whose K
+    is above the cap as :func:`haptic_bridge.rendering.capped` makes it, so that the physics force is felt at the
+    physics' pose; this min then only guards the ticks of a glide after the cap was lowered at run time."""
     if model is None or model.stiffness_n_per_m is None:
         return cap_n_per_m
     return min(model.stiffness_n_per_m, cap_n_per_m)
@@ -155,7 +157,8 @@ def passive_model_update_on(p: BridgeParameters) -> bool:
 
 class BridgeTick:
     """F_device = SafeForceOutput(Rᵀ·F_liver [− α·v]): F_liver is the local model's penalty force on the tool sphere
-    (`local_model` plane/sphere, rendered through a ModelGlide of `model_glide_s`, then through a
+    (`local_model` plane/sphere, capped at `stiffness_n_per_m` by :meth:`rendered_model` so that it still renders the
+    physics force at the physics' pose, rendered through a ModelGlide of `model_glide_s`, then through a
     PassiveModelUpdate when :func:`passive_model_update_on`) or the held physics contact force (`local_model: none`,
     Fig. 8 baseline). A PassivityObserver (`passivity`) estimates the energy the commands give the hand from the
     stylus samples (:meth:`sample`); with `passivity_control` its damping −α·v joins the force before the safety
@@ -184,6 +187,9 @@ class BridgeTick:
         self.passivity = PassivityObserver(1.0 / p.rate_hz, p.passivity_control,
                                            p.passivity_max_damping_ns_per_m)
         self.passive_update = PassiveModelUpdate(p.max_force_n) if passive_model_update_on(p) else None
+        self._arrived: LocalModel | None = None  # the newest model of the source, and the model rendered for it
+        self._arrived_cap = math.nan
+        self._rendered: LocalModel | None = None
 
     def configure(self, p: BridgeParameters) -> None:
         """Take parameters checked by :func:`checked_change`, from this tick on (called by the loop)."""
@@ -218,10 +224,20 @@ class BridgeTick:
             self.passive_update.forget()
         self.passivity.episode_energy_j = self.passivity.energy_j  # zero force now: a new contact begins
 
+    def rendered_model(self, model: LocalModel | None) -> LocalModel | None:
+        """The model rendered for the physics' `model`: :func:`haptic_bridge.rendering.capped` at `stiffness_n_per_m`
+        (checked passive). The one way a model enters the rendering (:meth:`step`): the glide, the passive model
+        update and the force all take this one. The same object for as long as the model and the cap stay, so that
+        the glide sees a new model only when one arrives or the cap changes (then it glides to the new surface)."""
+        cap = self.p.stiffness_n_per_m
+        if model is not self._arrived or cap != self._arrived_cap:
+            self._arrived, self._arrived_cap, self._rendered = model, cap, capped(model, cap)
+        return self._rendered
+
     def render(self, model: LocalModel | None, tip: np.ndarray | None) -> np.ndarray:
-        """Local-model force on the tool (N, liver frame); zero without a model or a tip.  The stiffness is the
-        model's K (the tissue's under the tool) capped at `stiffness_n_per_m` (checked passive), or that
-        parameter when the model carries no K."""
+        """Local-model force on the tool (N, liver frame) of a rendered model (:meth:`rendered_model`, glided);
+        zero without a model or a tip.  The stiffness is the model's K (the tissue's under the tool, at most
+        `stiffness_n_per_m` once capped), or that parameter when the model carries no K."""
         if model is None or tip is None:
             depth, direction = 0.0, np.zeros(3)
         else:
@@ -261,7 +277,7 @@ class BridgeTick:
             lifetime = self.p.lifetime_s
         else:
             model, lifetime = source if source is not None else (None, self.p.lifetime_s)
-            model = self.glide.update(model, now_s)
+            model = self.glide.update(self.rendered_model(model), now_s)
             if self.passive_update is not None:
                 model = self._admit(model, tip)
             force = self.render(model, tip)

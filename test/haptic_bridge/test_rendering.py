@@ -8,6 +8,7 @@ import pytest
 from haptic_bridge.rendering import (
     ModelGlide,
     blend,
+    capped,
     contact_force,
     contact_potential,
     depth_for_potential,
@@ -167,3 +168,67 @@ def test_a_glide_of_zero_renders_each_model_at_once_and_refuses_a_negative_durat
     assert [glide.update(m, t) for m, t in zip(models, (0.0, 0.001))] == models
     with pytest.raises(ValueError, match="^duration_s must be finite and >= 0"):
         ModelGlide(-0.001)
+
+
+CAP = 190.0
+
+
+def _physics_model(kind, stiffness, depth, tool_radius=0.003):
+    """A model placed as the physics places it for a tool sphere (radius `tool_radius`) at the origin: the tool
+    `depth` deep along the normal +x (sphere: radius 0.05, the liver inside it)."""
+    normal = np.array([1.0, 0.0, 0.0])
+    point = -(tool_radius - depth) * normal
+    centre = point - 0.05 * normal if kind == "sphere" else point
+    return LocalModel(kind, True, point, normal, centre, 0.05 if kind == "sphere" else 0.0, depth, True, stiffness)
+
+
+@pytest.mark.parametrize("kind", ["plane", "sphere"])
+def test_a_capped_model_renders_the_physics_force_at_the_physics_pose_and_the_cap_about_it(kind):
+    model = _physics_model(kind, 350.0, 0.002)
+    tip, radius = np.zeros(3), 0.003
+    assert penetration(model, tip, radius)[0] == pytest.approx(0.002)  # the physics' placing: K·d = F = 0.7 N
+    rendered = capped(model, CAP)
+    assert rendered.stiffness_n_per_m == CAP and rendered.kind == kind
+    depth, direction = penetration(rendered, tip, radius)
+    assert CAP * depth == pytest.approx(350.0 * 0.002, rel=1e-12)  # the physics force, not (K_r/K)·F
+    assert rendered.depth_m == pytest.approx(depth, rel=1e-12)     # and the depth it carries is that depth
+    np.testing.assert_allclose(direction, [1.0, 0.0, 0.0], atol=1e-12)
+    for step in (-0.001, 0.0005, 0.001):  # about the pose: a spring of the cap, the surface moved outward
+        moved = penetration(rendered, tip - step * direction, radius)[0]
+        assert CAP * (moved - depth) == pytest.approx(CAP * step, rel=1e-9)
+    assert capped(rendered, CAP) is rendered
+
+
+def test_a_capped_sphere_grows_and_a_capped_plane_moves_out_along_its_normal():
+    plane, sphere = _physics_model("plane", 380.0, 0.001), _physics_model("sphere", 380.0, 0.001)
+    shift = 0.001 * (380.0 / CAP - 1.0)  # = 1 mm
+    np.testing.assert_allclose(capped(plane, CAP).point, plane.point + shift * plane.normal, rtol=0, atol=1e-15)
+    np.testing.assert_array_equal(capped(plane, CAP).centre, capped(plane, CAP).point)
+    assert capped(sphere, CAP).radius_m == pytest.approx(sphere.radius_m + shift, rel=1e-12)
+    np.testing.assert_array_equal(capped(sphere, CAP).centre, sphere.centre)
+
+
+@pytest.mark.parametrize("model", [_physics_model("plane", 120.0, 0.002), _physics_model("sphere", CAP, 0.002),
+                                   _physics_model("plane", None, 0.002), LocalModel.invalid(), None])
+def test_a_model_within_the_cap_is_rendered_as_it_is(model):
+    assert capped(model, CAP) is model
+
+
+def test_a_model_above_the_cap_without_a_depth_only_takes_the_cap():
+    plane = LocalModel.plane([0.0, 0.0, 0.01], [0.0, 0.0, 1.0], 1e4)  # no depth seen: an old Marker's
+    rendered = capped(plane, CAP)
+    assert rendered.stiffness_n_per_m == CAP and rendered.depth_m == 0.0
+    np.testing.assert_array_equal(rendered.point, plane.point)
+    assert capped(plane, 0.0) is plane  # a cap of 0: no force, min(K, 0) in the renderer
+
+
+def test_the_glide_moves_between_the_capped_surfaces():
+    """Capped before the glide: halfway through, the surface rendered is halfway between the two rendered ones."""
+    first, second = _physics_model("plane", 350.0, 0.002), _physics_model("plane", 300.0, 0.003)
+    glide = ModelGlide(0.01)
+    start, target = capped(first, CAP), capped(second, CAP)
+    glide.update(start, 0.0)
+    glide.update(target, 0.001)
+    halfway = glide.update(target, 0.006)
+    np.testing.assert_allclose(halfway.point, (start.point + target.point) / 2.0, atol=1e-15)
+    assert halfway.stiffness_n_per_m == CAP

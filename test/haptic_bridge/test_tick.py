@@ -259,3 +259,47 @@ def test_the_longest_hold_with_local_model_none_is_the_physics_period_or_the_sta
     assert hold_time_s(none) == pytest.approx(1.0 / 150.0)               # 6.7 ms > stall_bound_s 5 ms
     assert hold_time_s(none.replace(physics_rate_hz=1000.0)) == 0.005    # then the stall bound is longer
     assert hold_time_s(none.replace(physics_rate_hz=1000.0, stall_bound_s=0.002)) == pytest.approx(0.002)
+
+
+def _stiff_plane(depth_m: float, stiffness: float = 350.0) -> LocalModel:
+    """A plane z = h placed as the physics places it for the tip at the origin: the tool sphere `depth_m` into it,
+    K·depth_m the physics force (0.7 N at 2 mm and 350 N/m), K above the bridge's cap of 190 N/m."""
+    point = np.array([0.0, 0.0, -(DEFAULTS.tool_radius_m - depth_m)])
+    return LocalModel("plane", True, point, np.array([0.0, 0.0, 1.0]), point, 0.0, depth_m, True, stiffness)
+
+
+def test_a_model_stiffer_than_the_cap_renders_the_physics_force_at_the_physics_pose_and_the_cap_about_it():
+    tick = BridgeTick(DEFAULTS.replace(damping_ns_per_m=0.0))
+    model, at_pose, deeper = _stiff_plane(0.002), np.zeros(3), np.array([0.0, 0.0, -0.001])
+    for k in range(300):  # past the soft start, the tip held at the physics pose
+        out = tick.step(k * T, at_pose, 0.0, (model, 0.05), 0.0)
+    np.testing.assert_allclose(out, [0.0, 0.0, 350.0 * 0.002], atol=1e-9)  # F, not (190/350)·F
+    for k in range(300, 350):  # 1 mm deeper: a spring of the cap
+        out = tick.step(k * T, deeper, 0.0, (model, 0.05), 0.0)
+    np.testing.assert_allclose(out, [0.0, 0.0, 350.0 * 0.002 + DEFAULTS.stiffness_n_per_m * 0.001], atol=1e-9)
+
+
+def test_the_glide_and_the_passive_update_take_the_capped_model_the_force_is_rendered_from():
+    tick = BridgeTick(DEFAULTS.replace(passive_model_update="always"))
+    model, cap = _stiff_plane(0.002), DEFAULTS.stiffness_n_per_m
+    rendered = tick.rendered_model(model)
+    assert rendered.stiffness_n_per_m == cap and rendered.depth_m == pytest.approx(350.0 * 0.002 / cap)
+    tip = np.array([0.0, 0.0, 0.01])
+    for k in range(20):  # out of contact: nothing holds the model back
+        tick.step(k * T, tip, 0.0, (model, 0.05), 0.0)
+    assert tick.rendered_model(model) is rendered  # one capped model per arrival: the glide sees it once
+    assert tick.glide.update(rendered, 20 * T) is rendered and tick.passive_update.shown is rendered
+    within = LocalModel("plane", True, np.zeros(3), np.array([0.0, 0.0, 1.0]), np.zeros(3), 0.0, 0.002, True, 120.0)
+    assert tick.rendered_model(within) is within  # at or below the cap: rendered exactly as it came
+
+
+def test_a_cap_lowered_at_run_time_still_renders_the_physics_force_at_the_physics_pose():
+    tick = BridgeTick(DEFAULTS.replace(damping_ns_per_m=0.0))
+    model = _stiff_plane(0.002)
+    for k in range(300):
+        tick.step(k * T, np.zeros(3), 0.0, (model, 0.05), 0.0)
+    tick.configure(checked_change(tick.p, {"stiffness_n_per_m": 120.0}))
+    assert tick.rendered_model(model).stiffness_n_per_m == 120.0
+    for k in range(300, 330):  # the glide to the surface of the new cap
+        out = tick.step(k * T, np.zeros(3), 0.0, (model, 0.05), 0.0)
+    np.testing.assert_allclose(out, [0.0, 0.0, 350.0 * 0.002], atol=1e-9)

@@ -7,7 +7,7 @@ import pytest
 
 from haptic_bridge.parameters import BridgeParameters
 from haptic_bridge.tick import BridgeTick, rendered_stiffness
-from liver_sim.base.local_model import penetration
+from liver_sim.base.local_model import LocalModel, penetration
 from liver_sim.mesh.landmarks import press_anchor
 from liver_sim.mesh.liver_shape import default_liver
 from liver_sim.physics.contact.tool_geometry import ToolPose
@@ -57,15 +57,23 @@ def demo_run():
     return bridge, frames, ticks
 
 
+def rendered_at(tick, local, tip):
+    """The force (N) the bridge renders for the physics' `local` model with the tool at `tip`, the depth rate
+    aside: K_r·depth of the model it renders (capped at its stiffness_n_per_m), and that depth."""
+    model = tick.rendered_model(local)
+    depth, direction = penetration(model, tip, tick.p.tool_radius_m)
+    return rendered_stiffness(model, tick.p.stiffness_n_per_m) * depth * direction, depth
+
+
 def test_at_each_update_the_rendered_force_is_the_physics_force(demo_run):
     bridge, frames, _ = demo_run
+    tick = BridgeTick(bridge)
     touching = 0
     for tip, force, local in frames:
         if local is None:
             assert np.linalg.norm(force) == 0.0
             continue
-        depth, direction = penetration(local, tip, bridge.tool_radius_m)
-        rendered = rendered_stiffness(local, bridge.stiffness_n_per_m) * depth * direction
+        rendered, depth = rendered_at(tick, local, tip)
         assert agree(rendered, force), (rendered, force)
         touching += np.linalg.norm(force) > 0.05
         if np.linalg.norm(force) == 0.0:
@@ -93,11 +101,40 @@ def test_between_updates_the_command_follows_the_physics_force(demo_run):
         tip, force, local = frames[k]
         if local is None or abs(t - k / 150.0 - (1 / 150.0 - 1e-3)) > 1e-3 / 2 or np.linalg.norm(force) < 0.05:
             continue
-        stiffness = rendered_stiffness(local, bridge.stiffness_n_per_m)
+        stiffness = rendered_stiffness(BridgeTick(bridge).rendered_model(local), bridge.stiffness_n_per_m)
         moved = np.linalg.norm(frames[min(k + 1, len(frames) - 1)][0] - tip)
         assert np.linalg.norm(command - force) <= max(0.05 * np.linalg.norm(force), 0.01) + stiffness * moved \
             + bridge.damping_ns_per_m * 0.2 + 1e-9, (t, command, force)
         checked += 1
+    assert checked > 100
+
+
+def stiffer(local, tip, force, stiffness_n_per_m, tool_radius_m):
+    """The physics' model of a frame placed again for a stiffer K, as the physics places it (paper §2.5): the
+    surface moved toward the liver along the direction of its push until K·depth at the frame's pose is |F|."""
+    depth, direction = penetration(local, tip, tool_radius_m)
+    back = depth - float(np.linalg.norm(force)) / stiffness_n_per_m if depth > 0.0 else 0.0
+    point = local.point - back * direction
+    return LocalModel(local.kind, True, point, local.normal, local.centre if local.kind == "sphere" else point,
+                      local.radius_m - back if local.kind == "sphere" else 0.0, depth - back, local.in_contact,
+                      stiffness_n_per_m)
+
+
+def test_a_model_stiffer_than_the_bridges_cap_still_renders_the_physics_force_at_each_update(demo_run):
+    """The demo's frames with K = 350 N/m, above the bridge's 190 N/m (the tissue's one-frame stiffness), through
+    the Marker: the bridge renders less than K, yet at each update the physics force."""
+    bridge, frames, _ = demo_run
+    tick = BridgeTick(bridge)
+    checked = 0
+    for tip, force, local in frames:
+        if local is None:
+            continue
+        stiff = stiffer(local, tip, force, 350.0, bridge.tool_radius_m)
+        stiff, _ = marker_to_local_model(local_model_marker(stiff, stamp_from_seconds(0.0), "liver", 0.05))
+        assert stiff.stiffness_n_per_m > bridge.stiffness_n_per_m
+        rendered, _ = rendered_at(tick, stiff, tip)
+        assert agree(rendered, force), (rendered, force)
+        checked += np.linalg.norm(force) > 0.05
     assert checked > 100
 
 
