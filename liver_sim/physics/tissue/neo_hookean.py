@@ -16,8 +16,8 @@ log and no division: it is defined through inversion (J ≤ 0).  Its first Piola
 Tangent ∂P/∂F = μ·I₉ + λ̂·vec(∂J/∂F)·vec(∂J/∂F)ᵀ + s·∂²J/∂F², indefinite in places, projected onto the positive
 semi-definite cone through its analytic eigensystem (Smith, de Goes & Kim, "Analytic eigensystems for isotropic
 distortion energies", ACM TOG 38(1), 2019; Kim & Eberle ch. 7).  With the rotation-variant SVD F = U·Σ·Vᵀ
-(det U = det V = +1, σ₂ carrying the sign of J) and, for each pair (i, j) with k the third index, u_i, v_j the columns
-of U, V:
+(det U = det V = +1, σ₂ carrying the sign of J; base.geometry.matrix3, without allocating) and, for each pair
+(i, j) with k the third index, u_i, v_j the columns of U, V:
 
     twist  (u_i·v_jᵀ − u_j·v_iᵀ)/√2,  eigenvalue μ + s·σ_k;
     flip   (u_i·v_jᵀ + u_j·v_iᵀ)/√2,  eigenvalue μ − s·σ_k;
@@ -35,6 +35,8 @@ import math
 
 import numba
 import numpy as np
+
+from liver_sim.base.geometry.matrix3 import rotation_variant_svd3, symmetric_eigen3
 
 #: The pairs (i, j) of singular values of the twist and flip modes, k the third index.
 PAIRS = ((1, 2, 0), (0, 2, 1), (0, 1, 2))
@@ -56,26 +58,21 @@ def first_piola(f, mu, lam_hat, out):
 
 
 @numba.njit(cache=True)
-def eigensystem(f, mu, lam_hat, values, modes):
+def eigensystem(f, mu, lam_hat, values, modes, mats, vecs):
     """values (9,) Pa and orthonormal modes (9, 3, 3) of the unprojected tangent at `f`: ∂P/∂F = Σ_m values[m]·
     vec(modes[m])·vec(modes[m])ᵀ; the three scaling modes first, then twist and flip per pair of PAIRS (module
-    docstring)."""
-    u, sigma, vt = np.linalg.svd(f)
-    v = np.ascontiguousarray(vt.T)
-    if np.linalg.det(u) < 0.0:
-        u[:, 2] = -u[:, 2]
-        sigma[2] = -sigma[2]
-    if np.linalg.det(v) < 0.0:
-        v[:, 2] = -v[:, 2]
-        sigma[2] = -sigma[2]
+    docstring).  `mats` (5, 3, 3) and `vecs` (2, 3): scratch (U, V, the scaling block, its eigenvectors, FᵀF; σ and
+    the block's eigenvalues)."""
+    u, v, block, q, work = mats[0], mats[1], mats[2], mats[3], mats[4]
+    sigma, scale = vecs[0], vecs[1]
+    rotation_variant_svd3(f, u, sigma, v, work)
     s = lam_hat * (sigma[0] * sigma[1] * sigma[2] - 1.0) - mu
-    block = np.empty((3, 3))
     for i, j, k in PAIRS:
         block[i, j] = lam_hat * sigma[i] * sigma[j] * sigma[k] * sigma[k] + s * sigma[k]
         block[j, i] = block[i, j]
     for i, j, k in PAIRS:
         block[k, k] = mu + lam_hat * (sigma[i] * sigma[j]) ** 2
-    scale, q = np.linalg.eigh(block)
+    symmetric_eigen3(block, scale, q)
     root = 1.0 / math.sqrt(2.0)
     for m in range(3):
         values[m] = scale[m]
@@ -94,10 +91,10 @@ def eigensystem(f, mu, lam_hat, values, modes):
 
 
 @numba.njit(cache=True)
-def projected_tangent(f, mu, lam_hat, values, modes, out):
+def projected_tangent(f, mu, lam_hat, values, modes, mats, vecs, out):
     """out (9, 9) ← 𝐂̃(F), the tangent with its negative eigenvalues clamped to 0 (Pa), exactly symmetric; `values`,
-    `modes` scratch for `eigensystem`."""
-    eigensystem(f, mu, lam_hat, values, modes)
+    `modes`, `mats`, `vecs` scratch for `eigensystem`."""
+    eigensystem(f, mu, lam_hat, values, modes, mats, vecs)
     out[:] = 0.0
     for m in range(9):
         w = values[m]
@@ -140,6 +137,8 @@ def neo_hookean_terms(x, v, y, inv_mass, h, law, f, ky, diagonal, assemble_matri
     contracted = np.empty((3, 3))
     values = np.empty(9)
     modes = np.empty((9, 3, 3))
+    mats = np.empty((5, 3, 3))
+    vecs = np.empty((2, 3))
     for e in range(tets.shape[0]):
         tet, g, c = tets[e], gradients[e], tangent[e]
         grad[:] = 0.0
@@ -155,7 +154,7 @@ def neo_hookean_terms(x, v, y, inv_mass, h, law, f, ky, diagonal, assemble_matri
                     if free:
                         probe[i, j] += y[n, i] * g[a, j]
         if assemble_matrix:
-            projected_tangent(grad, mu, lam_hat, values, modes, c)
+            projected_tangent(grad, mu, lam_hat, values, modes, mats, vecs, c)
         first_piola(grad, mu, lam_hat, stress)
         _contract(c, rate, contracted)
         for i in range(3):

@@ -36,13 +36,14 @@ def stress(f, mu=MU, lam_hat=LAM_HAT):
 def eigen(f, mu=MU, lam_hat=LAM_HAT):
     """(values (9,), modes as rows of a (9, 9) matrix) of the unprojected tangent."""
     values, modes = np.empty(9), np.empty((9, 3, 3))
-    eigensystem(np.ascontiguousarray(f), mu, lam_hat, values, modes)
+    eigensystem(np.ascontiguousarray(f), mu, lam_hat, values, modes, np.empty((5, 3, 3)), np.empty((2, 3)))
     return values, modes.reshape(9, 9)
 
 
 def tangent(f, mu=MU, lam_hat=LAM_HAT):
     out = np.empty((9, 9))
-    projected_tangent(np.ascontiguousarray(f), mu, lam_hat, np.empty(9), np.empty((9, 3, 3)), out)
+    projected_tangent(np.ascontiguousarray(f), mu, lam_hat, np.empty(9), np.empty((9, 3, 3)), np.empty((5, 3, 3)),
+                      np.empty((2, 3)), out)
     return out
 
 
