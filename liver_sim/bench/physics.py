@@ -37,8 +37,9 @@ LARGER_LIVERS = (10_000, 30_000, 100_000)
 #: Fraction of the stability bound a benchmarked time step may use.
 STABILITY_MARGIN = 0.9
 #: The integrators and tissue laws timed frame by frame, side by side (the last is the reference's, at its stable
-#: step): the implicit step with the springs (the default) and with the co-rotational tetrahedra.
-FRAME_INTEGRATORS = (("implicit_euler", "springs"), ("implicit_euler", "fem"), ("symplectic_euler", "springs"))
+#: step): the implicit step with the springs (the default), with the co-rotational and with the neo-Hookean tetrahedra.
+FRAME_INTEGRATORS = (("implicit_euler", "springs"), ("implicit_euler", "fem"), ("implicit_euler", "neo_hookean"),
+                     ("symplectic_euler", "springs"))
 TARGETS = {"default_us_per_step_1thread_max": 50.0, "default_speedup_vs_numpy_min": 10.0,
            "spring_updates_per_s_min": 50e6, "default_implicit_ms_per_frame_1thread_max": 0.5,
            "liver_10k_implicit_realtime_factor_min": 1.0, "liver_30k_implicit_ms_per_frame_1thread_max": 6.7,

@@ -40,8 +40,10 @@ def test_physics_bench_reports_the_default_liver_first_and_agrees_with_numpy():
         assert result["max_abs_diff_vs_numpy_m"] < 1e-9
         assert result["us_per_step_1thread"] > 0 and result["realtime_factor_150hz"] > 0
         rows = {(row["integrator"], row["tissue_law"]): row for row in result["integrators"]}
-        assert set(rows) == {("implicit_euler", "springs"), ("implicit_euler", "fem"), ("symplectic_euler", "springs")}
+        assert set(rows) == {("implicit_euler", "springs"), ("implicit_euler", "fem"),
+                             ("implicit_euler", "neo_hookean"), ("symplectic_euler", "springs")}
         assert rows[("implicit_euler", "fem")]["steps_per_frame"] == 1
+        assert rows[("implicit_euler", "neo_hookean")]["steps_per_frame"] == 1
         rows = {integrator: rows[(integrator, "springs")] for integrator in ("implicit_euler", "symplectic_euler")}
         assert rows["implicit_euler"]["steps_per_frame"] == 1
         assert rows["symplectic_euler"]["steps_per_frame"] == result["substeps_per_frame"] > 1
