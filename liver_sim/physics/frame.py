@@ -308,12 +308,12 @@ def change_topology(structure: Structure, state: State, cause: str,
 def local_models(structure: Structure, state: State, tools: Sequence[Tool], poses: Sequence[ToolPose | None],
                  liver_forces: Sequence[np.ndarray], holding: Sequence[bool],
                  rows: Sequence[Contacts]) -> tuple[LocalModel, ...]:
-    """Each tool's local model for the haptic loop (Tool.local_model) from its own rows pushing at the state, the
-    other tools' pushing rows holding the tissue under it."""
-    pushes = [pushing(r, state.positions, state.velocities) for r in rows]
+    """Each tool's local model for the haptic loop (Tool.local_model), the other tools' pushing rows holding the
+    tissue under it."""
+    pushes = [pushing(r, state.positions, state.velocities) for r in rows] if len(rows) > 1 else []
     return tuple(
-        tool.local_model(structure, state, state.tools[k], pose, -force, holds, pushes[k],
-                         joined([p for j, p in enumerate(pushes) if j != k and len(p)]) if len(pushes) > 1 else None)
+        tool.local_model(structure, state, state.tools[k], pose, -force, holds,
+                         joined([p for j, p in enumerate(pushes) if j != k and len(p)]) if pushes else None)
         for k, (tool, pose, force, holds) in enumerate(zip(tools, poses, liver_forces, holding)))
 
 

@@ -215,17 +215,15 @@ class ImplicitEuler:
                                        shape=(size, size)).tocsr()
 
     def compliance(self, x: np.ndarray, inv_mass: np.ndarray, load: np.ndarray, environment_damping: float,
-                   guess: np.ndarray, contacts: Contacts | None = None, rotations: np.ndarray | None = None,
-                   horizon_s: float = COMPLIANCE_HORIZON_S) -> float:
-        """Compliance H²·bᵀ·A⁻¹·b (m/N) of the network at x under the load pattern b = `load` (N, 3) N over a step
-        of H = `horizon_s`, held nodes (inv_mass 0) fixed: A = M·(1 + H·c_env) + H·C + H²·K with the tangent
-        stiffness K and damping C of the springs, elements (physics.solver.implicit_kernels) and the organ's supports
-        at x, and of `contacts` (each row taken as active: another tool's penalty holding the tissue), solved by the
-        step's PCG.  With the default H = COMPLIANCE_HORIZON_S the mass and damping terms weigh ≲ 1 % against K (the
-        static compliance bᵀ·K⁻¹·b); with the frame's dt, the tissue's response within one step.  `guess` (N, 3),
-        the previous solution ·H², starts the solve and is overwritten by this one; `rotations` the elements' warm
-        start (StepHistory.rotations, None: the identity)."""
-        h = float(horizon_s)
+                   guess: np.ndarray, contacts: Contacts | None = None, rotations: np.ndarray | None = None) -> float:
+        """Static compliance bᵀ·K⁻¹·b (m/N) of the network at x under the load pattern b = `load` (N, 3) N,
+        held nodes (inv_mass 0) fixed: the tangent stiffness K of the springs (physics.solver.implicit_kernels) and of
+        the organ's supports at x, and of `contacts` (each row taken as active: another tool's penalty holding the
+        tissue), solved by the step's PCG as (M·(1 + H·c_env) + H·C + H²·K)·z = b with H = COMPLIANCE_HORIZON_S,
+        so the mass and damping terms weigh ≲ 1 % against K; `guess` (N, 3), the previous solution ·H², starts
+        the solve and is overwritten by this one; `rotations` the elements' warm start (StepHistory.rotations, None:
+        the identity)."""
+        h = COMPLIANCE_HORIZON_S
         tets = self._rotations(rotations)
         contacts = contacts or Contacts.none()
         coefficient = h * contacts.damping_ns_per_m + h * h * contacts.stiffness_n_per_m

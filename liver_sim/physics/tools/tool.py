@@ -49,22 +49,18 @@ class Tool:
         return tool.sweep
 
     def local_model(self, structure: Structure, state: State, tool: ToolState, pose: ToolPose | None,
-                    force_on_tool_n: np.ndarray, holding: bool, own: Contacts | None = None,
-                    others: Contacts | None = None) -> LocalModel:
+                    force_on_tool_n: np.ndarray, holding: bool, others: Contacts | None = None) -> LocalModel:
         """The local model for the haptic loop at the end of the frame: none without a tool; holding nodes, the
         plane of their pull (contact.tool_geometry.pull_local_model); else the one of the contact force
-        (contact.tool_geometry.force_local_model), its stiffness the one-frame stiffness of its contact rows `own`
-        and the tissue (physics.tools.local_stiffness) with the other tools' pushing rows `others` in place."""
+        (contact.tool_geometry.force_local_model), its stiffness (physics.tools.local_stiffness) with the other
+        tools' pushing rows `others` in place."""
         if pose is None:
             return LocalModel.invalid()
         params = structure.params
         if holding:
             return pull_local_model(pose, force_on_tool_n, params.contact_stiffness_n_per_m, self.shape.radius_m)
-        frame_s = structure.frame_period_s
-        step_s = params.dt_s * (2.0 / 3.0 if state.history.second_order else 1.0)  # the last step's h
-        stiffness = stiffness_n_per_m(structure.solver, tool, state.positions, state.velocities, state.inv_mass,
-                                      params.contact_stiffness_n_per_m + params.contact_damping_ns_per_m / frame_s,
-                                      params.environment_damping_per_s, frame_s, step_s, own, others,
+        stiffness = stiffness_n_per_m(structure.solver, tool, state.positions, state.inv_mass,
+                                      params.contact_stiffness_n_per_m, params.environment_damping_per_s, others,
                                       state.history.rotations, self.stiffness_refresh_frames)
         return force_local_model(self.shape, pose, tool.sweep, force_on_tool_n, stiffness, self.local_model_reach_m,
                                  self.local_model_kind, state.positions)
