@@ -67,31 +67,31 @@ def local_model_marker_bytes(model: LocalModel, stamp, frame_id: str, lifetime_s
                             scale, colour, lifetime, text)
 
 
+def _marker_entry(text: str, entry: re.Pattern, key: str, check, bound: str, missing):
+    """The number of the first `key` entry (found by `entry`) of a local-model Marker's `text`, through `check` (a
+    liver_sim.base.checks function); `missing` when there is none; ValueError naming the field for a value that is
+    not a finite number `bound`."""
+    found = entry.search(text)
+    if found is None:
+        return missing
+    value = found.group(1)
+    try:
+        return check(float(value), f"Marker.text {key}")
+    except ValueError:
+        raise ValueError(f"Marker.text {key} must be a finite number {bound}, got {value[:40]!r}") from None
+
+
 def _marker_stiffness(text: str) -> float | None:
     """K (N/m) from a local-model Marker's `text`: None when it carries no STIFFNESS_KEY entry; ValueError
     naming the field for a value that is not a finite number > 0."""
-    found = _STIFFNESS_ENTRY.search(text)
-    if found is None:
-        return None
-    value = found.group(1)
-    try:
-        return positive(float(value), f"Marker.text {STIFFNESS_KEY}")
-    except ValueError:
-        raise ValueError(f"Marker.text {STIFFNESS_KEY} must be a finite number > 0, got {value[:40]!r}") from None
+    return _marker_entry(text, _STIFFNESS_ENTRY, STIFFNESS_KEY, positive, "> 0", None)
 
 
 def _marker_depth(text: str) -> float:
     """The depth (m) at the physics' pose from a local-model Marker's `text`: 0 when it carries no DEPTH_KEY entry
     (a Marker from before the entry, read as :meth:`LocalModel.plane` and :meth:`LocalModel.sphere` make it: no
     depth seen); ValueError naming the field for a value that is not a finite number >= 0."""
-    found = _DEPTH_ENTRY.search(text)
-    if found is None:
-        return 0.0
-    value = found.group(1)
-    try:
-        return non_negative(float(value), f"Marker.text {DEPTH_KEY}")
-    except ValueError:
-        raise ValueError(f"Marker.text {DEPTH_KEY} must be a finite number >= 0, got {value[:40]!r}") from None
+    return _marker_entry(text, _DEPTH_ENTRY, DEPTH_KEY, non_negative, ">= 0", 0.0)
 
 
 def marker_to_local_model(msg: Marker) -> tuple[LocalModel | None, float]:
