@@ -25,10 +25,9 @@ class Contacts:
     A row on the tool's true surface (a skin node against a ball swept along the segment `core_m` (K, 2, 3), of
     `radius_m` (K,) > 0, moving at `core_velocity_m_s` (K, 3)) is rebuilt at every iterate of the step
     (implicit_kernels.surface_rows): n = (x − c)/|x − c| with c the point of the core nearest the node,
-    o = r + n·c + `bias_m`, s = n·v_core, so that its depth is r − |x − c| + bias.  Rows of radius 0 keep the
-    geometry they were given.  `multiplier_key` (K,) int64: the node whose augmented Lagrange multiplier the row's
-    bias (the multiplier over k) comes from and goes back to (contact.tool_geometry.update_multipliers), −1 for
-    none.
+    o = r + n·c + `bias_m`, s = n·v_core, so that its depth is r − |x − c| + bias (the bias: its node's augmented
+    Lagrange multiplier over k, contact.tool_geometry.update_multipliers).  Rows of radius 0 keep the geometry they
+    were given.
     """
 
     nodes: np.ndarray
@@ -42,7 +41,6 @@ class Contacts:
     radius_m: np.ndarray = None
     core_velocity_m_s: np.ndarray = None
     bias_m: np.ndarray = None
-    multiplier_key: np.ndarray = None
 
     def __post_init__(self):
         count = len(self.offset_m)
@@ -50,8 +48,6 @@ class Contacts:
                             ("bias_m", (count,))):
             if getattr(self, name) is None:
                 object.__setattr__(self, name, np.zeros(shape))
-        if self.multiplier_key is None:
-            object.__setattr__(self, "multiplier_key", np.full(count, -1, dtype=np.int64))
 
     @classmethod
     def none(cls) -> "Contacts":

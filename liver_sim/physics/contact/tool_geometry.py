@@ -243,24 +243,18 @@ def contact_rows(x: np.ndarray, v: np.ndarray, tool: ToolSweep, shift: np.ndarra
                     np.concatenate([np.zeros((faces, 2, 3)), np.broadcast_to(core, (count, 2, 3))]),
                     np.concatenate([np.zeros(faces), np.full(count, tool.radius_m)]),
                     np.concatenate([np.zeros((faces, 3)), np.broadcast_to(tool.velocity_m_s, (count, 3))]),
-                    np.concatenate([np.zeros(faces), bias]),
-                    np.concatenate([np.full(faces, -1, dtype=np.int64), nodes]))
+                    np.concatenate([np.zeros(faces), bias]))
 
 
 def update_multipliers(contacts: Contacts, x: np.ndarray, multipliers_n: np.ndarray) -> None:
-    """The augmented Lagrange multipliers (N) after a step that ends at x, in place: each entry the largest elastic
-    force k·(o − n·Σ w_a·x_a), clipped at 0, of the rows it biases (their multiplier included in o); 0 for an entry
-    no row takes."""
+    """A tool's augmented Lagrange multipliers (N,) N after a step that ends at x, in place: the node of each of its
+    rows on the tool's surface (radius > 0, one per node) gets that row's elastic force k·(o − n·x), clipped at 0
+    (its multiplier included in o); every other node 0."""
     multipliers_n[:] = 0.0
-    keyed = contacts.multiplier_key >= 0
-    if not keyed.any():
-        return
-    used = contacts.nodes[keyed] >= 0
-    points = (np.where(used, contacts.weights[keyed], 0.0)[:, :, None]
-              * x[np.where(used, contacts.nodes[keyed], 0)]).sum(axis=1)
-    along = np.einsum("ij,ij->i", contacts.normal[keyed], points)
-    np.maximum.at(multipliers_n, contacts.multiplier_key[keyed],
-                  np.maximum(contacts.stiffness_n_per_m[keyed] * (contacts.offset_m[keyed] - along), 0.0))
+    surface = contacts.radius_m > 0.0
+    nodes = contacts.nodes[surface, 0]
+    along = np.einsum("ij,ij->i", contacts.normal[surface], x[nodes])
+    multipliers_n[nodes] = np.maximum(contacts.stiffness_n_per_m[surface] * (contacts.offset_m[surface] - along), 0.0)
 
 
 def surface_depths(x: np.ndarray, tool: ToolSweep, core: np.ndarray) -> tuple[np.ndarray, ...]:

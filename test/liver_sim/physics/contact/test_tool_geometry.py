@@ -176,23 +176,23 @@ def test_surface_contact_rows_sit_on_the_balls_true_surface(slab):
     np.testing.assert_allclose(rows.normal[surface], (slab.points[nodes] - centre) / distance[:, None], atol=1e-12)
     np.testing.assert_allclose(rows.stiffness_n_per_m[surface], 3e7 * 1e-4)
     np.testing.assert_allclose(rows.core_m[surface], np.broadcast_to([centre, centre], (surface.sum(), 2, 3)))
-    np.testing.assert_array_equal(rows.multiplier_key[surface], nodes)
-    assert (rows.multiplier_key[~surface] == -1).all()
+    np.testing.assert_array_equal(np.sort(nodes), np.unique(nodes))  # one row per node: its multiplier's
+    assert (rows.nodes[surface, 1:] == -1).all() and (rows.bias_m[~surface] == 0.0).all()
     faces = ~surface
     for row in np.flatnonzero(faces & (rows.stiffness_n_per_m > 0.0)):
         assert vertex not in rows.nodes[row]  # the faces round the vertex inside the ball are the node's
 
 
-def test_the_multipliers_take_the_largest_elastic_force_of_the_rows_they_bias():
-    x = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 0.01], [1.0, 0.0, 0.0]])
-    rows = Contacts(np.array([[0, -1, -1], [1, -1, -1], [2, -1, -1], [0, 1, -1], [0, 1, -1]]),
-                    np.array([[1.0, 0, 0], [1.0, 0, 0], [1.0, 0, 0], [0.5, 0.5, 0], [0.5, 0.5, 0]]),
-                    np.tile([0.0, 0.0, 1.0], (5, 1)), np.array([0.001, 0.005, 0.5, 0.007, 0.008]), np.zeros(5),
-                    np.full(5, 100.0), np.zeros(5), multiplier_key=np.array([0, 1, -1, 4, 4]))
-    multipliers = np.full(6, 9.0)
+def test_the_multipliers_take_each_surface_rows_elastic_force():
+    x = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 0.01], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+    rows = Contacts(np.array([[0, -1, -1], [1, -1, -1], [2, -1, -1], [0, 3, -1]]),
+                    np.array([[1.0, 0, 0], [1.0, 0, 0], [1.0, 0, 0], [0.5, 0.5, 0]]),
+                    np.tile([0.0, 0.0, 1.0], (4, 1)), np.array([0.001, 0.005, 0.5, 0.007]), np.zeros(4),
+                    np.full(4, 100.0), np.zeros(4), radius_m=np.array([0.01, 0.01, 0.0, 0.0]))
+    multipliers = np.full(4, 9.0)
     update_multipliers(rows, x, multipliers)
-    # node 0 pushed 1 mm: 0.1 N; node 1 pulled apart: 0; entry 4, the larger of its two rows' 0.2 and 0.3 N
-    np.testing.assert_allclose(multipliers, [0.1, 0.0, 0.0, 0.0, 0.3, 0.0])
+    # node 0 pushed 1 mm: 0.1 N; node 1 pulled apart: 0; node 2's row and the face row are not on the tool's surface
+    np.testing.assert_allclose(multipliers, [0.1, 0.0, 0.0, 0.0])
 
 
 def test_surface_depths_measure_from_a_capsules_shaft():
