@@ -15,7 +15,7 @@ import numpy as np
 
 from liver_sim.physics.contact.kernels import ToolSweep
 from liver_sim.physics.contact.tool_geometry import ToolPose
-from liver_sim.physics.solver.implicit import StepHistory
+from liver_sim.physics.solver.implicit import ComplianceSolve, ImplicitEuler, StepHistory
 from liver_sim.physics.structure import Structure
 from liver_sim.physics.topology.change import NodeState
 
@@ -28,7 +28,9 @@ class ToolState:
     frame's `sweep` (its probes, candidate triangles and contact rows); its use's `in_contact` at the last frame,
     the `cut_path` (P, 3) m of a cutting stroke so far, the `held_nodes` it grasped and their `grasp_offsets` in
     the tool frame (m); and the tissue's compliance under it (physics.tools.local_stiffness): the last solve's
-    `compliance_m_per_n` (None: none yet), its `compliance_guess` (N, 3) and the frames since; with the surface
+    `compliance_m_per_n` (None: none yet), its `compliance_guess` (N, 3), its PCG `compliance_iterations` and the
+    frames since, the solve under way (`compliance_solve`, None: none) and the solver `compliance_workspace` the
+    tool's solves run on (None: none yet; implicit.ImplicitEuler.workspace); with the surface
     contact, its augmented Lagrange multipliers `contact_multipliers_n` (N,) N per node (None: none yet;
     contact.tool_geometry.contact_rows)."""
 
@@ -41,6 +43,9 @@ class ToolState:
     compliance_m_per_n: float | None = None
     compliance_guess: np.ndarray | None = None
     frames_since_solve: int = 0
+    compliance_iterations: int = 0
+    compliance_solve: ComplianceSolve | None = None
+    compliance_workspace: ImplicitEuler | None = None
     contact_multipliers_n: np.ndarray | None = None
 
     @property
@@ -102,7 +107,8 @@ def carried_state(structure: Structure, state: State, nodes: NodeState) -> State
     sweeps, strokes and grasps, the implicit step from no history (backward Euler from the carried state) and the
     tissue's compliance and contact multipliers under each tool unknown (they are of the old network)."""
     tools = tuple(replace(tool, cut_path=list(tool.cut_path), compliance_m_per_n=None, compliance_guess=None,
-                          frames_since_solve=0, contact_multipliers_n=None)
+                          frames_since_solve=0, compliance_iterations=0, compliance_solve=None,
+                          compliance_workspace=None, contact_multipliers_n=None)
                   for tool in state.tools)
     return State(nodes.positions, nodes.velocities, nodes.external_forces_n, state.held_nodes,
                  inverse_masses(structure, state.held_nodes), structure.solver.new_history(), tools,

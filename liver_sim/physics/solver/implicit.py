@@ -31,7 +31,15 @@ from liver_sim.physics.contact.rows import Contacts, node_contacts
 from liver_sim.physics.settings import PRECONDITIONERS
 from liver_sim.physics.solver.coarse_space import CoarseSpace, aggregates, build_coarse_space, node_graph
 from liver_sim.physics.solver.implicit_kernels import assemble, bdf2_start, implicit_step, support_terms
-from liver_sim.physics.solver.pcg import SERIAL, block_jacobi, pcg, pcg_parallel
+from liver_sim.physics.solver.pcg import (
+    ENDED,
+    SERIAL,
+    block_jacobi,
+    pcg,
+    pcg_parallel,
+    pcg_resumable,
+    pcg_resumable_parallel,
+)
 from liver_sim.physics.solver.records import ContactRows, Loads, Operator, Scratch, SolveSettings, Tissue
 from liver_sim.physics.tissue.fem_kernels import TetArrays, tet_terms
 from liver_sim.physics.tissue.organ_support import SupportArrays
@@ -126,6 +134,7 @@ class ImplicitEuler:
         self._coefficient = np.zeros(0)
         self._inv_mass = np.zeros(self.n_nodes)
         self._tet_weight = 0.0
+        self._compliance_workspace: ImplicitEuler | None = None
 
     def step(self, history: StepHistory, x: np.ndarray, v: np.ndarray, inv_mass: np.ndarray,
              external_force: np.ndarray, dt: float, environment_damping: float, gravity: np.ndarray,
@@ -216,24 +225,47 @@ class ImplicitEuler:
 
     def compliance(self, x: np.ndarray, inv_mass: np.ndarray, load: np.ndarray, environment_damping: float,
                    guess: np.ndarray, contacts: Contacts | None = None, rotations: np.ndarray | None = None) -> float:
-        """Static compliance bᵀ·K⁻¹·b (m/N) of the network at x under the load pattern b = `load` (N, 3) N,
-        held nodes (inv_mass 0) fixed: the tangent stiffness K of the springs (physics.solver.implicit_kernels) and of
-        the organ's supports at x, and of `contacts` (each row taken as active: another tool's penalty holding the
-        tissue), solved by the step's PCG as (M·(1 + H·c_env) + H·C + H²·K)·z = b with H = COMPLIANCE_HORIZON_S,
-        so the mass and damping terms weigh ≲ 1 % against K; `guess` (N, 3), the previous solution ·H², starts
-        the solve and is overwritten by this one; `rotations` the elements' warm start (StepHistory.rotations, None:
-        the identity)."""
+        """Static compliance bᵀ·K⁻¹·b (m/N) of the network at x under the load pattern b = `load` (N, 3) N, held nodes
+        (inv_mass 0) fixed, solved at once: `compliance_solve` on a workspace this solver keeps for it, to the end."""
+        if self._compliance_workspace is None:
+            self._compliance_workspace = self.workspace()
+        return self.compliance_solve(self._compliance_workspace, x, inv_mass, load, environment_damping, guess,
+                                     contacts, rotations).finish()
+
+    def workspace(self) -> "ImplicitEuler":
+        """A solver of the same network, settings and elements with work arrays of its own (its operator, element
+        rotations and tangents, coarse spaces), where a solve can run in slices between this one's steps."""
+        return ImplicitEuler(self.springs, self.n_nodes, self.cg_tolerance, self.max_cg_iterations,
+                             self.newton_tolerance_n, self.max_newton, self.second_order, self.support,
+                             self.tets._replace(quaternion=self.tets.quaternion.copy(),
+                                                rotation=self.tets.rotation.copy(),
+                                                rotated_gradients=self.tets.rotated_gradients.copy(),
+                                                tangent=self.tets.tangent.copy()),
+                             "two_level" if self.two_level else "block_jacobi", self.threads)
+
+    @staticmethod
+    def compliance_solve(workspace: "ImplicitEuler", x: np.ndarray, inv_mass: np.ndarray, load: np.ndarray,
+                         environment_damping: float, guess: np.ndarray, contacts: Contacts | None = None,
+                         rotations: np.ndarray | None = None) -> "ComplianceSolve":
+        """The static compliance bᵀ·K⁻¹·b (m/N) of the network at x under the load pattern b = `load` (N, 3) N, held
+        nodes (inv_mass 0) fixed, assembled now into `workspace` (a `workspace()`, whose last solve it ends) and
+        solved in slices (ComplianceSolve): the tangent stiffness K of the springs (physics.solver.implicit_kernels)
+        and of the organ's supports at x, and of `contacts` (each row taken as active: another tool's penalty
+        holding the tissue), solved by the step's PCG as (M·(1 + H·c_env) + H·C + H²·K)·z = b with
+        H = COMPLIANCE_HORIZON_S, so the mass and damping terms weigh ≲ 1 % against K; `guess` (N, 3), the previous
+        solution ·H², starts the solve and receives this one when it ends; `rotations` the elements' warm start
+        (StepHistory.rotations, None: the identity; x and `rotations` are not read after this call)."""
         h = COMPLIANCE_HORIZON_S
-        tets = self._rotations(rotations)
+        tets = workspace._rotations(None if rotations is None else rotations.copy())
         contacts = contacts or Contacts.none()
         coefficient = h * contacts.damping_ns_per_m + h * h * contacts.stiffness_n_per_m
-        self._assemble_at_rest(x, inv_mass, np.zeros_like(x), environment_damping, h, tets, contacts, coefficient)
-        b = np.where((inv_mass > 0.0)[:, None], load, 0.0)
-        solution = np.where((inv_mass > 0.0)[:, None], guess / (h * h), 0.0)
-        self._solve(inv_mass, b, solution, COMPLIANCE_TOLERANCE, self._coarse_space(h, x, inv_mass, tets), tets,
-                    contacts, coefficient)
-        guess[:] = solution * (h * h)
-        return float(np.einsum("ij,ij->", b, guess))
+        workspace._assemble_at_rest(x, inv_mass, np.zeros_like(x), environment_damping, h, tets, contacts,
+                                    coefficient)
+        free = (inv_mass > 0.0)[:, None]
+        return ComplianceSolve(workspace, inv_mass.copy(), np.where(free, load, 0.0),
+                               np.where(free, guess / (h * h), 0.0), guess,
+                               workspace._coarse_space(h, x, inv_mass, tets), tets,
+                               ContactRows.of(contacts, coefficient))
 
     def equilibrium(self, x: np.ndarray, inv_mass: np.ndarray, external_force: np.ndarray, tolerance_n: float,
                     max_iterations: int = 500, rotations: np.ndarray | None = None) -> np.ndarray:
@@ -302,3 +334,47 @@ class ImplicitEuler:
                                                       tangent=self.tets.tangent.copy()))
         probe.step(probe.new_history(), x, v, np.ones(self.n_nodes), np.zeros_like(x), 1e-3, 0.0, np.zeros(3),
                    contacts)
+
+
+class ComplianceSolve:
+    """A compliance solve (ImplicitEuler.compliance_solve) on its workspace's assembled system, run in slices of
+    PCG iterations (pcg.pcg_resumable) between the steps of the solver it was taken from: the same iterations in
+    the same order as one solve, so its result does not depend on how it was sliced."""
+
+    def __init__(self, workspace: ImplicitEuler, inv_mass: np.ndarray, b: np.ndarray, solution: np.ndarray,
+                 guess: np.ndarray, coarse: CoarseSpace, tets: TetArrays, rows: ContactRows):
+        self.workspace = workspace
+        self._inv_mass, self._b, self._solution, self._guess = inv_mass, b, solution, guess
+        self._coarse, self._tets, self._rows = coarse, tets, rows
+        self._vectors = tuple(np.zeros_like(b) for _ in range(4))
+        self._status = np.zeros(4)
+        self._preconditioner = workspace._scratch.preconditioner
+        #: PCG iterations made so far
+        self.iterations = 0
+        self._started = False
+
+    @property
+    def ended(self) -> bool:
+        """Whether the solve has converged (or reached the workspace's max_cg_iterations)."""
+        return self._started and (self._status[ENDED] > 0.0
+                                  or self.iterations >= self.workspace.max_cg_iterations)
+
+    def advance(self, iterations: int) -> bool:
+        """Up to `iterations` more PCG iterations (the first slice also starts the solve); returns `ended`."""
+        if self.ended:
+            return True
+        w = self.workspace
+        solve = pcg_resumable_parallel if w.threads > 1 else pcg_resumable
+        steps = max(0, min(int(iterations), w.max_cg_iterations - self.iterations))
+        self.iterations += solve(w._op, self._inv_mass, self._rows, self._tets, w._tet_weight, self._preconditioner,
+                                 self._coarse, self._b, self._solution, COMPLIANCE_TOLERANCE, not self._started,
+                                 steps, self._vectors, w._partial, self._status)
+        self._started = True
+        return self.ended
+
+    def finish(self) -> float:
+        """Run the solve to its end; the compliance bᵀ·z (m/N), the solution ·H² written into the guess."""
+        self.advance(self.workspace.max_cg_iterations)
+        h = COMPLIANCE_HORIZON_S
+        self._guess[:] = self._solution * (h * h)
+        return float(np.einsum("ij,ij->", self._b, self._guess))

@@ -155,12 +155,16 @@ def _dot(u, w, chunks, sums):
     return total
 
 
+#: The fields of a resumable solve's `status` (4,): r·z, ‖r‖², the target ‖r‖² and whether it has ended (1.0:
+#: converged, or stopped where pᵀA·p ≤ 0).
+RZ, R_NORM2, TARGET, ENDED = 0, 1, 2, 3
+
+
 @numba.njit(cache=True, inline="always")
-def _pcg(op, inv_mass, rows, tet_law, tet_weight, preconditioner, coarse, b, z0, settings, vectors, partial):
-    """`pcg`'s iterations; the products (`_apply`) and the vector updates in partial.shape[0] chunks of springs,
-    elements and nodes (prange: on the threads of a parallel dispatcher, in order in a serial one)."""
+def _pcg_start(op, inv_mass, rows, tet_law, tet_weight, preconditioner, coarse, b, z0, tolerance, vectors, partial,
+               status):
+    """The start of a solve from z0: r = b − A·z0, z = P⁻¹·r, p = z, and `status` (RZ … ENDED)."""
     r, z, p, q = vectors
-    tolerance, max_iterations = settings.cg_tolerance, settings.max_cg_iterations
     two_level = coarse.factor.shape[0] > 0
     chunks = partial.shape[0]
     count = b.shape[0]
@@ -186,11 +190,26 @@ def _pcg(op, inv_mass, rows, tet_law, tet_weight, preconditioner, coarse, b, z0,
         coarse_correction(coarse, inv_mass, r, z)
         rz = _dot(r, z, chunks, sums)
     p[:] = z
+    status[RZ], status[R_NORM2], status[TARGET] = rz, r_norm2, target
+    status[ENDED] = 1.0 if r_norm2 <= target else 0.0
+
+
+@numba.njit(cache=True, inline="always")
+def _pcg_steps(op, inv_mass, rows, tet_law, tet_weight, preconditioner, coarse, z0, steps, vectors, partial, status):
+    """Up to `steps` iterations of a started solve (`_pcg_start`), z0 its iterate, until it ends; `status` carried
+    from one call to the next.  Returns the iterations made."""
+    r, z, p, q = vectors
+    two_level = coarse.factor.shape[0] > 0
+    chunks = partial.shape[0]
+    count = z0.shape[0]
+    sums = np.zeros((chunks, 2))
+    rz, r_norm2, target = status[RZ], status[R_NORM2], status[TARGET]
     iterations = 0
-    while r_norm2 > target and iterations < max_iterations:
+    while r_norm2 > target and iterations < steps:
         _apply(op, inv_mass, rows, tet_law, tet_weight, p, q, partial)
         pq = _dot(p, q, chunks, sums)
         if pq <= 0.0:
+            status[ENDED] = 1.0
             break
         alpha = rz / pq
         for c in numba.prange(chunks):
@@ -216,7 +235,22 @@ def _pcg(op, inv_mass, rows, tet_law, tet_weight, preconditioner, coarse, b, z0,
             for a in range(3):
                 p[n, a] = z[n, a] + beta * p[n, a]
         iterations += 1
+    status[RZ], status[R_NORM2] = rz, r_norm2
+    if r_norm2 <= target:
+        status[ENDED] = 1.0
     return iterations
+
+
+@numba.njit(cache=True, inline="always")
+def _pcg(op, inv_mass, rows, tet_law, tet_weight, preconditioner, coarse, b, z0, settings, vectors, partial):
+    """`pcg`'s solve: its start and its iterations; the products (`_apply`) and the vector updates in
+    partial.shape[0] chunks of springs, elements and nodes (prange: on the threads of a parallel dispatcher, in order
+    in a serial one)."""
+    status = np.zeros(4)
+    _pcg_start(op, inv_mass, rows, tet_law, tet_weight, preconditioner, coarse, b, z0, settings.cg_tolerance, vectors,
+               partial, status)
+    return _pcg_steps(op, inv_mass, rows, tet_law, tet_weight, preconditioner, coarse, z0,
+                      settings.max_cg_iterations, vectors, partial, status)
 
 
 @numba.njit(cache=True)
@@ -235,3 +269,27 @@ def pcg_parallel(op, inv_mass, rows, tet_law, tet_weight, preconditioner, coarse
     chunks' own sums of A·p.  The sums' order depends on the chunks alone, so a run repeats itself bit for bit with
     the same thread count; against `pcg` it differs by rounding."""
     return _pcg(op, inv_mass, rows, tet_law, tet_weight, preconditioner, coarse, b, z0, settings, vectors, partial)
+
+
+@numba.njit(cache=True, nogil=True)
+def pcg_resumable(op, inv_mass, rows, tet_law, tet_weight, preconditioner, coarse, b, z0, tolerance, start, steps,
+                  vectors, partial, status):
+    """`pcg`'s solve in slices: with `start`, begin it from z0 (`status` (4,), RZ … ENDED, is then set); then up to
+    `steps` iterations, z0 the iterate, `vectors` and `status` kept by the caller from one slice to the next.  The
+    slices make the same iterations, in the same order, as one `pcg` call.  Returns the iterations made."""
+    if start:
+        _pcg_start(op, inv_mass, rows, tet_law, tet_weight, preconditioner, coarse, b, z0, tolerance, vectors,
+                   partial, status)
+    return _pcg_steps(op, inv_mass, rows, tet_law, tet_weight, preconditioner, coarse, z0, steps, vectors, partial,
+                      status)
+
+
+@numba.njit(cache=True, parallel=True, nogil=True)
+def pcg_resumable_parallel(op, inv_mass, rows, tet_law, tet_weight, preconditioner, coarse, b, z0, tolerance, start,
+                           steps, vectors, partial, status):
+    """`pcg_resumable` on the threads (as `pcg_parallel`)."""
+    if start:
+        _pcg_start(op, inv_mass, rows, tet_law, tet_weight, preconditioner, coarse, b, z0, tolerance, vectors,
+                   partial, status)
+    return _pcg_steps(op, inv_mass, rows, tet_law, tet_weight, preconditioner, coarse, z0, steps, vectors, partial,
+                      status)

@@ -5,11 +5,16 @@ the two act in series, 1/K = 1/(probes·λ) + c, with c = bᵀ·K_t⁻¹·b the 
 spring network under the tool's unit load pattern b (implicit.ImplicitEuler.compliance).  The
 compliance changes slowly — with the tissue's strain and as the touched patch moves — so it is solved
 every `refresh_frames` frames (warm-started from the last solution) and reused in between, while the
-penalty part follows the probes touching at each frame.  Other tools on the liver hold the tissue while this
-one presses: their pushing contact rows enter the compliance solve as the penalty springs they are, and the nodes
-a tool grasps are held (contact_rows).
+penalty part follows the probes touching at each frame.  A solve is not made within one frame: it is assembled
+SOLVE_FRAMES frames before the frame that takes its result and its PCG iterations are spread over the frames
+between, so that no frame carries a whole solve; the frame that takes it is fixed, and the slices make the
+iterations of one solve, so K is the same whatever the machine (implicit.ComplianceSolve).  Other tools on the
+liver hold the tissue while this one presses: their pushing contact rows enter the compliance solve as the penalty
+springs they are, and the nodes a tool grasps are held (contact_rows).
 """
 from __future__ import annotations
+
+import math
 
 import numpy as np
 
@@ -18,9 +23,12 @@ from liver_sim.physics.contact.rows import Contacts
 from liver_sim.physics.solver.implicit import ImplicitEuler
 from liver_sim.physics.state import ToolState
 
-#: Frames between two solves of the tissue's compliance under the tool (10: 15 Hz at 150 Hz; K then stays
-#: within 10 % of a solve at every frame over the demo's press and slide, a test).
-REFRESH_FRAMES = 10
+#: Frames between two solves of the tissue's compliance under the tool, and frames over which a solve runs (its
+#: assembly in the first, its result taken REFRESH_FRAMES after the last was): a K is at most their sum old (10
+#: frames, 67 ms at 150 Hz), within which it stays within 10 % of a solve at every frame over the demo's press and
+#: slide (a test).
+REFRESH_FRAMES = 6
+SOLVE_FRAMES = 4
 
 
 def _rows(tool: ToolSweep) -> tuple[np.ndarray, np.ndarray]:
@@ -70,18 +78,47 @@ def stiffness_n_per_m(solver: ImplicitEuler, tool: ToolState, positions: np.ndar
     probes in series with the tissue's compliance under their push, from the tangent stiffness of `solver`'s
     network at `positions` with the held nodes (inv_mass 0) fixed and the other tools' pushing rows `others` holding
     the tissue (`rotations`: the state's StepHistory.rotations); the penalty alone when no probe is within reach.
-    The compliance is solved every `refresh_frames` frames in which a probe is within reach, and at the first such
-    frame after a reset or a topology change (ToolState.compliance_m_per_n None), warm-started from the last
-    solution (ToolState.compliance_guess)."""
+    The compliance counts the frames in which a probe is within reach: solved at once at the first such frame after a
+    reset or a topology change (ToolState.compliance_m_per_n None); then taken every `refresh_frames` of them from a
+    solve (ToolState.compliance_solve, on the tool's ToolState.compliance_workspace) assembled min(SOLVE_FRAMES,
+    refresh_frames − 1) frames before at the positions of that frame, its iterations spread over the frames
+    between as the last solve's count divided among them, the rest made in the frame that takes it; warm-started
+    from the last solution (ToolState.compliance_guess)."""
     probes = touching_probes(tool.sweep)
     if probes == 0.0:
         return penalty_n_per_m
     tool.frames_since_solve += 1
-    if tool.compliance_m_per_n is None or tool.frames_since_solve >= refresh_frames:
-        if tool.compliance_guess is None:
-            tool.compliance_guess = np.zeros((len(positions), 3))
-        tool.compliance_m_per_n = solver.compliance(positions, inv_mass, contact_load(tool.sweep, len(positions)),
+    if tool.compliance_m_per_n is None:
+        _begin(solver, tool, positions, inv_mass, environment_damping_per_s, others, rotations)
+        _take(tool)
+    else:
+        lead = min(SOLVE_FRAMES, refresh_frames - 1)
+        if tool.compliance_solve is None and tool.frames_since_solve >= refresh_frames - lead:
+            _begin(solver, tool, positions, inv_mass, environment_damping_per_s, others, rotations)
+            tool.compliance_solve.advance(0)  # r = b − A·z0: the start of the solve
+        elif tool.compliance_solve is not None and tool.frames_since_solve < refresh_frames:
+            tool.compliance_solve.advance(math.ceil(tool.compliance_iterations / max(lead - 1, 1)))
+        if tool.frames_since_solve >= refresh_frames:
+            _take(tool)
+    return local_stiffness(penalty_n_per_m, probes, tool.compliance_m_per_n)
+
+
+def _begin(solver: ImplicitEuler, tool: ToolState, positions: np.ndarray, inv_mass: np.ndarray,
+           environment_damping_per_s: float, others: Contacts | None, rotations: np.ndarray | None) -> None:
+    """Assemble the tool's compliance solve at `positions` (ToolState.compliance_solve) on its workspace."""
+    if tool.compliance_workspace is None:
+        tool.compliance_workspace = solver.workspace()
+    if tool.compliance_guess is None:
+        tool.compliance_guess = np.zeros((len(positions), 3))
+    tool.compliance_solve = solver.compliance_solve(tool.compliance_workspace, positions, inv_mass,
+                                                    contact_load(tool.sweep, len(positions)),
                                                     environment_damping_per_s, tool.compliance_guess, others,
                                                     rotations)
-        tool.frames_since_solve = 0
-    return local_stiffness(penalty_n_per_m, probes, tool.compliance_m_per_n)
+
+
+def _take(tool: ToolState) -> None:
+    """End the tool's compliance solve and take its result: ToolState.compliance_m_per_n, its iterations."""
+    tool.compliance_m_per_n = tool.compliance_solve.finish()
+    tool.compliance_iterations = tool.compliance_solve.iterations
+    tool.compliance_solve = None
+    tool.frames_since_solve = 0

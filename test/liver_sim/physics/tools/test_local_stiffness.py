@@ -65,3 +65,60 @@ def test_the_local_stiffness_refreshed_every_few_frames_stays_near_a_fresh_solve
         compared += 1
     assert REFRESH_FRAMES > 1 and compared > 50
 
+
+
+def pressed_default_liver(frames: int = 30) -> LiverModel:
+    """The default liver with its tool pressed 6 mm into the press anchor over `frames` frames."""
+    from liver_sim.mesh.landmarks import press_anchor
+    from liver_sim.mesh.liver_shape import default_liver
+
+    mesh = default_liver()
+    model = LiverModel(mesh, ModelParams())
+    anchor, radius = press_anchor(mesh), model.tool.shape.radius_m
+    for k in range(frames):
+        model.step_frame(ToolPose(anchor + [0.0, 0.0, radius - 0.006 * (k + 1) / frames]))
+    return model
+
+
+def test_a_compliance_solve_in_slices_makes_the_iterations_of_one_solve():
+    model = pressed_default_liver()
+    solver, state, tool = model.structure.solver, model.state, model.state.tools[0]
+    load = contact_load(tool.sweep, len(state.positions))
+    guesses = [np.zeros_like(state.positions) for _ in range(2)]
+    whole, sliced = (solver.compliance_solve(solver.workspace(), state.positions, state.inv_mass, load, 3.0, guess)
+                     for guess in guesses)
+    at_once = whole.finish()
+    slices = 0
+    while not sliced.advance(3):
+        slices += 1
+    assert slices > 3 and sliced.iterations == whole.iterations
+    assert sliced.finish() == at_once > 0.0
+    np.testing.assert_array_equal(guesses[0], guesses[1])
+
+
+def test_k_takes_the_solve_begun_solve_frames_before_at_the_frame_it_is_due():
+    """In contact, a solve is begun SOLVE_FRAMES frames before it is due and taken at the due frame, REFRESH_FRAMES
+    after the last: K changes at that frame only, to the compliance of the positions where the solve was begun."""
+    from liver_sim.mesh.landmarks import press_anchor
+    from liver_sim.physics.tools.local_stiffness import REFRESH_FRAMES, SOLVE_FRAMES
+
+    model = pressed_default_liver()
+    solver, tool = model.structure.solver, model.state.tools[0]
+    anchor, radius = press_anchor(model.structure.mesh), model.tool.shape.radius_m
+    assert tool.frames_since_solve < REFRESH_FRAMES and tool.compliance_m_per_n is not None
+    begun, taken, compliance = [], [], tool.compliance_m_per_n
+    for k in range(3 * REFRESH_FRAMES):
+        model.step_frame(ToolPose(anchor + [0.0, 0.0, radius - 0.006 - 0.002 * (k + 1) / REFRESH_FRAMES]))
+        if tool.frames_since_solve == REFRESH_FRAMES - SOLVE_FRAMES:
+            assert tool.compliance_solve is not None
+            positions = model.state.positions
+            begun.append((positions.copy(), contact_load(tool.sweep, len(positions)), tool.compliance_guess.copy()))
+        if tool.compliance_m_per_n != compliance:
+            assert tool.frames_since_solve == 0 and tool.compliance_solve is None
+            if begun:  # (the first may have been begun before the loop)
+                positions, load, guess = begun[-1]
+                assert tool.compliance_m_per_n == solver.compliance(
+                    positions, model.state.inv_mass, load, model.structure.params.environment_damping_per_s, guess)
+            taken.append(k)
+            compliance = tool.compliance_m_per_n
+    assert len(taken) >= 3 and len(begun) >= 2 and np.all(np.diff(taken) == REFRESH_FRAMES)
