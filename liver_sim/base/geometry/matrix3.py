@@ -62,13 +62,13 @@ def symmetric_eigen3(a, values, vectors):
                 values[j], values[j + 1] = values[j + 1], values[j]
                 for k in range(3):
                     vectors[k, j], vectors[k, j + 1] = vectors[k, j + 1], vectors[k, j]
-    if _det3(vectors) < 0.0:
+    if det3(vectors) < 0.0:
         for k in range(3):
             vectors[k, 2] = -vectors[k, 2]
 
 
 @numba.njit(cache=True, inline="always")
-def _det3(m):
+def det3(m):
     """det of the 3×3 `m`."""
     return (m[0, 0] * (m[1, 1] * m[2, 2] - m[1, 2] * m[2, 1]) - m[0, 1] * (m[1, 0] * m[2, 2] - m[1, 2] * m[2, 0])
             + m[0, 2] * (m[1, 0] * m[2, 1] - m[1, 1] * m[2, 0]))

@@ -25,7 +25,9 @@ distortion energies", ACM TOG 38(1), 2019; Kim & Eberle ch. 7).  With the rotati
            + s·σ_k·(1 − δ_ij), γ_i = ∂J/∂σ_i = Π_{l≠i} σ_l.
 
 The element's tangent 𝐂̃ = Σ max(0, eigenvalue)·vec(mode)·vec(mode)ᵀ (9×9, row (i, j) ↔ 3i + j), kept per element
-from the last assembly.  Kelvin–Voigt viscosity stiffness-proportional as the co-rotational law's: P_v = τ·𝐂̃:Ḟ,
+from the last assembly, is built as ∂P/∂F less its modes of negative eigenvalue (the scaling block's eigensystem
+only where that block is not positive definite).  Kelvin–Voigt viscosity stiffness-proportional as the
+co-rotational law's: P_v = τ·𝐂̃:Ḟ,
 Ḟ = Σ v_a ⊗ g_a, τ = η/E, so K_ab·y = −V·(𝐂̃:(y ⊗ g_b))·g_a, D = τ·K, and in A = M − h·D − h²·K the element adds
 (h² + h·τ)·V·g_aᵀ·𝐂̃·g_b, whose diagonal blocks are (h² + h·τ)·V·Σ_jl g_a[j]·g_a[l]·𝐂̃[(i, j), (k, l)].
 """
@@ -36,78 +38,123 @@ import math
 import numba
 import numpy as np
 
-from liver_sim.base.geometry.matrix3 import rotation_variant_svd3, symmetric_eigen3
+from liver_sim.base.geometry.matrix3 import det3, rotation_variant_svd3, symmetric_eigen3
 
 #: The pairs (i, j) of singular values of the twist and flip modes, k the third index.
 PAIRS = ((1, 2, 0), (0, 2, 1), (0, 1, 2))
 
 
-@numba.njit(cache=True)
-def first_piola(f, mu, lam_hat, out):
-    """out ← P(F) = μ·F + (λ̂·(J − 1) − μ)·∂J/∂F (Pa; `f` 3×3, μ, λ̂ in Pa)."""
+@numba.njit(cache=True, inline="always")
+def _cofactor(f, out):
+    """out ← ∂J/∂F = [f₁×f₂ | f₂×f₀ | f₀×f₁] (columns f_i of the 3×3 `f`); returns J = det F."""
     for j in range(3):
         a, b = (j + 1) % 3, (j + 2) % 3
         out[0, j] = f[1, a] * f[2, b] - f[2, a] * f[1, b]
         out[1, j] = f[2, a] * f[0, b] - f[0, a] * f[2, b]
         out[2, j] = f[0, a] * f[1, b] - f[1, a] * f[0, b]
-    jacobian = f[0, 0] * out[0, 0] + f[1, 0] * out[1, 0] + f[2, 0] * out[2, 0]
-    s = lam_hat * (jacobian - 1.0) - mu
+    return f[0, 0] * out[0, 0] + f[1, 0] * out[1, 0] + f[2, 0] * out[2, 0]
+
+
+@numba.njit(cache=True)
+def first_piola(f, mu, lam_hat, out):
+    """out ← P(F) = μ·F + (λ̂·(J − 1) − μ)·∂J/∂F (Pa; `f` 3×3, μ, λ̂ in Pa)."""
+    s = lam_hat * (_cofactor(f, out) - 1.0) - mu
     for i in range(3):
         for j in range(3):
             out[i, j] = mu * f[i, j] + s * out[i, j]
 
 
 @numba.njit(cache=True)
-def eigensystem(f, mu, lam_hat, values, modes, mats, vecs):
-    """values (9,) Pa and orthonormal modes (9, 3, 3) of the unprojected tangent at `f`: ∂P/∂F = Σ_m values[m]·
-    vec(modes[m])·vec(modes[m])ᵀ; the three scaling modes first, then twist and flip per pair of PAIRS (module
-    docstring).  `mats` (5, 3, 3) and `vecs` (2, 3): scratch (U, V, the scaling block, its eigenvectors, FᵀF; σ and
-    the block's eigenvalues)."""
-    u, v, block, q, work = mats[0], mats[1], mats[2], mats[3], mats[4]
-    sigma, scale = vecs[0], vecs[1]
-    rotation_variant_svd3(f, u, sigma, v, work)
+def _singular_block(f, mu, lam_hat, mats, sigma):
+    """The SVD of `f` into U = mats[0], σ = `sigma`, V = mats[1] (mats[4] scratch) and the scaling block
+    ∂²Ψ/∂σ_i∂σ_j into mats[2]; returns s = λ̂·(J − 1) − μ, J = σ₀σ₁σ₂."""
+    block = mats[2]
+    rotation_variant_svd3(f, mats[0], sigma, mats[1], mats[4])
     s = lam_hat * (sigma[0] * sigma[1] * sigma[2] - 1.0) - mu
     for i, j, k in PAIRS:
         block[i, j] = lam_hat * sigma[i] * sigma[j] * sigma[k] * sigma[k] + s * sigma[k]
         block[j, i] = block[i, j]
     for i, j, k in PAIRS:
         block[k, k] = mu + lam_hat * (sigma[i] * sigma[j]) ** 2
-    symmetric_eigen3(block, scale, q)
-    root = 1.0 / math.sqrt(2.0)
-    for m in range(3):
-        values[m] = scale[m]
-        for r in range(3):
-            for c in range(3):
-                modes[m, r, c] = u[r, 0] * q[0, m] * v[c, 0] + u[r, 1] * q[1, m] * v[c, 1] + u[r, 2] * q[2, m] * v[c, 2]
-    for p in range(3):
-        i, j, k = PAIRS[p]
-        values[3 + 2 * p] = mu + s * sigma[k]
-        values[4 + 2 * p] = mu - s * sigma[k]
-        for r in range(3):
-            for c in range(3):
-                ij, ji = u[r, i] * v[c, j], u[r, j] * v[c, i]
-                modes[3 + 2 * p, r, c] = root * (ij - ji)
-                modes[4 + 2 * p, r, c] = root * (ij + ji)
+    return s
 
 
 @numba.njit(cache=True)
-def projected_tangent(f, mu, lam_hat, values, modes, mats, vecs, out):
-    """out (9, 9) ← 𝐂̃(F), the tangent with its negative eigenvalues clamped to 0 (Pa), exactly symmetric; `values`,
-    `modes`, `mats`, `vecs` scratch for `eigensystem`."""
-    eigensystem(f, mu, lam_hat, values, modes, mats, vecs)
-    out[:] = 0.0
+def _mode(m, u, v, q, out):
+    """out (9,) ← vec of mode m (the order of `eigensystem`) from U, V and the scaling block's eigenvectors `q`."""
+    if m < 3:
+        for r in range(3):
+            for c in range(3):
+                out[3 * r + c] = u[r, 0] * q[0, m] * v[c, 0] + u[r, 1] * q[1, m] * v[c, 1] + u[r, 2] * q[2, m] * v[c, 2]
+        return
+    i, j, _ = PAIRS[(m - 3) // 2]
+    sign = -1.0 if m % 2 else 1.0  # twist (odd m), flip (even m)
+    root = 1.0 / math.sqrt(2.0)
+    for r in range(3):
+        for c in range(3):
+            out[3 * r + c] = root * (u[r, i] * v[c, j] + sign * u[r, j] * v[c, i])
+
+
+@numba.njit(cache=True)
+def eigensystem(f, mu, lam_hat, values, modes, mats, vecs):
+    """values (9,) Pa and orthonormal modes (rows of `modes`, 9×9, row m = vec(mode m)) of the unprojected tangent at
+    `f`: ∂P/∂F = Σ_m values[m]·modes[m]·modes[m]ᵀ; the three scaling modes first, then twist and flip per pair of
+    PAIRS (module docstring).  `mats` (5, 3, 3) and `vecs` (2, 3): scratch (U, V, the scaling block, its
+    eigenvectors, FᵀF; σ and the block's eigenvalues)."""
+    sigma = vecs[0]
+    s = _singular_block(f, mu, lam_hat, mats, sigma)
+    symmetric_eigen3(mats[2], values[:3], mats[3])
+    for p in range(3):
+        k = PAIRS[p][2]
+        values[3 + 2 * p] = mu + s * sigma[k]
+        values[4 + 2 * p] = mu - s * sigma[k]
     for m in range(9):
-        w = values[m]
-        if w <= 0.0:
-            continue
-        mode = modes[m]
-        for r in range(9):
-            wr = w * mode[r // 3, r % 3]
-            for c in range(r, 9):
-                out[r, c] += wr * mode[c // 3, c % 3]
+        _mode(m, mats[0], mats[1], mats[3], modes[m])
+
+
+@numba.njit(cache=True, inline="always")
+def _subtract(w, mode, out):
+    """out (9, 9) ← out − w·mode·modeᵀ, keeping it exactly symmetric."""
     for r in range(9):
-        for c in range(r):
-            out[r, c] = out[c, r]
+        for c in range(9):
+            out[r, c] -= w * (mode[r] * mode[c])
+@numba.njit(cache=True)
+def projected_tangent(f, mu, lam_hat, mats, vecs, out):
+    """out (9, 9) ← 𝐂̃(F) (Pa), exactly symmetric: the tangent ∂P/∂F = μ·I₉ + λ̂·vec(∂J/∂F)·vec(∂J/∂F)ᵀ + s·∂²J/∂F²,
+    ∂²J/∂F_ij∂F_kl = ε_ikm·ε_jln·F_mn, less w·vec(mode)·vec(mode)ᵀ for each mode of `eigensystem` whose eigenvalue
+    w < 0 (the scaling block's eigensystem only when the block is not positive definite).  `mats` (5, 3, 3) and
+    `vecs` (3, 9): scratch (as `eigensystem`'s, and ∂J/∂F; σ, the block's eigenvalues, a mode)."""
+    u, v, block, q, cof = mats[0], mats[1], mats[2], mats[3], mats[4]
+    sigma, scale, mode = vecs[0], vecs[1], vecs[2]
+    s = _singular_block(f, mu, lam_hat, mats, sigma)
+    _cofactor(f, cof)
+    for i in range(3):
+        for j in range(3):
+            for k in range(3):
+                for l in range(3):
+                    out[3 * i + j, 3 * k + l] = cof[i, j] * cof[k, l] * lam_hat
+            out[3 * i + j, 3 * i + j] += mu
+    for i, k, m in ((0, 1, 2), (1, 2, 0), (2, 0, 1)):  # ε_ikm = 1: the blocks (i, k) and (k, i) of s·∂²J/∂F²
+        for j in range(3):
+            l, n = (j + 1) % 3, (j + 2) % 3  # ε_jln = 1
+            turn = s * f[m, n]
+            out[3 * i + j, 3 * k + l] += turn
+            out[3 * k + l, 3 * i + j] += turn
+            out[3 * i + l, 3 * k + j] -= turn
+            out[3 * k + j, 3 * i + l] -= turn
+    for p in range(3):
+        k = PAIRS[p][2]
+        for m, w in ((3 + 2 * p, mu + s * sigma[k]), (4 + 2 * p, mu - s * sigma[k])):
+            if w < 0.0:
+                _mode(m, u, v, q, mode)
+                _subtract(w, mode, out)
+    minor = block[0, 0] * block[1, 1] - block[0, 1] * block[0, 1]
+    if minor <= 0.0 or det3(block) <= 0.0:  # block[0, 0] > 0: Sylvester's criterion
+        symmetric_eigen3(block, scale, q)
+        for m in range(3):
+            if scale[m] < 0.0:
+                _mode(m, u, v, q, mode)
+                _subtract(scale[m], mode, out)
 
 
 @numba.njit(cache=True, inline="always")
@@ -135,10 +182,8 @@ def neo_hookean_terms(x, v, y, inv_mass, h, law, f, ky, diagonal, assemble_matri
     probe = np.empty((3, 3))
     stress = np.empty((3, 3))
     contracted = np.empty((3, 3))
-    values = np.empty(9)
-    modes = np.empty((9, 3, 3))
     mats = np.empty((5, 3, 3))
-    vecs = np.empty((2, 3))
+    vecs = np.empty((3, 9))
     for e in range(tets.shape[0]):
         tet, g, c = tets[e], gradients[e], tangent[e]
         grad[:] = 0.0
@@ -154,7 +199,7 @@ def neo_hookean_terms(x, v, y, inv_mass, h, law, f, ky, diagonal, assemble_matri
                     if free:
                         probe[i, j] += y[n, i] * g[a, j]
         if assemble_matrix:
-            projected_tangent(grad, mu, lam_hat, values, modes, mats, vecs, c)
+            projected_tangent(grad, mu, lam_hat, mats, vecs, c)
         first_piola(grad, mu, lam_hat, stress)
         _contract(c, rate, contracted)
         for i in range(3):
