@@ -157,20 +157,65 @@ def projected_tangent(f, mu, lam_hat, mats, vecs, out):
                 _subtract(scale[m], mode, out)
 
 
+#: Every node of an element counts in `_gradient`.
+EVERY_NODE = (True, True, True, True)
+
+
 @numba.njit(cache=True, inline="always")
-def _contract(tangent, grad, out):
-    """out ← 𝐂̃:grad, out[i, j] = Σ_kl 𝐂̃[(i, j), (k, l)]·grad[k, l]."""
-    for r in range(9):
-        total = 0.0
-        for c in range(9):
-            total += tangent[r, c] * grad[c // 3, c % 3]
-        out[r // 3, r % 3] = total
+def _gradient(values, tet, g, counts):
+    """G = Σ_a values[tet[a]] ⊗ g_a over the nodes a with counts[a], as the 9-tuple (row (i, j) ↔ 3i + j)."""
+    g00 = g01 = g02 = g10 = g11 = g12 = g20 = g21 = g22 = 0.0
+    for a in range(4):
+        if counts[a]:
+            n = tet[a]
+            px, py, pz = values[n, 0], values[n, 1], values[n, 2]
+            hx, hy, hz = g[a, 0], g[a, 1], g[a, 2]
+            g00 += px * hx
+            g01 += px * hy
+            g02 += px * hz
+            g10 += py * hx
+            g11 += py * hy
+            g12 += py * hz
+            g20 += pz * hx
+            g21 += pz * hy
+            g22 += pz * hz
+    return g00, g01, g02, g10, g11, g12, g20, g21, g22
+
+
+@numba.njit(cache=True, inline="always")
+def _contract(tangent, grad):
+    """𝐂̃:G as the 9-tuple, (𝐂̃:G)[r] = Σ_c 𝐂̃[r, c]·G[c], summed down the columns of the symmetric `tangent` (9, 9)
+    (`grad` G the 9-tuple)."""
+    s0 = s1 = s2 = s3 = s4 = s5 = s6 = s7 = s8 = 0.0
+    for c in range(9):
+        gc = grad[c]
+        s0 += tangent[c, 0] * gc
+        s1 += tangent[c, 1] * gc
+        s2 += tangent[c, 2] * gc
+        s3 += tangent[c, 3] * gc
+        s4 += tangent[c, 4] * gc
+        s5 += tangent[c, 5] * gc
+        s6 += tangent[c, 6] * gc
+        s7 += tangent[c, 7] * gc
+        s8 += tangent[c, 8] * gc
+    return s0, s1, s2, s3, s4, s5, s6, s7, s8
+
+
+@numba.njit(cache=True, inline="always")
+def _scatter(stress, tet, g, scale, out):
+    """out[tet[a]] += scale·S·g_a for the element's nodes (`stress` S the 9-tuple)."""
+    for a in range(4):
+        n = tet[a]
+        ga, gb, gc = g[a, 0], g[a, 1], g[a, 2]
+        out[n, 0] += scale * (stress[0] * ga + stress[1] * gb + stress[2] * gc)
+        out[n, 1] += scale * (stress[3] * ga + stress[4] * gb + stress[5] * gc)
+        out[n, 2] += scale * (stress[6] * ga + stress[7] * gb + stress[8] * gc)
 
 
 @numba.njit(cache=True)
 def neo_hookean_terms(x, v, y, inv_mass, h, law, f, ky, diagonal, assemble_matrix):
-    """Add the elements' (`law`, a fem_kernels.TetArrays of this law) forces at (x, v) to f and K·y to ky (y zero on
-    held nodes); with assemble_matrix, first each element's projected tangent at x (into law.tangent) and the
+    """Add the elements' (`law`, a fem_kernels.TetArrays of this law) forces at (x, v) to f and K·y to ky (y counted
+    on free nodes only); with assemble_matrix, first each element's projected tangent at x (into law.tangent) and the
     diagonal blocks of (h² + h·τ)·V·g_aᵀ·𝐂̃·g_a to free nodes' `diagonal`.  Without it the last tangents are used
     (for K·y and the viscous stress)."""
     tets, volume, gradients, tangent = law.tets, law.volume_m3, law.gradients, law.tangent
@@ -178,48 +223,43 @@ def neo_hookean_terms(x, v, y, inv_mass, h, law, f, ky, diagonal, assemble_matri
     lam_hat = law.lame_lambda_pa + mu
     weight = h * h + h * tau
     grad = np.empty((3, 3))
-    rate = np.empty((3, 3))
-    probe = np.empty((3, 3))
     stress = np.empty((3, 3))
-    contracted = np.empty((3, 3))
     mats = np.empty((5, 3, 3))
     vecs = np.empty((3, 9))
     for e in range(tets.shape[0]):
         tet, g, c = tets[e], gradients[e], tangent[e]
-        grad[:] = 0.0
-        rate[:] = 0.0
-        probe[:] = 0.0
-        for a in range(4):
-            n = tet[a]
-            free = inv_mass[n] > 0.0
-            for i in range(3):
-                for j in range(3):
-                    grad[i, j] += x[n, i] * g[a, j]
-                    rate[i, j] += v[n, i] * g[a, j]
-                    if free:
-                        probe[i, j] += y[n, i] * g[a, j]
+        deformation = _gradient(x, tet, g, EVERY_NODE)
+        for i in range(3):
+            for j in range(3):
+                grad[i, j] = deformation[3 * i + j]
         if assemble_matrix:
             projected_tangent(grad, mu, lam_hat, mats, vecs, c)
         first_piola(grad, mu, lam_hat, stress)
-        _contract(c, rate, contracted)
-        for i in range(3):
-            for j in range(3):
-                stress[i, j] += tau * contracted[i, j]
-        _contract(c, probe, contracted)  # 𝐂̃:Y, Y = Σ y_a ⊗ g_a
-        vol = volume[e]
-        for a in range(4):
-            n = tet[a]
+        if tau != 0.0:
+            viscous = _contract(c, _gradient(v, tet, g, EVERY_NODE))
             for i in range(3):
-                f[n, i] -= vol * (stress[i, 0] * g[a, 0] + stress[i, 1] * g[a, 1] + stress[i, 2] * g[a, 2])
-                ky[n, i] -= vol * (contracted[i, 0] * g[a, 0] + contracted[i, 1] * g[a, 1] + contracted[i, 2] * g[a, 2])
-            if assemble_matrix and inv_mass[n] > 0.0:
-                for i in range(3):
-                    for k in range(3):
-                        total = 0.0
-                        for j in range(3):
-                            for l in range(3):
-                                total += g[a, j] * g[a, l] * c[3 * i + j, 3 * k + l]
-                        diagonal[n, i, k] += weight * vol * total
+                for j in range(3):
+                    stress[i, j] += tau * viscous[3 * i + j]
+        vol = volume[e]
+        _scatter((stress[0, 0], stress[0, 1], stress[0, 2], stress[1, 0], stress[1, 1], stress[1, 2], stress[2, 0],
+                  stress[2, 1], stress[2, 2]), tet, g, -vol, f)
+        free = (inv_mass[tet[0]] > 0.0, inv_mass[tet[1]] > 0.0, inv_mass[tet[2]] > 0.0, inv_mass[tet[3]] > 0.0)
+        probe = _gradient(y, tet, g, free)  # Y = Σ y_a ⊗ g_a
+        if probe != (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0):
+            _scatter(_contract(c, probe), tet, g, -vol, ky)
+        if assemble_matrix:
+            for a in range(4):
+                if free[a]:
+                    n = tet[a]
+                    for i in range(3):
+                        for k in range(3):
+                            total = 0.0
+                            for j in range(3):
+                                row = 0.0
+                                for l in range(3):
+                                    row += c[3 * i + j, 3 * k + l] * g[a, l]
+                                total += g[a, j] * row
+                            diagonal[n, i, k] += weight * vol * total
 
 
 @numba.njit(cache=True)
@@ -227,19 +267,6 @@ def neo_hookean_apply(law, weight, p, first, last, out):
     """out += Σ elements first..last−1 of weight·V·g_aᵀ·𝐂̃·g_b·p_b (`law` a fem_kernels.TetArrays of this law, weight =
     h² + h·τ; p zero on held nodes): with G = Σ_b p_b ⊗ g_b, node a gets weight·V·(𝐂̃:G)·g_a."""
     tets, volume, gradients, tangent = law.tets, law.volume_m3, law.gradients, law.tangent
-    grad = np.empty((3, 3))
-    stress = np.empty((3, 3))
     for e in range(first, last):
         tet, g = tets[e], gradients[e]
-        grad[:] = 0.0
-        for b in range(4):
-            n = tet[b]
-            for i in range(3):
-                for j in range(3):
-                    grad[i, j] += p[n, i] * g[b, j]
-        _contract(tangent[e], grad, stress)
-        scale = weight * volume[e]
-        for a in range(4):
-            n = tet[a]
-            for i in range(3):
-                out[n, i] += scale * (stress[i, 0] * g[a, 0] + stress[i, 1] * g[a, 1] + stress[i, 2] * g[a, 2])
+        _scatter(_contract(tangent[e], _gradient(p, tet, g, EVERY_NODE)), tet, g, weight * volume[e], out)
