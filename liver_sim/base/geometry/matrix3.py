@@ -37,8 +37,8 @@ def symmetric_eigen3(a, values, vectors):
                 app, aqq, apq = m11, m22, m12
             if apq == 0.0:
                 continue
-            theta = (aqq - app) / (2.0 * apq)
-            t = math.copysign(1.0, theta) / (abs(theta) + math.sqrt(theta * theta + 1.0))
+            half = 0.5 * (aqq - app)  # t = sgn(θ)/(|θ| + √(θ² + 1)), θ = half/apq, with one division
+            t = math.copysign(1.0, half) * apq / (abs(half) + math.sqrt(half * half + apq * apq))
             c = 1.0 / math.sqrt(t * t + 1.0)
             s = t * c
             # A ← Jᵀ·A·J with J the rotation in the (p, q) plane that zeroes a_pq
