@@ -186,5 +186,5 @@ def test_warm_compiles_the_kernels_the_physics_node_steps_with(capsys):
 
     assert main(["warm"]) == 0
     assert "compiled and cached" in capsys.readouterr().out
-    assert implicit_kernels.implicit_step.signatures and pcg.pcg.signatures
+    assert implicit_kernels.implicit_step.signatures and pcg.pcg_resumable.signatures  # the step, the compliance
     assert explicit_kernels.run_frame.signatures
