@@ -200,18 +200,34 @@ def build_coarse_space(positions: np.ndarray, aggregate: np.ndarray, matrix_arra
     return CoarseSpace(aggregate, offset, factor, np.zeros(len(factor)))
 
 
-@numba.njit(cache=True, fastmath={"reassoc", "contract"})
+@numba.njit(cache=True, inline="always")
+def _dot4(u, w, count):
+    """Σ_{j<count} u[j]·w[j] in four interleaved partial sums added as (s0 + s1) + (s2 + s3): an order fixed in the
+    code, so the bits do not depend on the CPU's vector width."""
+    s0 = s1 = s2 = s3 = 0.0
+    j = 0
+    while j + 4 <= count:
+        s0 += u[j] * w[j]
+        s1 += u[j + 1] * w[j + 1]
+        s2 += u[j + 2] * w[j + 2]
+        s3 += u[j + 3] * w[j + 3]
+        j += 4
+    while j < count:
+        s0 += u[j] * w[j]
+        j += 1
+    return (s0 + s1) + (s2 + s3)
+
+
+@numba.njit(cache=True)
 def cholesky(matrix):
-    """The lower triangular L of L·Lᵀ = `matrix` (symmetric positive definite), row by row (Cholesky–Banachiewicz),
-    in one thread (a threaded LAPACK would contend with the loops for the cores).  ValueError when a pivot is not
-    positive."""
+    """The lower triangular L of L·Lᵀ = `matrix` (symmetric positive definite), row by row (Cholesky–Banachiewicz,
+    its sums `_dot4`'s), in one thread (a threaded LAPACK would contend with the loops for the cores).  ValueError
+    when a pivot is not positive."""
     size = matrix.shape[0]
     factor = np.zeros_like(matrix)
     for i in range(size):
         for j in range(i + 1):
-            total = 0.0
-            for k in range(j):
-                total += factor[i, k] * factor[j, k]
+            total = _dot4(factor[i], factor[j], j)
             if j < i:
                 factor[i, j] = (matrix[i, j] - total) / factor[j, j]
             else:
@@ -222,16 +238,14 @@ def cholesky(matrix):
     return factor
 
 
-@numba.njit(cache=True, fastmath={"reassoc", "contract"})
+@numba.njit(cache=True)
 def cholesky_solve(factor, y):
-    """y ← (L·Lᵀ)⁻¹·y for the lower triangular `factor` L: forward by rows, backward by the columns of Lᵀ (the rows
-    of L).  Reassociated sums (vectorised; the same on one machine, rounding apart from the sequential order)."""
+    """y ← (L·Lᵀ)⁻¹·y for the lower triangular `factor` L: forward by its rows (`_dot4`), backward by the columns of
+    Lᵀ (the rows of L), each y element updated in a fixed order: the bits do not depend on the CPU's vector width
+    (no fastmath: the compiler may neither reassociate a sum nor fuse a product into it)."""
     size = y.shape[0]
     for i in range(size):
-        total = 0.0
-        for j in range(i):
-            total += factor[i, j] * y[j]
-        y[i] = (y[i] - total) / factor[i, i]
+        y[i] = (y[i] - _dot4(factor[i], y, i)) / factor[i, i]
     for i in range(size - 1, -1, -1):
         y[i] /= factor[i, i]
         u = y[i]
