@@ -24,11 +24,11 @@ from liver_sim.physics.solver.implicit import ImplicitEuler
 from liver_sim.physics.state import ToolState
 
 #: Frames between two solves of the tissue's compliance under the tool, and frames over which a solve runs (its
-#: assembly in the first, its result taken REFRESH_FRAMES after the last was): a K is at most their sum old (10
-#: frames, 67 ms at 150 Hz), within which it stays within 10 % of a solve at every frame over the demo's press and
-#: slide (a test).
-REFRESH_FRAMES = 6
-SOLVE_FRAMES = 4
+#: assembly in the first, its result taken REFRESH_FRAMES after the last was): a K is at most their sum less one
+#: frames old (9 frames, 60 ms at 150 Hz, as old as a whole solve every 10 frames left it), within which it stays
+#: within 10 % of a solve at every frame over the demo's press and slide (a test).
+REFRESH_FRAMES = 7
+SOLVE_FRAMES = 3
 
 
 def _rows(tool: ToolSweep) -> tuple[np.ndarray, np.ndarray]:
