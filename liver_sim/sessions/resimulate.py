@@ -222,6 +222,24 @@ def recorded_device_map(bag: Path, topic: str) -> DeviceMap:
     raise BagError(bag, f"holds device samples but no {topic} to place them in the liver frame")
 
 
+def recorded_solver(bag: Path) -> str | None:
+    """The physics' solver the bag was made with (ImplicitEuler.solver): a re-simulated bag's `physics_solver`, else
+    the newest `solver` of the /diagnostics it recorded; None when it says neither."""
+
+    info, topic = bag_info(bag), TOPICS["diagnostics"]
+    solver = info.custom_data.get("physics_solver")
+    if solver is not None or topic.name not in info.topics:
+        return solver
+    for recorded in read_messages(bag, [topic.name]):
+        try:
+            message = deserialize_message(recorded.data, topic.type)
+        except Exception as exc:
+            raise BagError(bag, f"a {topic.name} message is not a diagnostic_msgs/DiagnosticArray ({exc})") from None
+        for status in message.status:
+            solver = next((kv.value for kv in status.values if kv.key == "solver"), solver)
+    return solver
+
+
 def session_inputs(bag: Path, bridge: BridgeParameters, tools: tuple[PhysicsTool, ...]) -> list[tuple]:
     """Per tool, (samples, device map, their topic, its TOPICS key) of a bag: the device's samples and the recorded
     map in the tool's namespace, or, in a bag of the older layout, the tool poses and the identity map; BagError
@@ -252,7 +270,8 @@ def resimulate(bag: Path, out: Path, overrides=(), storage: str = "mcap", progre
     """Re-run physics and bridges on the device's samples of `bag` (module docstring), one bridge per tool, with
     parameter `overrides` ('name:=value'); write the outputs (and the input samples) to a new bag `out`; return a
     summary.  With `compare`, a second bridge per tool without local model writes the baseline force topic
-    (BASELINE_FORCE_TOPIC in the tool's namespace) from the same inputs (Fig. 8)."""
+    (BASELINE_FORCE_TOPIC in the tool's namespace) from the same inputs (Fig. 8).  The summary names the solver that
+    ran and the one the bag was made with (`recorded_solver`); when they differ, a line of `progress` says so."""
 
     params = node_parameters(overrides)
     physics, bridge, tools = params["liver_physics"], params["haptic_bridge"], params["tools"]
@@ -278,8 +297,13 @@ def resimulate(bag: Path, out: Path, overrides=(), storage: str = "mcap", progre
 
         session.emit = emit
         session.run()
-        writer.set_custom_data("physics_solver", session.model.structure.step_solver)
+        solver = session.model.structure.step_solver
+        writer.set_custom_data("physics_solver", solver)
         counts = dict(writer.counts)
+    recorded = recorded_solver(bag)
+    if recorded is not None and recorded != solver:
+        progress(f"the bag was made with the solver '{recorded}', re-simulated with '{solver}': where their "
+                 "versions or threads differ, the physics differs by rounding (docs/sessions.md)")
     wall = time.perf_counter() - started
     pipeline = session.pipeline
     peak = max(hand.peak_force_n for hand in session.hands)
@@ -288,7 +312,7 @@ def resimulate(bag: Path, out: Path, overrides=(), storage: str = "mcap", progre
                "refused_poses": pipeline.refused_poses, "frames": pipeline.frames, "commands": session.commands,
                "divergences": session.model.divergences, "simulated_s": simulated, "wall_s": wall,
                "speed_vs_real_time": simulated / wall if wall > 0 else None,
-               "peak_command_n": peak, "physics_solver": session.model.structure.step_solver, "counts": counts,
+               "peak_command_n": peak, "physics_solver": solver, "recorded_solver": recorded, "counts": counts,
                "tools": {hand.tool.name: {"commands": hand.commands, "peak_command_n": hand.peak_force_n,
                                           "force_topic": hand.force_topic} for hand in session.hands}}
     progress(f"wrote {out}: {pipeline.frames} physics frames, {session.commands} force commands "

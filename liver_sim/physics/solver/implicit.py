@@ -61,6 +61,11 @@ STATIC_CG_TOLERANCE = 1e-6
 
 NO_COARSE_SPACE = CoarseSpace.none()
 
+#: The version of the step's arithmetic, named in `ImplicitEuler.solver` (/diagnostics, re-simulated bags): a session
+#: re-simulates to the bit under the version and threads it was recorded with.  2: the coarse solve without
+#: fastmath (the same bits on every x86-64 CPU), the local model's compliance solved in slices.
+SOLVER_VERSION = 2
+
 
 
 class StepHistory:
@@ -180,13 +185,14 @@ class ImplicitEuler:
 
     @property
     def solver(self) -> str:
-        """Which solver the steps take: 'pcg block-jacobi' or 'pcg two-level' (with its aggregates once built), and
-        its threads when more than one (their count sets the order of the sums)."""
+        """Which solver the steps take: 'pcg block-jacobi' or 'pcg two-level' (with its aggregates once built), its
+        threads when more than one (their count sets the order of the sums), and SOLVER_VERSION ('; solver 2')."""
         threads = f", {self.threads} threads" if self.threads > 1 else ""
+        version = f"; solver {SOLVER_VERSION}"
         if not self.two_level:
-            return f"pcg block-jacobi{threads}"
+            return f"pcg block-jacobi{threads}{version}"
         built = {c.aggregates for c in self._coarse.values()}
-        return f"pcg two-level{threads}" + (f", {built.pop()} aggregates" if len(built) == 1 else "")
+        return f"pcg two-level{threads}" + (f", {built.pop()} aggregates" if len(built) == 1 else "") + version
 
     def _coarse_space(self, h: float, x: np.ndarray, inv_mass: np.ndarray, tets: TetArrays) -> CoarseSpace:
         """The coarse space of step length `h` (none without the two-level preconditioner); the first time, built

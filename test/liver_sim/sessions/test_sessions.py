@@ -371,3 +371,28 @@ def test_demo_and_replay_refuse_a_domain_where_a_bridge_or_a_device_runs(ros_env
         log.close()
         probe.destroy_node()
         context.try_shutdown()
+
+
+def test_a_resimulation_names_the_solver_the_bag_was_made_with(tmp_path):
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+
+    from liver_sim.physics.solver.implicit import SOLVER_VERSION
+    from liver_sim.sessions.resimulate import recorded_solver
+
+    lines = []
+    fresh = resimulate(pose_bag(tmp_path / "poses", duration_s=0.3), tmp_path / "a", progress=lines.append)
+    assert fresh["recorded_solver"] is None and fresh["physics_solver"] == f"pcg block-jacobi; solver {SOLVER_VERSION}"
+    again = resimulate(tmp_path / "a", tmp_path / "b", progress=lines.append)  # a re-simulated bag names its own
+    assert again["recorded_solver"] == again["physics_solver"] and not any("made with" in line for line in lines)
+
+    older = pose_bag(tmp_path / "older", duration_s=0.3)  # a bag recorded live names its solver in /diagnostics
+    status = DiagnosticStatus(name="liver_physics: loop", values=[KeyValue(key="solver", value="pcg block-jacobi")])
+    with BagWriter(tmp_path / "recorded", "mcap") as writer:
+        for m in read_messages(older):
+            writer.write(m.topic, m.msgtype, m.timestamp_ns, m.data, QosSpec(False, False, 1))
+        writer.write("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray", 50_100_000_000,
+                     serialize_message(DiagnosticArray(status=[status])), QosSpec(True, True, 1))
+    assert recorded_solver(tmp_path / "recorded") == "pcg block-jacobi"
+    redone = resimulate(tmp_path / "recorded", tmp_path / "c", progress=lines.append)
+    assert redone["recorded_solver"] == "pcg block-jacobi"
+    assert any("made with the solver 'pcg block-jacobi'" in line for line in lines)
