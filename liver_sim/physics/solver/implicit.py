@@ -345,7 +345,8 @@ class ImplicitEuler:
 class ComplianceSolve:
     """A compliance solve (ImplicitEuler.compliance_solve) on its workspace's assembled system, run in slices of
     PCG iterations (pcg.pcg_resumable) between the steps of the solver it was taken from: the same iterations in
-    the same order as one solve, so its result does not depend on how it was sliced."""
+    the same order as one solve, so its result does not depend on how it was sliced.  Its kernels, as the step's,
+    run without the GIL: a node's executor thread delivers messages meanwhile."""
 
     def __init__(self, workspace: ImplicitEuler, inv_mass: np.ndarray, b: np.ndarray, solution: np.ndarray,
                  guess: np.ndarray, coarse: CoarseSpace, tets: TetArrays, rows: ContactRows):

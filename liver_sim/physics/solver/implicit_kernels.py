@@ -105,7 +105,7 @@ def contact_forces(x, v, y, inv_mass, h, rows, f, ky):
     return tx, ty, tz
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def assemble(x, v, y, inv_mass, loads, h, springs, op, f, ky, assemble_matrix):
     """Forces f at (x, v) of the `springs` (physics.tissue.spring_law.SpringArrays) and `loads` (records.Loads),
     and ky = K·y (y zero on held nodes); with assemble_matrix, also the system (into `op`, a records.Operator)
@@ -134,7 +134,7 @@ def assemble(x, v, y, inv_mass, loads, h, springs, op, f, ky, assemble_matrix):
                 diagonal[n, a, a] = shift[n]
     spring_terms(x, v, y, inv_mass, h, springs, op, f, ky, assemble_matrix)
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def support_terms(x, v, y, inv_mass, h, support, f, ky, op, assemble_matrix):
     """Add the forces of the `support` (organ_support.SupportArrays) at (x, v) to f and K·y to ky (free nodes); with
     assemble_matrix, also h·c_n + h²·k_n to each free supported node's shift and diagonal block in `op`

@@ -93,7 +93,7 @@ def apply(op, inv_mass, rows, tet_law, tet_weight, p, out):
     _apply(op, inv_mass, rows, tet_law, tet_weight, p, out, np.zeros((1, 0, 3)))
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def block_jacobi(diagonal, inv_mass, rows, inverse):
     """inverse[n] = (A_nn + Σ diagonal blocks of the contact `rows`, records.ContactRows)⁻¹ (3×3, symmetric positive
     definite)."""

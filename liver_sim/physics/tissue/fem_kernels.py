@@ -156,7 +156,7 @@ def _rotated_stress(r, grad, lam, mu, stress, rs):
             rs[i, j] = r[i, 0] * stress[0, j] + r[i, 1] * stress[1, j] + r[i, 2] * stress[2, j]
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def tet_terms(x, v, y, inv_mass, h, law, f, ky, diagonal, assemble_matrix):
     """Add the elements' (`law`, a TetArrays) forces at (x, v) to f and K·y to ky (y zero on held nodes); with
     assemble_matrix, first the rotations R at x (into law.quaternion, law.rotation) and the diagonal blocks of
