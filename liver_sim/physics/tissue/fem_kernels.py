@@ -27,6 +27,7 @@ import numpy as np
 
 from liver_sim.mesh.tetmesh import signed_volumes
 from liver_sim.physics.tissue.neo_hookean import neo_hookean_apply, neo_hookean_terms
+from liver_sim.physics.tissue.tet_gradient import EVERY_NODE, tet_gradient
 
 #: Iterations and tolerance (rad) of the rotation's extraction per step (warm-started: one or two suffice).
 ROTATION_ITERATIONS = 20
@@ -127,15 +128,9 @@ def _extract_rotation(f, q, r):
 
 @numba.njit(cache=True, inline="always")
 def _gradient(values, tet, g, out):
-    """out ← Σ_a values[tet[a]] ⊗ g_a (3×3), values zero on held nodes is the caller's business."""
-    for i in range(3):
-        for j in range(3):
-            out[i, j] = 0.0
-    for a in range(4):
-        n = tet[a]
-        for i in range(3):
-            for j in range(3):
-                out[i, j] += values[n, i] * g[a, j]
+    """out ← Σ_a values[tet[a]] ⊗ g_a (3×3: tet_gradient), values zero on held nodes is the caller's business."""
+    (out[0, 0], out[0, 1], out[0, 2], out[1, 0], out[1, 1], out[1, 2],
+     out[2, 0], out[2, 1], out[2, 2]) = tet_gradient(values, tet, g, EVERY_NODE)
 
 
 @numba.njit(cache=True, inline="always")
@@ -235,20 +230,7 @@ def tet_apply(law, weight, p, first, last, out):
     lam, mu = law.lame_lambda_pa, law.lame_mu_pa
     for e in range(first, last):
         tet, hg = tets[e], rotated[e]
-        g00 = g01 = g02 = g10 = g11 = g12 = g20 = g21 = g22 = 0.0
-        for b in range(4):
-            n = tet[b]
-            px, py, pz = p[n, 0], p[n, 1], p[n, 2]
-            hx, hy, hz = hg[b, 0], hg[b, 1], hg[b, 2]
-            g00 += px * hx
-            g01 += px * hy
-            g02 += px * hz
-            g10 += py * hx
-            g11 += py * hy
-            g12 += py * hz
-            g20 += pz * hx
-            g21 += pz * hy
-            g22 += pz * hz
+        g00, g01, g02, g10, g11, g12, g20, g21, g22 = tet_gradient(p, tet, hg, EVERY_NODE)
         scale = weight * volume[e]
         trace = lam * (g00 + g11 + g22)
         s00, s11, s22 = trace + 2.0 * mu * g00, trace + 2.0 * mu * g11, trace + 2.0 * mu * g22

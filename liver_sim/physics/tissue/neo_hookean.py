@@ -39,6 +39,7 @@ import numba
 import numpy as np
 
 from liver_sim.base.geometry.matrix3 import det3, rotation_variant_svd3, symmetric_eigen3
+from liver_sim.physics.tissue.tet_gradient import EVERY_NODE, tet_gradient
 
 #: The pairs (i, j) of singular values of the twist and flip modes, k the third index.
 PAIRS = ((1, 2, 0), (0, 2, 1), (0, 1, 2))
@@ -157,31 +158,6 @@ def projected_tangent(f, mu, lam_hat, mats, vecs, out):
                 _subtract(scale[m], mode, out)
 
 
-#: Every node of an element counts in `_gradient`.
-EVERY_NODE = (True, True, True, True)
-
-
-@numba.njit(cache=True, inline="always")
-def _gradient(values, tet, g, counts):
-    """G = Σ_a values[tet[a]] ⊗ g_a over the nodes a with counts[a], as the 9-tuple (row (i, j) ↔ 3i + j)."""
-    g00 = g01 = g02 = g10 = g11 = g12 = g20 = g21 = g22 = 0.0
-    for a in range(4):
-        if counts[a]:
-            n = tet[a]
-            px, py, pz = values[n, 0], values[n, 1], values[n, 2]
-            hx, hy, hz = g[a, 0], g[a, 1], g[a, 2]
-            g00 += px * hx
-            g01 += px * hy
-            g02 += px * hz
-            g10 += py * hx
-            g11 += py * hy
-            g12 += py * hz
-            g20 += pz * hx
-            g21 += pz * hy
-            g22 += pz * hz
-    return g00, g01, g02, g10, g11, g12, g20, g21, g22
-
-
 @numba.njit(cache=True, inline="always")
 def _contract(tangent, grad):
     """𝐂̃:G as the 9-tuple, (𝐂̃:G)[r] = Σ_c 𝐂̃[r, c]·G[c], summed down the columns of the symmetric `tangent` (9, 9)
@@ -228,7 +204,7 @@ def neo_hookean_terms(x, v, y, inv_mass, h, law, f, ky, diagonal, assemble_matri
     vecs = np.empty((3, 9))
     for e in range(tets.shape[0]):
         tet, g, c = tets[e], gradients[e], tangent[e]
-        deformation = _gradient(x, tet, g, EVERY_NODE)
+        deformation = tet_gradient(x, tet, g, EVERY_NODE)
         for i in range(3):
             for j in range(3):
                 grad[i, j] = deformation[3 * i + j]
@@ -236,7 +212,7 @@ def neo_hookean_terms(x, v, y, inv_mass, h, law, f, ky, diagonal, assemble_matri
             projected_tangent(grad, mu, lam_hat, mats, vecs, c)
         first_piola(grad, mu, lam_hat, stress)
         if tau != 0.0:
-            viscous = _contract(c, _gradient(v, tet, g, EVERY_NODE))
+            viscous = _contract(c, tet_gradient(v, tet, g, EVERY_NODE))
             for i in range(3):
                 for j in range(3):
                     stress[i, j] += tau * viscous[3 * i + j]
@@ -244,7 +220,7 @@ def neo_hookean_terms(x, v, y, inv_mass, h, law, f, ky, diagonal, assemble_matri
         _scatter((stress[0, 0], stress[0, 1], stress[0, 2], stress[1, 0], stress[1, 1], stress[1, 2], stress[2, 0],
                   stress[2, 1], stress[2, 2]), tet, g, -vol, f)
         free = (inv_mass[tet[0]] > 0.0, inv_mass[tet[1]] > 0.0, inv_mass[tet[2]] > 0.0, inv_mass[tet[3]] > 0.0)
-        probe = _gradient(y, tet, g, free)  # Y = Σ y_a ⊗ g_a
+        probe = tet_gradient(y, tet, g, free)  # Y = Σ y_a ⊗ g_a
         if probe != (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0):
             _scatter(_contract(c, probe), tet, g, -vol, ky)
         if assemble_matrix:
@@ -269,4 +245,4 @@ def neo_hookean_apply(law, weight, p, first, last, out):
     tets, volume, gradients, tangent = law.tets, law.volume_m3, law.gradients, law.tangent
     for e in range(first, last):
         tet, g = tets[e], gradients[e]
-        _scatter(_contract(tangent[e], _gradient(p, tet, g, EVERY_NODE)), tet, g, weight * volume[e], out)
+        _scatter(_contract(tangent[e], tet_gradient(p, tet, g, EVERY_NODE)), tet, g, weight * volume[e], out)
