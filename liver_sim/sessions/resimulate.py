@@ -31,6 +31,7 @@ from liver_sim.base.geometry.device_map import DeviceMap
 from liver_sim.base.topic_names import BASELINE_FORCE_TOPIC, in_namespace, tool_topic
 from liver_sim.physics.parameters import PhysicsParameters, PhysicsTool, build_model
 from liver_sim.physics.pipeline import FramePipeline
+from liver_sim.physics.solver.implicit import same_arithmetic
 from liver_sim.sessions.bag import BagError, BagWriter, bag_info, canonical_cdr, read_messages
 from liver_sim.sessions.parameters import node_parameters
 from liver_sim.sessions.record import known_topics, type_name
@@ -271,7 +272,8 @@ def resimulate(bag: Path, out: Path, overrides=(), storage: str = "mcap", progre
     parameter `overrides` ('name:=value'); write the outputs (and the input samples) to a new bag `out`; return a
     summary.  With `compare`, a second bridge per tool without local model writes the baseline force topic
     (BASELINE_FORCE_TOPIC in the tool's namespace) from the same inputs (Fig. 8).  The summary names the solver that
-    ran and the one the bag was made with (`recorded_solver`); when they differ, a line of `progress` says so."""
+    ran and the one the bag was made with (`recorded_solver`); when their arithmetic differs
+    (physics.solver.implicit.same_arithmetic), a line of `progress` says so."""
 
     params = node_parameters(overrides)
     physics, bridge, tools = params["liver_physics"], params["haptic_bridge"], params["tools"]
@@ -301,9 +303,10 @@ def resimulate(bag: Path, out: Path, overrides=(), storage: str = "mcap", progre
         writer.set_custom_data("physics_solver", solver)
         counts = dict(writer.counts)
     recorded = recorded_solver(bag)
-    if recorded is not None and recorded != solver:
-        progress(f"the bag was made with the solver '{recorded}', re-simulated with '{solver}': where their "
-                 "versions or threads differ, the physics differs by rounding (docs/sessions.md)")
+    if recorded is not None and not same_arithmetic(recorded, solver):
+        progress(f"the bag was made with the solver '{recorded}', re-simulated with '{solver}': their arithmetic "
+                 "differs (the version, or before solver 3 the threads), so the physics differs by rounding "
+                 "(docs/sessions.md)")
     wall = time.perf_counter() - started
     pipeline = session.pipeline
     peak = max(hand.peak_force_n for hand in session.hands)

@@ -253,13 +253,12 @@ def cholesky_solve(factor, y):
             y[j] -= factor[i, j] * u
 
 
-@numba.njit(cache=True)
-def coarse_correction(coarse, inv_mass, r, z):
-    """z += F·T·A_c⁻¹·Tᵀ·r (r vanishes on held nodes): restriction, the Cholesky factor's two triangular solves,
-    prolongation to the free nodes."""
-    aggregate, offset, factor, y = coarse.aggregate, coarse.offset_m, coarse.factor, coarse.work
-    y[:] = 0.0
-    for n in range(r.shape[0]):
+@numba.njit(cache=True, inline="always")
+def restrict(coarse, r, first, last, y):
+    """y += Tᵀ·r over nodes first..last−1 (r vanishing on held nodes: Tᵀ·F·r), in node order: per aggregate its
+    nodes' Σ r and Σ d × r."""
+    aggregate, offset = coarse.aggregate, coarse.offset_m
+    for n in range(first, last):
         k = MODES * aggregate[n]
         dx, dy, dz = offset[n, 0], offset[n, 1], offset[n, 2]
         rx, ry, rz = r[n, 0], r[n, 1], r[n, 2]
@@ -269,13 +268,30 @@ def coarse_correction(coarse, inv_mass, r, z):
         y[k + 3] += dy * rz - dz * ry
         y[k + 4] += dz * rx - dx * rz
         y[k + 5] += dx * ry - dy * rx
-    cholesky_solve(factor, y)
-    for n in range(r.shape[0]):
-        if inv_mass[n] == 0.0:
-            continue
-        k = MODES * aggregate[n]
-        dx, dy, dz = offset[n, 0], offset[n, 1], offset[n, 2]
-        wx, wy, wz = y[k + 3], y[k + 4], y[k + 5]
-        z[n, 0] += y[k] + wy * dz - wz * dy
-        z[n, 1] += y[k + 1] + wz * dx - wx * dz
-        z[n, 2] += y[k + 2] + wx * dy - wy * dx
+
+
+@numba.njit(cache=True, inline="always")
+def prolong(coarse, w, n):
+    """(T·w)_n = t_a + ω_a × d_n for node n of aggregate a, w (6C,) the aggregates' motions (zero it on held
+    nodes: F)."""
+    k = MODES * coarse.aggregate[n]
+    dx, dy, dz = coarse.offset_m[n, 0], coarse.offset_m[n, 1], coarse.offset_m[n, 2]
+    wx, wy, wz = w[k + 3], w[k + 4], w[k + 5]
+    return w[k] + wy * dz - wz * dy, w[k + 1] + wz * dx - wx * dz, w[k + 2] + wx * dy - wy * dx
+
+
+@numba.njit(cache=True, inline="always")
+def coarse_solve(coarse, restricted):
+    """w = A_c⁻¹·y into coarse.work, y = Σ of the `restricted` rows (chunks, 6C) in row order; returns y·w
+    (= r·F·T·w, the coarse correction's part of r·z)."""
+    y = coarse.work
+    y[:] = 0.0
+    for c in range(restricted.shape[0]):
+        for k in range(y.shape[0]):
+            y[k] += restricted[c, k]
+    cholesky_solve(coarse.factor, y)
+    total = 0.0
+    for c in range(restricted.shape[0]):
+        for k in range(y.shape[0]):
+            total += restricted[c, k] * y[k]
+    return total

@@ -33,7 +33,6 @@ from liver_sim.physics.solver.coarse_space import CoarseSpace, aggregates, build
 from liver_sim.physics.solver.implicit_kernels import assemble, bdf2_start, implicit_step, support_terms
 from liver_sim.physics.solver.pcg import (
     ENDED,
-    SERIAL,
     block_jacobi,
     pcg,
     pcg_parallel,
@@ -62,9 +61,25 @@ STATIC_CG_TOLERANCE = 1e-6
 NO_COARSE_SPACE = CoarseSpace.none()
 
 #: The version of the step's arithmetic, named in `ImplicitEuler.solver` (/diagnostics, re-simulated bags): a session
-#: re-simulates to the bit under the version and threads it was recorded with.  2: the coarse solve without
-#: fastmath (the same bits on every x86-64 CPU), the local model's compliance solved in slices.
-SOLVER_VERSION = 2
+#: re-simulates to the bit under the version it was recorded with (version 2: and its threads).  2: the coarse solve
+#: without fastmath (the same bits on every x86-64 CPU), the local model's compliance solved in slices.  3: the
+#: product gathered per node and every sum over fixed chunks (physics.solver.pcg), the same bits on any thread count.
+SOLVER_VERSION = 3
+#: The first version whose bits do not depend on the threads.
+THREAD_FREE_VERSION = 3
+
+
+def same_arithmetic(recorded: str, solver: str) -> bool:
+    """Whether the solver described `recorded` (ImplicitEuler.solver; without '; solver N': version 1) does the
+    arithmetic of `solver` to the bit: the same version, and before THREAD_FREE_VERSION the same threads too."""
+
+    def version(description: str) -> int:
+        head, _, tail = description.rpartition("; solver ")
+        return int(tail) if head and tail.isdigit() else 1
+
+    if version(recorded) != version(solver):
+        return False
+    return version(solver) >= THREAD_FREE_VERSION or recorded == solver
 
 
 
@@ -126,16 +141,16 @@ class ImplicitEuler:
         #: Whether the PCG adds the coarse correction to block-Jacobi.
         self.two_level = preconditioner == "two_level" or (preconditioner == "auto"
                                                            and self.n_nodes >= TWO_LEVEL_MIN_NODES)
-        #: Threads of the PCG (pcg.pcg_parallel above one).
+        #: Threads of the PCG (pcg.pcg_parallel above one; the same bits whatever their count).
         self.threads = max(1, int(threads))
-        self._partial = SERIAL if self.threads == 1 else np.zeros((self.threads, self.n_nodes, 3))
         self._aggregate: np.ndarray | None = None
         self._coarse: dict[float, CoarseSpace] = {}
         # unsigned indices spare numba's negative-index wraparound in the inner loops
         node_i, node_j = springs.node_i.astype(np.uint32), springs.node_j.astype(np.uint32)
-        self._op = Operator.allocate(node_i, node_j, self.n_nodes)
-        self._springs = spring_arrays(springs, node_i, node_j)  # the kernels' record of the same arrays
-        self._scratch = Scratch(np.zeros((10, self.n_nodes, 3)), self._partial, np.zeros((self.n_nodes, 3, 3)))
+        self._op = Operator.allocate(node_i, node_j, self.n_nodes, self.tets.tets)
+        # the kernels' record of the same springs, in the operator's order
+        self._springs = spring_arrays(springs, node_i, node_j).taken(self._op.spring_order)
+        self._scratch = Scratch(np.zeros((10, self.n_nodes, 3)), np.zeros((self.n_nodes, 3, 3)), self.threads > 1)
         self._coefficient = np.zeros(0)
         self._inv_mass = np.zeros(self.n_nodes)
         self._tet_weight = 0.0
@@ -186,7 +201,7 @@ class ImplicitEuler:
     @property
     def solver(self) -> str:
         """Which solver the steps take: 'pcg block-jacobi' or 'pcg two-level' (with its aggregates once built), its
-        threads when more than one (their count sets the order of the sums), and SOLVER_VERSION ('; solver 2')."""
+        threads when more than one, and SOLVER_VERSION ('; solver 3')."""
         threads = f", {self.threads} threads" if self.threads > 1 else ""
         version = f"; solver {SOLVER_VERSION}"
         if not self.two_level:
@@ -212,15 +227,14 @@ class ImplicitEuler:
     def matrix(self) -> scipy.sparse.csr_matrix:
         """The spring, support, mass and damping part of the last assembled system matrix, (3N, 3N) sparse
         (contacts and tetrahedra excluded; held nodes' rows and columns are the identity)."""
-        springs = self.springs
         free = self._inv_mass > 0.0
         op = self._op
         blocks = op.iso[:, None, None] * np.eye(3) + op.axial[:, None, None] * (
             op.unit[:, :, None] * op.unit[:, None, :])
-        blocks = blocks * (free[springs.node_i] & free[springs.node_j])[:, None, None]
+        blocks = blocks * (free[op.node_i] & free[op.node_j])[:, None, None]
         nodes = np.arange(self.n_nodes)
-        rows = np.concatenate([nodes, springs.node_i, springs.node_j])
-        cols = np.concatenate([nodes, springs.node_j, springs.node_i])
+        rows = np.concatenate([nodes, op.node_i, op.node_j])
+        cols = np.concatenate([nodes, op.node_j, op.node_i])
         values = np.concatenate([op.diagonal, -blocks, -blocks])
         r = (3 * rows)[:, None, None] + np.arange(3)[None, :, None]
         c = (3 * cols)[:, None, None] + np.arange(3)[None, None, :]
@@ -323,7 +337,7 @@ class ImplicitEuler:
         rows = ContactRows.of(contacts or Contacts.none(), np.zeros(0) if coefficient is None else coefficient)
         solve = pcg_parallel if self.threads > 1 else pcg
         solve(self._op, inv_mass, rows, tets, self._tet_weight, self._scratch.preconditioner, coarse, b, solution,
-              SolveSettings(tolerance, self.max_cg_iterations, 0.0, 0), vectors, self._partial)
+              SolveSettings(tolerance, self.max_cg_iterations, 0.0, 0), vectors)
 
     def warm_up(self) -> None:
         """Compile the kernels (numba, cached on disk) before a timed loop starts."""
@@ -375,7 +389,7 @@ class ComplianceSolve:
         steps = max(0, min(int(iterations), w.max_cg_iterations - self.iterations))
         self.iterations += solve(w._op, self._inv_mass, self._rows, self._tets, w._tet_weight, self._preconditioner,
                                  self._coarse, self._b, self._solution, COMPLIANCE_TOLERANCE, not self._started,
-                                 steps, self._vectors, w._partial, self._status)
+                                 steps, self._vectors, self._status)
         self._started = True
         return self.ended
 

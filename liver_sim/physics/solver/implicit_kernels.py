@@ -219,9 +219,9 @@ def implicit_step(x, v, inv_mass, loads, h, tissue, op, rows, coarse, warm, sett
     (records.ContactRows; those on the tool's true surface rebuilt at every iterate, surface_rows), `op`
     (records.Operator) receives the system.  `coarse`: the preconditioner's coarse space
     (physics.solver.coarse_space; none: block-Jacobi alone).  `warm` holds the previous Δv (start of the solve;
-    overwritten).  `scratch` (records.Scratch): `partial` pcg.SERIAL for one thread, else (threads, N, 3): the solve
-    on the threads (pcg.pcg_parallel).  Returns (contact force on the liver at the new state (3,), CG iterations,
-    Newton iterations, final residual (N))."""
+    overwritten).  `scratch` (records.Scratch): with `parallel`, the solve on the threads (pcg.pcg_parallel).
+    Returns (contact force on the liver at the new state (3,), CG iterations, Newton iterations, final residual
+    (N))."""
     f, ky, rhs, x0, v0, r, z, p, q, zero = scratch.work
     springs, support, tet_law = tissue.springs, tissue.support, tissue.tets
     zero[:] = 0.0
@@ -245,12 +245,12 @@ def implicit_step(x, v, inv_mass, loads, h, tissue, op, rows, coarse, warm, sett
     vectors = (r, z, p, q)
     while True:
         block_jacobi(op.diagonal, inv_mass, rows, scratch.preconditioner)
-        if scratch.partial.shape[0] > 1:
+        if scratch.parallel:
             total_iterations += pcg_parallel(op, inv_mass, rows, tet_law, tet_weight, scratch.preconditioner, coarse,
-                                             rhs, warm, settings, vectors, scratch.partial)
+                                             rhs, warm, settings, vectors)
         else:
             total_iterations += pcg(op, inv_mass, rows, tet_law, tet_weight, scratch.preconditioner, coarse, rhs,
-                                    warm, settings, vectors, scratch.partial)
+                                    warm, settings, vectors)
         advance(x, x0, v, v0, warm, inv_mass, h)
         surface_rows(x, rows)
         assemble(x, v, zero, inv_mass, loads, h, springs, op, f, ky, False)

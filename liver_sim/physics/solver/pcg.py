@@ -3,12 +3,16 @@
 axial per spring: physics.tissue.spring_law.spring_apply), the tetrahedra of the 'fem' or 'neo_hookean' law
 (physics.tissue.fem_kernels, none with the springs' law), the contacts.
 
+The sums' order is fixed in the code, whatever the threads, so one thread and several give the same bits: A·p adds
+the springs and elements group by group (physics.solver.partition), and every pass over the nodes runs in NODE_CHUNKS
+chunks whose sums are added in chunk order.  An iteration: A·p with p·q; the update of z0 and r with z = D⁻¹·r, ‖r‖²,
+r·z and the coarse restriction, in one pass; the coarse solve; the prolongation with the update of p, in one pass.
+
 The solve starts from the previous step's Δv and stops at ‖r‖ ≤ cg_tolerance·‖b‖ (default 1e-3; the Newton residual
 check guards the result).  Preconditioner: block-Jacobi (the 3×3 diagonal blocks, contacts included), and on larger
 livers the additive two-level one, block-Jacobi plus a coarse correction on rigid aggregates of nodes
 (physics.solver.coarse_space), which keeps the iterations nearly flat as the mesh is refined (docs/performance.md, "The
-physics", for the iterations and costs).  Why this solver: the values change at every step (the axes turn,
-the
+physics", for the iterations and costs).  Why this solver: the values change at every step (the axes turn, the
 cubic law stiffens, contacts come and go), so a sparse factorisation would be redone each step (SuperLU: 20–70× the
 cost of the solve), and matrix-free beats a block CSR pattern because it reads 5 numbers per spring instead of 36.
 The coarse matrix, small and dense, is factored once per topology and step length: a preconditioner need not follow
@@ -19,12 +23,13 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from liver_sim.physics.solver.coarse_space import coarse_correction
+from liver_sim.physics.solver.coarse_space import coarse_solve, prolong, restrict
+from liver_sim.physics.solver.partition import LEVELS
 from liver_sim.physics.tissue.fem_kernels import tet_apply
 from liver_sim.physics.tissue.spring_law import spring_apply
 
-#: The `partial` of a serial solve: no per-thread slices, one chunk.
-SERIAL = np.zeros((1, 0, 3))
+#: The chunks every pass over the nodes is cut into, whatever the threads: their sums are added in chunk order.
+NODE_CHUNKS = 16
 
 
 @numba.njit(cache=True, inline="always")
@@ -34,33 +39,38 @@ def _chunk(c, chunks, count):
 
 
 @numba.njit(cache=True, inline="always")
-def _apply(op, inv_mass, rows, tet_law, tet_weight, p, out, partial):
-    """out = A·p (see `apply`).  With `partial` of (chunks > 1, N, 3), the springs and tetrahedra in `chunks` chunks
-    on the threads, each into its own slice, summed per node after shift·p in chunk order (no atomics; the same
-    sums whatever thread runs a chunk)."""
-    chunks = partial.shape[0]
-    shift, nodes, weights, normal, coefficient = op.shift, rows.nodes, rows.weights, rows.normal, rows.coefficient
-    springs, elements = op.node_i.shape[0], tet_law.tets.shape[0]
-    if chunks <= 1:
-        for n in range(p.shape[0]):
+def _group(op, tet_law, tet_weight, p, g, out):
+    """Add group g's springs and elements (physics.solver.partition) to out."""
+    spring_apply(op, p, op.spring_start[g], op.spring_start[g + 1], out)
+    if tet_law.tets.shape[0] > 0:
+        tet_apply(tet_law, tet_weight, p, op.tet_order, op.tet_start[g], op.tet_start[g + 1], out)
+
+
+@numba.njit(cache=True, inline="always")
+def _check_groups(op, tet_law):
+    """ValueError unless `op`'s element groups are those of `tet_law`'s elements (records.Operator.allocate)."""
+    if int(op.tet_start[op.tet_start.shape[0] - 1]) != tet_law.tets.shape[0]:
+        raise ValueError("the operator's element groups are not the elements': allocate it with them")
+
+
+@numba.njit(cache=True, inline="always")
+def _apply(op, inv_mass, rows, tet_law, tet_weight, p, out, sums):
+    """out = A·p (see `apply`); returns p·out.  Per part its nodes' shift·p and its springs and elements, then the
+    halves' cuts, then the whole's (physics.solver.partition: the groups of a level on the threads, each node's sum
+    in the same order); the contacts in row order; then per node chunk the held nodes' rows zeroed and p·out, its
+    chunks' sums (`sums`[:, 0], (NODE_CHUNKS, 2)) in order."""
+    shift, part_nodes, part_start = op.shift, op.part_nodes, op.part_start
+    for g in numba.prange(LEVELS[0][1]):  # the parts: groups 0.. of the first level
+        for k in range(part_start[g], part_start[g + 1]):
+            n = part_nodes[k]
             for a in range(3):
                 out[n, a] = shift[n] * p[n, a]
-        spring_apply(op, p, 0, springs, out)
-        tet_apply(tet_law, tet_weight, p, 0, elements, out)
-    else:
-        for c in numba.prange(chunks):
-            own = partial[c]
-            own[:] = 0.0
-            first, last = _chunk(c, chunks, springs)
-            spring_apply(op, p, first, last, own)
-            first, last = _chunk(c, chunks, elements)
-            tet_apply(tet_law, tet_weight, p, first, last, own)
-        for n in numba.prange(p.shape[0]):
-            for a in range(3):
-                total = shift[n] * p[n, a]
-                for c in range(chunks):
-                    total += partial[c, n, a]
-                out[n, a] = total
+        _group(op, tet_law, tet_weight, p, g, out)
+    first_level, last_level = LEVELS[1]
+    for g in numba.prange(last_level - first_level):
+        _group(op, tet_law, tet_weight, p, first_level + g, out)
+    _group(op, tet_law, tet_weight, p, LEVELS[2][0], out)
+    nodes, weights, normal, coefficient = rows.nodes, rows.weights, rows.normal, rows.coefficient
     for e in range(nodes.shape[0]):
         if coefficient[e] == 0.0:
             continue
@@ -78,10 +88,20 @@ def _apply(op, inv_mass, rows, tet_law, tet_weight, p, out, partial):
                 out[n, 0] += g * nx
                 out[n, 1] += g * ny
                 out[n, 2] += g * nz
-    for n in range(p.shape[0]):
-        if inv_mass[n] == 0.0:
-            for a in range(3):
-                out[n, a] = 0.0
+    count = p.shape[0]
+    for c in numba.prange(NODE_CHUNKS):
+        first, last = _chunk(c, NODE_CHUNKS, count)
+        total = 0.0
+        for n in range(first, last):
+            if inv_mass[n] == 0.0:
+                out[n, 0] = out[n, 1] = out[n, 2] = 0.0
+                continue
+            total += p[n, 0] * out[n, 0] + p[n, 1] * out[n, 1] + p[n, 2] * out[n, 2]
+        sums[c, 0] = total
+    pq = 0.0
+    for c in range(NODE_CHUNKS):
+        pq += sums[c, 0]
+    return pq
 
 
 @numba.njit(cache=True)
@@ -89,8 +109,9 @@ def apply(op, inv_mass, rows, tet_law, tet_weight, p, out):
     """out = A·p, matrix-free (`op` a records.Operator, `rows` a records.ContactRows): shift·p, each spring's
     B·(p_i − p_j) to i and its opposite to j, the tetrahedra of a continuum law (`tet_law`, a fem_kernels.TetArrays,
     scaled by `tet_weight` = h² + h·τ; fem_kernels.tet_apply) and the active contacts' (h·c + h²·k)·w_a·w_b·nnᵀ.
-    p must vanish on held nodes; out does there too."""
-    _apply(op, inv_mass, rows, tet_law, tet_weight, p, out, np.zeros((1, 0, 3)))
+    p must vanish on held nodes; out does there too.  Returns p·out."""
+    _check_groups(op, tet_law)
+    return _apply(op, inv_mass, rows, tet_law, tet_weight, p, out, np.zeros((NODE_CHUNKS, 2)))
 
 
 @numba.njit(cache=True, nogil=True)
@@ -139,101 +160,127 @@ def _block_jacobi_node(preconditioner, r, z, n, rz):
 
 
 @numba.njit(cache=True, inline="always")
-def _dot(u, w, chunks, sums):
-    """u·w over (N, 3) arrays, node chunk by node chunk (each chunk's sum in order, then the chunks' in order)."""
+def _dot(u, w, sums):
+    """u·w over (N, 3) arrays in NODE_CHUNKS node chunks (each chunk's sum in order, then the chunks' in order)."""
     count = u.shape[0]
-    for c in numba.prange(chunks):
-        first, last = _chunk(c, chunks, count)
+    for c in numba.prange(NODE_CHUNKS):
+        first, last = _chunk(c, NODE_CHUNKS, count)
         total = 0.0
         for n in range(first, last):
             for a in range(3):
                 total += u[n, a] * w[n, a]
         sums[c, 0] = total
     total = 0.0
-    for c in range(chunks):
+    for c in range(NODE_CHUNKS):
         total += sums[c, 0]
     return total
 
 
-#: The fields of a resumable solve's `status` (4,): r·z, ‖r‖², the target ‖r‖² and whether it has ended (1.0:
-#: converged, or stopped where pᵀA·p ≤ 0).
+#: The fields of a solve's `status` (4,): r·z, ‖r‖², the target ‖r‖² and whether it has ended (1.0: converged, or
+#: stopped where pᵀA·p ≤ 0).
 RZ, R_NORM2, TARGET, ENDED = 0, 1, 2, 3
 
 
 @numba.njit(cache=True, inline="always")
-def _pcg_start(op, inv_mass, rows, tet_law, tet_weight, preconditioner, coarse, b, z0, tolerance, vectors, partial,
+def _precondition(preconditioner, coarse, r, z, sums, restricted, first_pass, alpha, z0, p, q):
+    """The second pass: per node chunk (with `first_pass` False, first z0 += α·p and r −= α·q), z = D⁻¹·r, the
+    chunk's ‖r‖² and r·z into `sums` and its Tᵀ·r into its row of `restricted`; then the coarse solve.  Returns
+    (‖r‖², r·z with the coarse correction's part); coarse.work holds the coarse motions w."""
+    two_level = coarse.factor.shape[0] > 0
+    count = r.shape[0]
+    for c in numba.prange(NODE_CHUNKS):
+        first, last = _chunk(c, NODE_CHUNKS, count)
+        r_norm2, rz = 0.0, 0.0
+        for n in range(first, last):
+            if not first_pass:
+                for a in range(3):
+                    z0[n, a] += alpha * p[n, a]
+                    r[n, a] -= alpha * q[n, a]
+            for a in range(3):
+                r_norm2 += r[n, a] * r[n, a]
+            rz = _block_jacobi_node(preconditioner, r, z, n, rz)
+        sums[c, 0], sums[c, 1] = r_norm2, rz
+        if two_level:
+            own = restricted[c]
+            own[:] = 0.0
+            restrict(coarse, r, first, last, own)
+    r_norm2, rz = 0.0, 0.0
+    for c in range(NODE_CHUNKS):
+        r_norm2 += sums[c, 0]
+        rz += sums[c, 1]
+    if two_level:
+        rz += coarse_solve(coarse, restricted)
+    return r_norm2, rz
+
+
+@numba.njit(cache=True, inline="always")
+def _next_direction(coarse, inv_mass, z, p, beta):
+    """The third pass: p = z + F·T·w + β·p per node chunk (w the coarse motions in coarse.work)."""
+    two_level = coarse.factor.shape[0] > 0
+    w = coarse.work
+    count = p.shape[0]
+    for c in numba.prange(NODE_CHUNKS):
+        first, last = _chunk(c, NODE_CHUNKS, count)
+        for n in range(first, last):
+            zx, zy, zz = z[n, 0], z[n, 1], z[n, 2]
+            if two_level and inv_mass[n] > 0.0:
+                cx, cy, cz = prolong(coarse, w, n)
+                zx += cx
+                zy += cy
+                zz += cz
+            if beta != 0.0:  # β = 0 starts the directions: p's old values unread
+                zx += beta * p[n, 0]
+                zy += beta * p[n, 1]
+                zz += beta * p[n, 2]
+            p[n, 0], p[n, 1], p[n, 2] = zx, zy, zz
+
+
+@numba.njit(cache=True, inline="always")
+def _restricted(coarse):
+    """The chunks' rows of Tᵀ·r: (NODE_CHUNKS, 6C)."""
+    return np.zeros((NODE_CHUNKS, coarse.work.shape[0]))
+
+
+@numba.njit(cache=True, inline="always")
+def _pcg_start(op, inv_mass, rows, tet_law, tet_weight, preconditioner, coarse, b, z0, tolerance, vectors,
                status):
     """The start of a solve from z0: r = b − A·z0, z = P⁻¹·r, p = z, and `status` (RZ … ENDED)."""
     r, z, p, q = vectors
-    two_level = coarse.factor.shape[0] > 0
-    chunks = partial.shape[0]
     count = b.shape[0]
-    sums = np.zeros((chunks, 2))
-    _apply(op, inv_mass, rows, tet_law, tet_weight, z0, q, partial)
-    for n in range(count):
-        for a in range(3):
-            r[n, a] = b[n, a] - q[n, a]
-    target = tolerance * tolerance * _dot(b, b, chunks, sums)
-    for c in numba.prange(chunks):
-        first, last = _chunk(c, chunks, count)
-        rz, r_norm2 = 0.0, 0.0
+    sums = np.zeros((NODE_CHUNKS, 2))
+    _check_groups(op, tet_law)
+    _apply(op, inv_mass, rows, tet_law, tet_weight, z0, q, sums)
+    for c in numba.prange(NODE_CHUNKS):
+        first, last = _chunk(c, NODE_CHUNKS, count)
         for n in range(first, last):
-            rz = _block_jacobi_node(preconditioner, r, z, n, rz)
             for a in range(3):
-                r_norm2 += r[n, a] * r[n, a]
-        sums[c, 0], sums[c, 1] = rz, r_norm2
-    rz, r_norm2 = 0.0, 0.0
-    for c in range(chunks):
-        rz += sums[c, 0]
-        r_norm2 += sums[c, 1]
-    if two_level:
-        coarse_correction(coarse, inv_mass, r, z)
-        rz = _dot(r, z, chunks, sums)
-    p[:] = z
+                r[n, a] = b[n, a] - q[n, a]
+    target = tolerance * tolerance * _dot(b, b, sums)
+    r_norm2, rz = _precondition(preconditioner, coarse, r, z, sums, _restricted(coarse), True, 0.0, z0, p, q)
+    _next_direction(coarse, inv_mass, z, p, 0.0)
     status[RZ], status[R_NORM2], status[TARGET] = rz, r_norm2, target
     status[ENDED] = 1.0 if r_norm2 <= target else 0.0
 
 
 @numba.njit(cache=True, inline="always")
-def _pcg_steps(op, inv_mass, rows, tet_law, tet_weight, preconditioner, coarse, z0, steps, vectors, partial, status):
+def _pcg_steps(op, inv_mass, rows, tet_law, tet_weight, preconditioner, coarse, z0, steps, vectors, status):
     """Up to `steps` iterations of a started solve (`_pcg_start`), z0 its iterate, until it ends; `status` carried
     from one call to the next.  Returns the iterations made."""
     r, z, p, q = vectors
-    two_level = coarse.factor.shape[0] > 0
-    chunks = partial.shape[0]
-    count = z0.shape[0]
-    sums = np.zeros((chunks, 2))
+    sums = np.zeros((NODE_CHUNKS, 2))
+    restricted = _restricted(coarse)
     rz, r_norm2, target = status[RZ], status[R_NORM2], status[TARGET]
     iterations = 0
     while r_norm2 > target and iterations < steps:
-        _apply(op, inv_mass, rows, tet_law, tet_weight, p, q, partial)
-        pq = _dot(p, q, chunks, sums)
+        pq = _apply(op, inv_mass, rows, tet_law, tet_weight, p, q, sums)
         if pq <= 0.0:
             status[ENDED] = 1.0
             break
         alpha = rz / pq
-        for c in numba.prange(chunks):
-            first, last = _chunk(c, chunks, count)
-            r_norm2, rz_new = 0.0, 0.0
-            for n in range(first, last):
-                for a in range(3):
-                    z0[n, a] += alpha * p[n, a]
-                    r[n, a] -= alpha * q[n, a]
-                    r_norm2 += r[n, a] * r[n, a]
-                rz_new = _block_jacobi_node(preconditioner, r, z, n, rz_new)
-            sums[c, 0], sums[c, 1] = r_norm2, rz_new
-        r_norm2, rz_new = 0.0, 0.0
-        for c in range(chunks):
-            r_norm2 += sums[c, 0]
-            rz_new += sums[c, 1]
-        if two_level:
-            coarse_correction(coarse, inv_mass, r, z)
-            rz_new = _dot(r, z, chunks, sums)
+        r_norm2, rz_new = _precondition(preconditioner, coarse, r, z, sums, restricted, False, alpha, z0, p, q)
         beta = rz_new / rz
         rz = rz_new
-        for n in numba.prange(count):
-            for a in range(3):
-                p[n, a] = z[n, a] + beta * p[n, a]
+        _next_direction(coarse, inv_mass, z, p, beta)
         iterations += 1
     status[RZ], status[R_NORM2] = rz, r_norm2
     if r_norm2 <= target:
@@ -242,54 +289,50 @@ def _pcg_steps(op, inv_mass, rows, tet_law, tet_weight, preconditioner, coarse, 
 
 
 @numba.njit(cache=True, inline="always")
-def _pcg(op, inv_mass, rows, tet_law, tet_weight, preconditioner, coarse, b, z0, settings, vectors, partial):
-    """`pcg`'s solve: its start and its iterations; the products (`_apply`) and the vector updates in
-    partial.shape[0] chunks of springs, elements and nodes (prange: on the threads of a parallel dispatcher, in order
-    in a serial one)."""
+def _pcg(op, inv_mass, rows, tet_law, tet_weight, preconditioner, coarse, b, z0, settings, vectors):
+    """`pcg`'s solve: its start and its iterations (prange: on the threads of a parallel dispatcher, in order in a
+    serial one)."""
     status = np.zeros(4)
     _pcg_start(op, inv_mass, rows, tet_law, tet_weight, preconditioner, coarse, b, z0, settings.cg_tolerance, vectors,
-               partial, status)
+               status)
     return _pcg_steps(op, inv_mass, rows, tet_law, tet_weight, preconditioner, coarse, z0,
-                      settings.max_cg_iterations, vectors, partial, status)
+                      settings.max_cg_iterations, vectors, status)
 
 
 @numba.njit(cache=True)
-def pcg(op, inv_mass, rows, tet_law, tet_weight, preconditioner, coarse, b, z0, settings, vectors, partial):
+def pcg(op, inv_mass, rows, tet_law, tet_weight, preconditioner, coarse, b, z0, settings, vectors):
     """Solve A·z = b by preconditioned conjugate gradients from z0 (overwritten by z): block-Jacobi, plus the
     coarse correction of `coarse` (a coarse_space.CoarseSpace; none: block-Jacobi alone); stops when
     ‖r‖ ≤ cg_tolerance·‖b‖ or after max_cg_iterations (`settings`, records.SolveSettings); `vectors` (r, z, p, q)
-    (N, 3) each, scratch.  Returns the iterations used.  One thread, `partial` SERIAL (`pcg_parallel`: on the
-    threads).  With SERIAL its sums run node by node in order."""
-    return _pcg(op, inv_mass, rows, tet_law, tet_weight, preconditioner, coarse, b, z0, settings, vectors, partial)
+    (N, 3) each, scratch.  Returns the iterations used.  One thread (`pcg_parallel`: on the threads, the same
+    bits)."""
+    return _pcg(op, inv_mass, rows, tet_law, tet_weight, preconditioner, coarse, b, z0, settings, vectors)
 
 
 @numba.njit(cache=True, parallel=True)
-def pcg_parallel(op, inv_mass, rows, tet_law, tet_weight, preconditioner, coarse, b, z0, settings, vectors, partial):
-    """`pcg` on the threads: springs, elements and nodes in partial.shape[0] chunks, `partial` (chunks, N, 3) the
-    chunks' own sums of A·p.  The sums' order depends on the chunks alone, so a run repeats itself bit for bit with
-    the same thread count; against `pcg` it differs by rounding."""
-    return _pcg(op, inv_mass, rows, tet_law, tet_weight, preconditioner, coarse, b, z0, settings, vectors, partial)
+def pcg_parallel(op, inv_mass, rows, tet_law, tet_weight, preconditioner, coarse, b, z0, settings, vectors):
+    """`pcg` on the threads: its groups of springs and elements and its chunks of nodes shared among them; the same
+    sums in the same order, so the same bits as `pcg`."""
+    return _pcg(op, inv_mass, rows, tet_law, tet_weight, preconditioner, coarse, b, z0, settings, vectors)
 
 
 @numba.njit(cache=True, nogil=True)
 def pcg_resumable(op, inv_mass, rows, tet_law, tet_weight, preconditioner, coarse, b, z0, tolerance, start, steps,
-                  vectors, partial, status):
+                  vectors, status):
     """`pcg`'s solve in slices: with `start`, begin it from z0 (`status` (4,), RZ … ENDED, is then set); then up to
     `steps` iterations, z0 the iterate, `vectors` and `status` kept by the caller from one slice to the next.  The
     slices make the same iterations, in the same order, as one `pcg` call.  Returns the iterations made."""
     if start:
         _pcg_start(op, inv_mass, rows, tet_law, tet_weight, preconditioner, coarse, b, z0, tolerance, vectors,
-                   partial, status)
-    return _pcg_steps(op, inv_mass, rows, tet_law, tet_weight, preconditioner, coarse, z0, steps, vectors, partial,
-                      status)
+                   status)
+    return _pcg_steps(op, inv_mass, rows, tet_law, tet_weight, preconditioner, coarse, z0, steps, vectors, status)
 
 
 @numba.njit(cache=True, parallel=True, nogil=True)
 def pcg_resumable_parallel(op, inv_mass, rows, tet_law, tet_weight, preconditioner, coarse, b, z0, tolerance, start,
-                           steps, vectors, partial, status):
+                           steps, vectors, status):
     """`pcg_resumable` on the threads (as `pcg_parallel`)."""
     if start:
         _pcg_start(op, inv_mass, rows, tet_law, tet_weight, preconditioner, coarse, b, z0, tolerance, vectors,
-                   partial, status)
-    return _pcg_steps(op, inv_mass, rows, tet_law, tet_weight, preconditioner, coarse, z0, steps, vectors, partial,
-                      status)
+                   status)
+    return _pcg_steps(op, inv_mass, rows, tet_law, tet_weight, preconditioner, coarse, z0, steps, vectors, status)

@@ -11,6 +11,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from liver_sim.physics.solver.partition import PARTS, group_order, item_groups, node_parts
 from liver_sim.physics.tissue.fem_kernels import TetArrays
 from liver_sim.physics.tissue.organ_support import SupportArrays
 from liver_sim.physics.tissue.spring_law import SpringArrays
@@ -19,7 +20,10 @@ from liver_sim.physics.tissue.spring_law import SpringArrays
 class Operator(NamedTuple):
     """The step's system A = M − h·D − h²·K without contacts and tetrahedra: per spring its nodes (E,) uint32, unit
     axis `unit` (E, 3) and block B = iso·I + axial·uuᵀ (`iso`, `axial` (E,)); per node `shift` (N,), m·(1 + h·c_env)
-    plus the support's h·c + h²·k (1 on held nodes), and the 3×3 `diagonal` blocks (N, 3, 3)."""
+    plus the support's h·c + h²·k (1 on held nodes), and the 3×3 `diagonal` blocks (N, 3, 3).  The groups of the
+    product (physics.solver.partition): the springs are the network's in the order `spring_order` (E,) int64, group
+    g's spring_start[g]..spring_start[g + 1] − 1; part g's nodes `part_nodes`[part_start[g]:part_start[g + 1]]
+    (uint32); group g's elements `tet_order`[tet_start[g]:tet_start[g + 1]] (uint32); the starts uint64."""
 
     node_i: np.ndarray
     node_j: np.ndarray
@@ -28,13 +32,32 @@ class Operator(NamedTuple):
     axial: np.ndarray
     shift: np.ndarray
     diagonal: np.ndarray
+    spring_order: np.ndarray
+    spring_start: np.ndarray
+    part_nodes: np.ndarray
+    part_start: np.ndarray
+    tet_order: np.ndarray
+    tet_start: np.ndarray
 
     @classmethod
-    def allocate(cls, node_i: np.ndarray, node_j: np.ndarray, n_nodes: int) -> "Operator":
-        """The operator of springs `node_i`→`node_j` (uint32) on `n_nodes` nodes, to be assembled: blocks 0, shift 1."""
+    def allocate(cls, node_i: np.ndarray, node_j: np.ndarray, n_nodes: int,
+                 tets: np.ndarray | None = None) -> "Operator":
+        """The operator of springs `node_i`→`node_j` and elements `tets` (M, 4; none by default) on `n_nodes` nodes,
+        to be assembled (blocks 0, shift 1), its springs in group order: the spring law's arrays must be taken in
+        `spring_order` too (spring_law.SpringArrays.taken)."""
+        tets = np.zeros((0, 4), np.int64) if tets is None else tets
+        part = node_parts(n_nodes, node_i, node_j, tets)
+        spring_order, spring_start = group_order(item_groups(part, np.stack([node_i, node_j], axis=1)))
+        part_nodes = np.argsort(part, kind="stable").astype(np.uint32)
+        part_start = np.zeros(PARTS + 1, np.uint64)
+        np.cumsum(np.bincount(part, minlength=PARTS), out=part_start[1:])
+        tet_order, tet_start = group_order(item_groups(part, tets))
         edges = len(node_i)
-        return cls(node_i, node_j, np.zeros((edges, 3)), np.zeros(edges), np.zeros(edges), np.ones(n_nodes),
-                   np.zeros((n_nodes, 3, 3)))
+        # unsigned ranges spare numba's negative-index wraparound in the loops they bound
+        return cls(np.ascontiguousarray(node_i[spring_order]), np.ascontiguousarray(node_j[spring_order]),
+                   np.zeros((edges, 3)), np.zeros(edges), np.zeros(edges), np.ones(n_nodes),
+                   np.zeros((n_nodes, 3, 3)), spring_order, spring_start.astype(np.uint64), part_nodes, part_start,
+                   tet_order.astype(np.uint32), tet_start.astype(np.uint64))
 
 
 class ContactRows(NamedTuple):
@@ -94,9 +117,9 @@ class SolveSettings(NamedTuple):
 
 
 class Scratch(NamedTuple):
-    """A solver's work arrays: `work` (10, N, 3), `partial` pcg.SERIAL for one thread, else (threads, N, 3), and the
-    block-Jacobi `preconditioner` (N, 3, 3)."""
+    """A solver's work arrays: `work` (10, N, 3) and the block-Jacobi `preconditioner` (N, 3, 3); and whether the
+    solve runs on the threads (`parallel`, pcg.pcg_parallel; the same bits either way)."""
 
     work: np.ndarray
-    partial: np.ndarray
     preconditioner: np.ndarray
+    parallel: bool

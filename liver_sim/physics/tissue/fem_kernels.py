@@ -219,16 +219,18 @@ def tet_terms(x, v, y, inv_mass, h, law, f, ky, diagonal, assemble_matrix):
 
 
 @numba.njit(cache=True)
-def tet_apply(law, weight, p, first, last, out):
-    """out += Σ elements first..last−1 of weight·V·R·C·Rᵀ·p (`law` a TetArrays, weight = h² + h·τ; p zero on held
-    nodes): the elements' part of A·p.  With the rotated gradients h_a = R·g_a and G = Σ_b p_b ⊗ h_b, R·C·Rᵀ·p gives
-    node a (λ·tr(G)·I + μ·(G + Gᵀ))·h_a.  The neo-Hookean law's elements: neo_hookean.neo_hookean_apply."""
+def tet_apply(law, weight, p, elements, first, last, out):
+    """out += Σ over the elements elements[first..last−1] of weight·V·R·C·Rᵀ·p (`law` a TetArrays, weight = h² + h·τ;
+    p zero on held nodes): the elements' part of A·p.  With the rotated gradients h_a = R·g_a and
+    G = Σ_b p_b ⊗ h_b, R·C·Rᵀ·p gives node a (λ·tr(G)·I + μ·(G + Gᵀ))·h_a.  The neo-Hookean law's elements:
+    neo_hookean.neo_hookean_apply."""
     if law.neo_hookean:
-        neo_hookean_apply(law, weight, p, first, last, out)
+        neo_hookean_apply(law, weight, p, elements, first, last, out)
         return
     tets, volume, rotated = law.tets, law.volume_m3, law.rotated_gradients
     lam, mu = law.lame_lambda_pa, law.lame_mu_pa
-    for e in range(first, last):
+    for k in range(first, last):
+        e = elements[k]
         tet, hg = tets[e], rotated[e]
         g00, g01, g02, g10, g11, g12, g20, g21, g22 = tet_gradient(p, tet, hg, EVERY_NODE)
         scale = weight * volume[e]

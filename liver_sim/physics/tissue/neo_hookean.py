@@ -239,10 +239,11 @@ def neo_hookean_terms(x, v, y, inv_mass, h, law, f, ky, diagonal, assemble_matri
 
 
 @numba.njit(cache=True)
-def neo_hookean_apply(law, weight, p, first, last, out):
-    """out += Σ elements first..last−1 of weight·V·g_aᵀ·𝐂̃·g_b·p_b (`law` a fem_kernels.TetArrays of this law, weight =
-    h² + h·τ; p zero on held nodes): with G = Σ_b p_b ⊗ g_b, node a gets weight·V·(𝐂̃:G)·g_a."""
+def neo_hookean_apply(law, weight, p, elements, first, last, out):
+    """out += Σ over the elements elements[first..last−1] of weight·V·g_aᵀ·𝐂̃·g_b·p_b (`law` a fem_kernels.TetArrays
+    of this law, weight = h² + h·τ; p zero on held nodes): with G = Σ_b p_b ⊗ g_b, node a gets weight·V·(𝐂̃:G)·g_a."""
     tets, volume, gradients, tangent = law.tets, law.volume_m3, law.gradients, law.tangent
-    for e in range(first, last):
+    for k in range(first, last):
+        e = elements[k]
         tet, g = tets[e], gradients[e]
         _scatter(_contract(tangent[e], tet_gradient(p, tet, g, EVERY_NODE)), tet, g, weight * volume[e], out)

@@ -39,6 +39,10 @@ class SpringArrays(NamedTuple):
     lambda2_n: np.ndarray
     mu_ns_per_m: np.ndarray
 
+    def taken(self, order: np.ndarray) -> "SpringArrays":
+        """The same springs in `order` (a permutation of their indices)."""
+        return SpringArrays(*(np.ascontiguousarray(a[order]) for a in self))
+
 
 def spring_arrays(springs, node_i: np.ndarray | None = None, node_j: np.ndarray | None = None) -> SpringArrays:
     """The kernels' record of a physics.tissue.springs.SpringNetwork, with its own end nodes unless `node_i`,

@@ -13,9 +13,11 @@ from liver_sim.physics.solver.coarse_space import (
     aggregates,
     build_coarse_space,
     cholesky,
-    coarse_correction,
     coarse_matrix,
+    coarse_solve,
     node_graph,
+    prolong,
+    restrict,
 )
 from liver_sim.physics.solver.implicit_kernels import assemble
 from liver_sim.physics.solver.records import ContactRows, Loads, Operator, SolveSettings
@@ -32,7 +34,7 @@ H_S = 1.0 / 150.0
 
 def assembled_system(mesh, params: ModelParams, x, inv_mass):
     """The step's matrix-free system at x (v = 0, h = H_S) of `mesh`'s springs and, with params.tissue_law 'fem', its
-    tetrahedra: (the operator's arrays as pcg.apply and coarse_matrix take them, the block-Jacobi inverse)."""
+    tetrahedra: (its records.Operator, the operator's arrays as coarse_matrix takes them, the block-Jacobi inverse)."""
     springs = build_springs(mesh, params)
     tets = TetArrays.none()
     if params.tissue_law == "fem":
@@ -40,18 +42,13 @@ def assembled_system(mesh, params: ModelParams, x, inv_mass):
     n = len(x)
     f, ky, zero = np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3))
     node_i, node_j = springs.node_i.astype(np.uint32), springs.node_j.astype(np.uint32)
-    op = Operator.allocate(node_i, node_j, n)
-    law = spring_arrays(springs, node_i, node_j)
+    op = Operator.allocate(node_i, node_j, n, tets.tets)
+    law = spring_arrays(springs, node_i, node_j).taken(op.spring_order)
     assemble(x, zero, zero, inv_mass, Loads(zero, np.zeros(3), 3.0), H_S, law, op, f, ky, True)
     tet_terms(x, zero, zero, inv_mass, H_S, tets, f, ky, op.diagonal, True)
     inverse = np.zeros_like(op.diagonal)
     pcg.block_jacobi(op.diagonal, inv_mass, NO_ROWS, inverse)
-    return (*op[:6], inv_mass, tets, H_S * H_S + H_S * tets.viscous_time_s), inverse
-
-
-def operator_record(operator) -> Operator:
-    """The records.Operator of `assembled_system`'s arrays (its diagonal blocks left out: the solve reads none)."""
-    return Operator(*operator[:6], np.zeros((0, 3, 3)))
+    return op, (*op[:6], inv_mass, tets, H_S * H_S + H_S * tets.viscous_time_s), inverse
 
 
 def graph(mesh):
@@ -67,8 +64,9 @@ def perturbed_box(law: str):
     return mesh, ModelParams(tissue_law=law), x, inv_mass
 
 
-def dense_operator(operator):
-    """pcg.apply's operator (no contacts) as a dense (3N × 3N) matrix, column by column."""
+def dense_operator(op, operator):
+    """pcg.apply's operator `op` (no contacts; `operator` its arrays) as a dense (3N × 3N) matrix, column by
+    column."""
     inv_mass = operator[6]
     columns = []
     for k in range(3 * len(inv_mass)):
@@ -76,7 +74,7 @@ def dense_operator(operator):
         p.flat[k] = 1.0
         p[inv_mass == 0.0] = 0.0
         out = np.zeros_like(p)
-        pcg.apply(operator_record(operator), inv_mass, NO_ROWS, *operator[7:], p, out)
+        pcg.apply(op, inv_mass, NO_ROWS, *operator[7:], p, out)
         columns.append(out.ravel())
     return np.array(columns).T
 
@@ -105,11 +103,11 @@ def test_aggregates_cover_every_node_once_and_stay_under_the_target():
 @pytest.mark.parametrize("law", ["springs", "fem"])
 def test_the_coarse_matrix_is_the_operator_on_the_aggregates_rigid_motions(law):
     mesh, params, x, inv_mass = perturbed_box(law)
-    operator, _ = assembled_system(mesh, params, x, inv_mass)
+    op, operator, _ = assembled_system(mesh, params, x, inv_mass)
     aggregate = aggregates(*graph(mesh), 4)
     coarse = build_coarse_space(x, aggregate, operator)
     t = modes_matrix(coarse, inv_mass)
-    expected = t.T @ dense_operator(operator) @ t
+    expected = t.T @ dense_operator(op, operator) @ t
     actual = coarse_matrix(*operator, aggregate, coarse.offset_m, coarse.aggregates)
     np.testing.assert_allclose(actual, expected, rtol=1e-9, atol=1e-12 * np.abs(expected).max())
     np.testing.assert_allclose(coarse.factor @ coarse.factor.T, actual, rtol=1e-9, atol=1e-9 * np.abs(actual).max())
@@ -125,33 +123,37 @@ def test_cholesky_factors_and_refuses_an_indefinite_matrix():
         cholesky(-spd)
 
 
-def test_the_coarse_correction_adds_f_t_ac_inverse_t_transpose_r():
+def test_the_coarse_correction_is_f_t_ac_inverse_t_transpose_r_and_its_part_of_r_dot_z():
     mesh, params, x, inv_mass = perturbed_box("fem")
-    operator, _ = assembled_system(mesh, params, x, inv_mass)
+    _, operator, _ = assembled_system(mesh, params, x, inv_mass)
     coarse = build_coarse_space(x, aggregates(*graph(mesh), 5), operator)
     t = modes_matrix(coarse, inv_mass)
     r = np.random.default_rng(1).normal(size=x.shape)
     r[inv_mass == 0.0] = 0.0
-    z = np.ones_like(r)
-    coarse_correction(coarse, inv_mass, r, z)
+    restricted = np.zeros((2, len(coarse.work)))  # two chunks of nodes, summed by the solve
+    half = len(r) // 2
+    restrict(coarse, r, 0, half, restricted[0])
+    restrict(coarse, r, half, len(r), restricted[1])
+    r_dot_z = coarse_solve(coarse, restricted)
+    z = np.array([prolong(coarse, coarse.work, n) if inv_mass[n] > 0.0 else (0.0, 0.0, 0.0) for n in range(len(r))])
     expected = t @ np.linalg.solve(coarse.factor @ coarse.factor.T, t.T @ r.ravel())
-    np.testing.assert_allclose(z.ravel() - 1.0, expected, rtol=1e-8, atol=1e-10 * np.abs(expected).max())
+    np.testing.assert_allclose(z.ravel(), expected, rtol=1e-8, atol=1e-10 * np.abs(expected).max())
+    assert r_dot_z == pytest.approx(r.ravel() @ expected, rel=1e-10)
 
 
 def test_two_levels_solve_the_same_system_in_fewer_iterations():
     mesh = build_liver(10_000)
     inv_mass = 1.0 / mesh.lumped_masses(1060.0)
     inv_mass[:4] = 0.0
-    operator, inverse = assembled_system(mesh, ModelParams(), mesh.points, inv_mass)
+    op, operator, inverse = assembled_system(mesh, ModelParams(), mesh.points, inv_mass)
     coarse = build_coarse_space(mesh.points, aggregates(*graph(mesh)), operator)
     b = np.random.default_rng(2).normal(scale=1e-3, size=mesh.points.shape) * operator[5][:, None]
     b[inv_mass == 0.0] = 0.0
 
     def solve(space, tolerance):
         z = np.zeros_like(b)
-        iterations = pcg.pcg(operator_record(operator), inv_mass, NO_ROWS, *operator[7:], inverse, space, b, z,
-                             SolveSettings(tolerance, 1000, 0.0, 0), tuple(np.zeros_like(b) for _ in range(4)),
-                             pcg.SERIAL)
+        iterations = pcg.pcg(op, inv_mass, NO_ROWS, *operator[7:], inverse, space, b, z,
+                             SolveSettings(tolerance, 1000, 0.0, 0), tuple(np.zeros_like(b) for _ in range(4)))
         return z, iterations
 
     exact, _ = solve(CoarseSpace.none(), 1e-12)

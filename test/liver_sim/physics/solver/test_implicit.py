@@ -10,7 +10,7 @@ from liver_sim.physics.contact.tool_geometry import ToolPose, ToolShape, contact
 from liver_sim.physics.model import LiverModel
 from liver_sim.physics.settings import ModelParams
 from liver_sim.physics.solver import explicit_kernels, reference
-from liver_sim.physics.solver.implicit import ImplicitEuler
+from liver_sim.physics.solver.implicit import ImplicitEuler, same_arithmetic
 from liver_sim.physics.tools.tool import Tool
 from liver_sim.tool.scripts import ScriptSettings, make_script
 
@@ -268,3 +268,12 @@ def test_capsule_and_box_tools_press_with_the_implicit_step(kind):
     assert np.abs(result.tool_force_n - expected.tool_force_n).max() < 0.02 * peak
     assert result.local_model.valid and result.local_model.in_contact
     np.testing.assert_allclose(result.local_model.normal, expected.local_model.normal, atol=0.05)
+
+
+def test_the_same_arithmetic_is_the_same_version_and_before_version_3_the_same_threads():
+    assert same_arithmetic("pcg two-level, 2 threads, 50 aggregates; solver 3", "pcg two-level; solver 3")
+    assert not same_arithmetic("pcg two-level; solver 2", "pcg two-level; solver 3")
+    assert not same_arithmetic("pcg two-level, 2 threads; solver 2", "pcg two-level; solver 2")
+    assert same_arithmetic("pcg block-jacobi; solver 2", "pcg block-jacobi; solver 2")
+    assert same_arithmetic("pcg block-jacobi", "pcg block-jacobi")  # before versions were named: version 1
+    assert not same_arithmetic("pcg block-jacobi", "pcg block-jacobi; solver 3")

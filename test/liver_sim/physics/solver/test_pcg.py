@@ -7,7 +7,9 @@ from liver_sim.physics.contact.rows import Contacts, node_contacts
 from liver_sim.physics.solver import pcg
 from liver_sim.physics.solver.coarse_space import CoarseSpace
 from liver_sim.physics.solver.records import ContactRows, Operator, SolveSettings
-from liver_sim.physics.tissue.fem_kernels import TetArrays
+from liver_sim.physics.tissue.fem_kernels import TetArrays, build_tets
+
+from meshes import box_mesh
 
 NO_ROWS = ContactRows.of(Contacts.none(), np.zeros(0))
 
@@ -20,8 +22,10 @@ def spring_operator(node_i, node_j, unit, iso, axial, shift) -> Operator:
     for s, (i, j) in enumerate(zip(node_i, node_j)):
         diagonal[i] += blocks[s]
         diagonal[j] += blocks[s]
-    return Operator(np.asarray(node_i, np.uint32), np.asarray(node_j, np.uint32), unit, iso, axial, shift,
-                    diagonal.reshape(n, 3, 3))
+    op = Operator.allocate(np.asarray(node_i, np.uint32), np.asarray(node_j, np.uint32), n)
+    order = op.spring_order
+    return op._replace(unit=unit[order], iso=iso[order], axial=axial[order], shift=shift,
+                       diagonal=diagonal.reshape(n, 3, 3))
 
 
 def dense(op: Operator) -> np.ndarray:
@@ -80,9 +84,9 @@ def test_pcg_solves_a_small_spd_system_as_numpy_does(system, threads):
     pcg.block_jacobi(op.diagonal, np.ones(6), NO_ROWS, inverse)
     z = np.zeros_like(b)
     vectors = tuple(np.zeros_like(b) for _ in range(4))
-    solve, partial = (pcg.pcg, pcg.SERIAL) if threads == 1 else (pcg.pcg_parallel, np.zeros((threads, 6, 3)))
+    solve = pcg.pcg if threads == 1 else pcg.pcg_parallel
     iterations = solve(op, np.ones(6), NO_ROWS, TetArrays.none(), 0.0, inverse, CoarseSpace.none(), b, z,
-                       SolveSettings(1e-12, 100, 0.0, 0), vectors, partial)
+                       SolveSettings(1e-12, 100, 0.0, 0), vectors)
     np.testing.assert_allclose(z, expected, rtol=1e-9, atol=1e-12)
     assert 0 < iterations <= 18  # CG ends within the dimension (18), up to rounding
 
@@ -95,11 +99,22 @@ def test_pcg_stops_at_the_tolerance_and_at_the_iteration_limit(system):
     def solve(tolerance, limit):
         z = np.zeros_like(b)
         used = pcg.pcg(op, np.ones(6), NO_ROWS, TetArrays.none(), 0.0, inverse, CoarseSpace.none(), b, z,
-                       SolveSettings(tolerance, limit, 0.0, 0), tuple(np.zeros_like(b) for _ in range(4)),
-                       pcg.SERIAL)
+                       SolveSettings(tolerance, limit, 0.0, 0), tuple(np.zeros_like(b) for _ in range(4)))
         return used, np.linalg.norm(b.ravel() - dense(op) @ z.ravel())
 
     used, residual = solve(1e-2, 100)
     assert residual <= 1e-2 * np.linalg.norm(b)
     assert 0 < used < solve(1e-12, 100)[0]  # a looser tolerance stops sooner
     assert solve(1e-12, 2)[0] == 2
+
+
+def test_the_product_refuses_an_operator_allocated_without_the_elements():
+    mesh = box_mesh(2, 1, 1, 0.01)
+    tets = build_tets(mesh.points, mesh.tets, 2e3, 0.45, 0.0)
+    n = len(mesh.points)
+    none = np.zeros(0, np.uint32)
+    p, out = np.random.default_rng(4).normal(size=(n, 3)), np.zeros((n, 3))
+    with pytest.raises(ValueError, match="element groups"):
+        pcg.apply(Operator.allocate(none, none, n), np.ones(n), NO_ROWS, tets, 1e-4, p, out)
+    pcg.apply(Operator.allocate(none, none, n, tets.tets), np.ones(n), NO_ROWS, tets, 1e-4, p, out)
+    assert np.abs(out - p).max() > 1e-3 * np.abs(p).max()  # the elements' part beside shift·p

@@ -140,9 +140,10 @@ def test_at_rest_the_law_is_hookes_with_the_small_strain_lame_constants():
     np.testing.assert_allclose(fd_hessian(np.eye(3)), hooke(lam, MU), atol=1e-7 * LAM_HAT)
 
 
-def operator_without_springs(n):
-    """A records.Operator of n nodes, no spring and a zero shift: pcg.apply gives the elements' part alone."""
-    op = Operator.allocate(np.zeros(0, np.uint32), np.zeros(0, np.uint32), n)
+def operator_without_springs(n, tets):
+    """A records.Operator of n nodes and the elements `tets`, no spring and a zero shift: pcg.apply gives the
+    elements' part alone."""
+    op = Operator.allocate(np.zeros(0, np.uint32), np.zeros(0, np.uint32), n, tets)
     op.shift[:] = 0.0
     return op
 
@@ -239,7 +240,7 @@ def test_the_system_blocks_are_the_tangents_k_times_y_and_its_diagonal():
         p.flat[k] = 1.0
         p[inv_mass == 0.0] = 0.0
         out = np.zeros((n, 3))
-        pcg.apply(operator_without_springs(n), inv_mass, NO_ROWS, law, weight, p, out)
+        pcg.apply(operator_without_springs(n, law.tets), inv_mass, NO_ROWS, law, weight, p, out)
         dense[:, k] = out.ravel()
     y = rng.normal(size=(n, 3))
     y[inv_mass == 0.0] = 0.0
