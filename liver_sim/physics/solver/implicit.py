@@ -30,7 +30,7 @@ import scipy.sparse
 from liver_sim.physics.contact.rows import Contacts, node_contacts
 from liver_sim.physics.settings import PRECONDITIONERS
 from liver_sim.physics.solver.coarse_space import CoarseSpace, aggregates, build_coarse_space, node_graph
-from liver_sim.physics.solver.implicit_kernels import assemble, bdf2_start, implicit_step, support_terms
+from liver_sim.physics.solver.implicit_kernels import bdf2_start, implicit_step, system_terms
 from liver_sim.physics.solver.pcg import (
     ENDED,
     block_jacobi,
@@ -40,7 +40,7 @@ from liver_sim.physics.solver.pcg import (
     pcg_resumable_parallel,
 )
 from liver_sim.physics.solver.records import ContactRows, Loads, Operator, Scratch, SolveSettings, Tissue
-from liver_sim.physics.tissue.fem_kernels import TetArrays, tet_terms
+from liver_sim.physics.tissue.fem_kernels import TetArrays
 from liver_sim.physics.tissue.organ_support import SupportArrays
 from liver_sim.physics.tissue.spring_law import spring_arrays
 from liver_sim.physics.tissue.springs import SpringNetwork
@@ -141,7 +141,8 @@ class ImplicitEuler:
         #: Whether the PCG adds the coarse correction to block-Jacobi.
         self.two_level = preconditioner == "two_level" or (preconditioner == "auto"
                                                            and self.n_nodes >= TWO_LEVEL_MIN_NODES)
-        #: Threads of the PCG (pcg.pcg_parallel above one; the same bits whatever their count).
+        #: Threads of the step's assembly and PCG (their parallel kernels above one; the same bits whatever their
+        #: count).
         self.threads = max(1, int(threads))
         self._aggregate: np.ndarray | None = None
         self._coarse: dict[float, CoarseSpace] = {}
@@ -320,10 +321,8 @@ class ImplicitEuler:
         zero = np.zeros_like(x)
         f, ky = np.zeros_like(x), np.zeros_like(x)
         rows = ContactRows.of(contacts or Contacts.none(), np.zeros(0) if coefficient is None else coefficient)
-        assemble(x, zero, zero, inv_mass, Loads(external_force, np.zeros(3), float(environment_damping)), h,
-                 self._springs, self._op, f, ky, True)
-        support_terms(x, zero, zero, inv_mass, h, self.support, f, ky, self._op, True)
-        tet_terms(x, zero, zero, inv_mass, h, tets, f, ky, self._op.diagonal, True)
+        system_terms(x, zero, zero, inv_mass, Loads(external_force, np.zeros(3), float(environment_damping)), h,
+                     Tissue(self._springs, self.support, tets), self._op, f, ky, True, self.threads > 1)
         self._tet_weight = h * h + h * tets.viscous_time_s
         block_jacobi(self._op.diagonal, inv_mass, rows, self._scratch.preconditioner)
         return f

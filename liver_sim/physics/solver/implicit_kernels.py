@@ -25,6 +25,7 @@ import math
 import numba
 import numpy as np
 
+from liver_sim.physics.solver.partition import LEVELS
 from liver_sim.physics.solver.pcg import block_jacobi, pcg, pcg_parallel
 from liver_sim.physics.tissue.fem_kernels import tet_terms
 from liver_sim.physics.tissue.spring_law import spring_terms
@@ -106,13 +107,10 @@ def contact_forces(x, v, y, inv_mass, h, rows, f, ky):
 
 
 @numba.njit(cache=True, nogil=True)
-def assemble(x, v, y, inv_mass, loads, h, springs, op, f, ky, assemble_matrix):
-    """Forces f at (x, v) of the `springs` (physics.tissue.spring_law.SpringArrays) and `loads` (records.Loads),
-    and ky = K·y (y zero on held nodes); with assemble_matrix, also the system (into `op`, a records.Operator)
-    A = M·(1 + h·c_env) − h·D_springs − h²·K_springs in matrix-free form: per spring its block
-    (spring_law.spring_terms);
-    shift = m·(1 + h·c_env) per node (1 on held ones, whose rows and columns are the identity);
-    and the 3×3 diagonal blocks of A."""
+def load_terms(x, v, y, inv_mass, loads, h, op, f, ky, assemble_matrix):
+    """Start f and ky = K·y at (x, v): f the `loads` (records.Loads: external forces, gravity, the environment's
+    damping), ky 0; with assemble_matrix, also each node's shift m·(1 + h·c_env) in `op` (a records.Operator; 1 on
+    held nodes, whose rows and columns are the identity) and its diagonal block shift·I."""
     external, gravity, c_env = loads.external, loads.gravity, loads.c_env
     shift, diagonal = op.shift, op.diagonal
     for n in range(x.shape[0]):
@@ -132,13 +130,60 @@ def assemble(x, v, y, inv_mass, loads, h, springs, op, f, ky, assemble_matrix):
             diagonal[n] = 0.0
             for a in range(3):
                 diagonal[n, a, a] = shift[n]
-    spring_terms(x, v, y, inv_mass, h, springs, op, f, ky, assemble_matrix)
+
+
+@numba.njit(cache=True, inline="always")
+def _group_terms(x, v, y, inv_mass, h, springs, tet_law, op, f, ky, assemble_matrix, g):
+    """The terms of group g's springs (spring_law.spring_terms) and elements (fem_kernels.tet_terms)."""
+    spring_terms(x, v, y, inv_mass, h, springs, op, f, ky, assemble_matrix, op.spring_start[g], op.spring_start[g + 1])
+    if tet_law.tets.shape[0] > 0:
+        tet_terms(x, v, y, inv_mass, h, tet_law, f, ky, op.diagonal, assemble_matrix, op.tet_order, op.tet_start[g],
+                  op.tet_start[g + 1])
+
+
+@numba.njit(cache=True, inline="always")
+def _groups_terms(x, v, y, inv_mass, h, springs, tet_law, op, f, ky, assemble_matrix):
+    """The springs' and elements' terms group by group (physics.solver.partition): the groups of a level on the
+    threads of a parallel dispatcher, each node's sum in the same order."""
+    for g in numba.prange(LEVELS[0][1]):
+        _group_terms(x, v, y, inv_mass, h, springs, tet_law, op, f, ky, assemble_matrix, g)
+    first_group, last_group = LEVELS[1]
+    for g in numba.prange(last_group - first_group):
+        _group_terms(x, v, y, inv_mass, h, springs, tet_law, op, f, ky, assemble_matrix, first_group + g)
+    _group_terms(x, v, y, inv_mass, h, springs, tet_law, op, f, ky, assemble_matrix, LEVELS[2][0])
+
+
+@numba.njit(cache=True, nogil=True)
+def groups_terms(x, v, y, inv_mass, h, springs, tet_law, op, f, ky, assemble_matrix):
+    """`_groups_terms` on one thread (groups_terms_parallel: on the threads, the same bits)."""
+    _groups_terms(x, v, y, inv_mass, h, springs, tet_law, op, f, ky, assemble_matrix)
+
+
+@numba.njit(cache=True, nogil=True, parallel=True)
+def groups_terms_parallel(x, v, y, inv_mass, h, springs, tet_law, op, f, ky, assemble_matrix):
+    """`groups_terms` on the threads."""
+    _groups_terms(x, v, y, inv_mass, h, springs, tet_law, op, f, ky, assemble_matrix)
+
+
+@numba.njit(cache=True, nogil=True)
+def system_terms(x, v, y, inv_mass, loads, h, tissue, op, f, ky, assemble_matrix, parallel):
+    """Forces f at (x, v) and ky = K·y (y zero on held nodes) of the `loads` and the `tissue` (records.Tissue), and
+    with assemble_matrix the system A = M·(1 + h·c_env) − h·D − h²·K into `op` (records.Operator): the loads and
+    shifts (load_terms), the support (support_terms), then the springs and elements group by group (groups_terms;
+    with `parallel`, on the threads)."""
+    load_terms(x, v, y, inv_mass, loads, h, op, f, ky, assemble_matrix)
+    support_terms(x, v, y, inv_mass, h, tissue.support, f, ky, op, assemble_matrix)
+    if parallel:
+        groups_terms_parallel(x, v, y, inv_mass, h, tissue.springs, tissue.tets, op, f, ky, assemble_matrix)
+    else:
+        groups_terms(x, v, y, inv_mass, h, tissue.springs, tissue.tets, op, f, ky, assemble_matrix)
+
 
 @numba.njit(cache=True, nogil=True)
 def support_terms(x, v, y, inv_mass, h, support, f, ky, op, assemble_matrix):
     """Add the forces of the `support` (organ_support.SupportArrays) at (x, v) to f and K·y to ky (free nodes); with
     assemble_matrix, also h·c_n + h²·k_n to each free supported node's shift and diagonal block in `op`
-    (records.Operator, after assemble)."""
+    (records.Operator, after load_terms)."""
     nodes, rest, stiffness, damping = support
     shift, diagonal = op.shift, op.diagonal
     for s in range(nodes.shape[0]):
@@ -219,11 +264,10 @@ def implicit_step(x, v, inv_mass, loads, h, tissue, op, rows, coarse, warm, sett
     (records.ContactRows; those on the tool's true surface rebuilt at every iterate, surface_rows), `op`
     (records.Operator) receives the system.  `coarse`: the preconditioner's coarse space
     (physics.solver.coarse_space; none: block-Jacobi alone).  `warm` holds the previous Δv (start of the solve;
-    overwritten).  `scratch` (records.Scratch): with `parallel`, the solve on the threads (pcg.pcg_parallel).
-    Returns (contact force on the liver at the new state (3,), CG iterations, Newton iterations, final residual
-    (N))."""
+    overwritten).  `scratch` a records.Scratch (with `parallel`, the assembly and solve on the threads).  Returns
+    (contact force on the liver at the new state (3,), CG iterations, Newton iterations, final residual (N))."""
     f, ky, rhs, x0, v0, r, z, p, q, zero = scratch.work
-    springs, support, tet_law = tissue.springs, tissue.support, tissue.tets
+    tet_law = tissue.tets
     zero[:] = 0.0
     x0[:] = x
     v0[:] = v
@@ -231,9 +275,7 @@ def implicit_step(x, v, inv_mass, loads, h, tissue, op, rows, coarse, warm, sett
         if inv_mass[n] == 0.0:
             for a in range(3):
                 warm[n, a] = 0.0  # held: Δv = 0, and CG's vectors vanish there (see pcg.apply)
-    assemble(x, v, v, inv_mass, loads, h, springs, op, f, ky, True)
-    support_terms(x, v, v, inv_mass, h, support, f, ky, op, True)
-    tet_terms(x, v, v, inv_mass, h, tet_law, f, ky, op.diagonal, True)
+    system_terms(x, v, v, inv_mass, loads, h, tissue, op, f, ky, True, scratch.parallel)
     tet_weight = h * h + h * tet_law.viscous_time_s
     contact_forces(x, v, v, inv_mass, h, rows, f, ky)
     for n in range(x.shape[0]):
@@ -253,18 +295,15 @@ def implicit_step(x, v, inv_mass, loads, h, tissue, op, rows, coarse, warm, sett
                                     warm, settings, vectors)
         advance(x, x0, v, v0, warm, inv_mass, h)
         surface_rows(x, rows)
-        assemble(x, v, zero, inv_mass, loads, h, springs, op, f, ky, False)
-        support_terms(x, v, zero, inv_mass, h, support, f, ky, op, False)
-        tet_terms(x, v, zero, inv_mass, h, tet_law, f, ky, op.diagonal, False)
+        system_terms(x, v, zero, inv_mass, loads, h, tissue, op, f, ky, False, scratch.parallel)
         tx, ty, tz = contact_forces(x, v, zero, inv_mass, h, rows, f, ky)
         contact[0], contact[1], contact[2] = tx, ty, tz
         residual = newton_rhs(v, v0, f, inv_mass, h, rhs)
         if newton >= settings.max_newton or residual <= settings.newton_tolerance_n:
             break
         newton += 1
-        assemble(x, v, zero, inv_mass, loads, h, springs, op, f, ky, True)
-        support_terms(x, v, zero, inv_mass, h, support, f, ky, op, True)
-        tet_terms(x, v, zero, inv_mass, h, tet_law, f, ky, op.diagonal, True)
+        system_terms(x, v, zero, inv_mass, loads, h, tissue, op, f, ky, True, scratch.parallel)
         warm[:] = 0.0
     warm[:] = v - v0
     return contact, total_iterations, newton, residual
+

@@ -118,7 +118,7 @@ class SolveSettings(NamedTuple):
 
 class Scratch(NamedTuple):
     """A solver's work arrays: `work` (10, N, 3) and the block-Jacobi `preconditioner` (N, 3, 3); and whether the
-    solve runs on the threads (`parallel`, pcg.pcg_parallel; the same bits either way)."""
+    step's assembly and solve run on the threads (`parallel`; the same bits either way)."""
 
     work: np.ndarray
     preconditioner: np.ndarray

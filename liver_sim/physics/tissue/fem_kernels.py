@@ -152,13 +152,14 @@ def _rotated_stress(r, grad, lam, mu, stress, rs):
 
 
 @numba.njit(cache=True, nogil=True)
-def tet_terms(x, v, y, inv_mass, h, law, f, ky, diagonal, assemble_matrix):
-    """Add the elements' (`law`, a TetArrays) forces at (x, v) to f and K·y to ky (y zero on held nodes); with
+def tet_terms(x, v, y, inv_mass, h, law, f, ky, diagonal, assemble_matrix, elements, first, last):
+    """Add the forces at (x, v) of the elements elements[first..last−1] (`law`, a TetArrays) to f and K·y to ky (y
+    zero on held nodes); with
     assemble_matrix, first the rotations R at x (into law.quaternion, law.rotation) and the diagonal blocks of
     (h² + h·τ)·V·R·C_aa·Rᵀ to free nodes' `diagonal` (module docstring).  Without it the last rotations are used.
     The neo-Hookean law's elements: neo_hookean.neo_hookean_terms."""
     if law.neo_hookean:
-        neo_hookean_terms(x, v, y, inv_mass, h, law, f, ky, diagonal, assemble_matrix)
+        neo_hookean_terms(x, v, y, inv_mass, h, law, f, ky, diagonal, assemble_matrix, elements, first, last)
         return
     tets, volume, gradients, quaternion, rotation = law.tets, law.volume_m3, law.gradients, law.quaternion, law.rotation
     lam, mu, tau = law.lame_lambda_pa, law.lame_mu_pa, law.viscous_time_s
@@ -167,7 +168,8 @@ def tet_terms(x, v, y, inv_mass, h, law, f, ky, diagonal, assemble_matrix):
     rs = np.empty((3, 3))
     total = np.empty((3, 3))
     weight = h * h + h * tau
-    for e in range(tets.shape[0]):
+    for k in range(first, last):
+        e = elements[k]
         tet, g, r = tets[e], gradients[e], rotation[e]
         _gradient(x, tet, g, grad)
         if assemble_matrix:

@@ -189,11 +189,11 @@ def _scatter(stress, tet, g, scale, out):
 
 
 @numba.njit(cache=True)
-def neo_hookean_terms(x, v, y, inv_mass, h, law, f, ky, diagonal, assemble_matrix):
-    """Add the elements' (`law`, a fem_kernels.TetArrays of this law) forces at (x, v) to f and K·y to ky (y counted
-    on free nodes only); with assemble_matrix, first each element's projected tangent at x (into law.tangent) and the
-    diagonal blocks of (h² + h·τ)·V·g_aᵀ·𝐂̃·g_a to free nodes' `diagonal`.  Without it the last tangents are used
-    (for K·y and the viscous stress)."""
+def neo_hookean_terms(x, v, y, inv_mass, h, law, f, ky, diagonal, assemble_matrix, elements, first, last):
+    """Add the forces at (x, v) of the elements elements[first..last−1] (`law`, a fem_kernels.TetArrays of this law)
+    to f and K·y to ky (y counted on free nodes only); with assemble_matrix, first each element's projected tangent
+    at x (into law.tangent) and the diagonal blocks of (h² + h·τ)·V·g_aᵀ·𝐂̃·g_a to free nodes' `diagonal`.  Without
+    it the last tangents are used (for K·y and the viscous stress)."""
     tets, volume, gradients, tangent = law.tets, law.volume_m3, law.gradients, law.tangent
     mu, tau = law.lame_mu_pa, law.viscous_time_s
     lam_hat = law.lame_lambda_pa + mu
@@ -202,7 +202,8 @@ def neo_hookean_terms(x, v, y, inv_mass, h, law, f, ky, diagonal, assemble_matri
     stress = np.empty((3, 3))
     mats = np.empty((5, 3, 3))
     vecs = np.empty((3, 9))
-    for e in range(tets.shape[0]):
+    for k in range(first, last):
+        e = elements[k]
         tet, g, c = tets[e], gradients[e], tangent[e]
         deformation = tet_gradient(x, tet, g, EVERY_NODE)
         for i in range(3):

@@ -113,12 +113,12 @@ def spring_forces_parallel(x, v, law, partial, f):
 
 
 @numba.njit(cache=True)
-def spring_terms(x, v, y, inv_mass, h, law, op, f, ky, assemble_matrix):
-    """Add the springs' forces at (x, v) to f and K·y to ky (y zero on held nodes); with assemble_matrix, also
-    their part of A (module docstring) into `op` (the solver's records.Operator): each spring's axis `unit`,
-    `iso`, `axial`, and its block B added to the `diagonal` blocks of its free nodes."""
+def spring_terms(x, v, y, inv_mass, h, law, op, f, ky, assemble_matrix, first, last):
+    """Add the forces at (x, v) of springs first..last−1 to f and K·y to ky (y zero on held nodes); with
+    assemble_matrix, also their part of A (module docstring) into `op` (the solver's records.Operator): each spring's
+    axis `unit`, `iso`, `axial`, and its block B added to the `diagonal` blocks of its free nodes."""
     unit, iso, axial, diagonal = op.unit, op.iso, op.axial, op.diagonal
-    for s in range(law.node_i.shape[0]):
+    for s in range(first, last):
         i, j = law.node_i[s], law.node_j[s]
         inv_l0 = law.inv_rest_per_m[s]
         length, inv_length, ux, uy, uz = _axis(x, i, j, inv_l0)

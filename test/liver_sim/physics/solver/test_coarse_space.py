@@ -19,9 +19,10 @@ from liver_sim.physics.solver.coarse_space import (
     prolong,
     restrict,
 )
-from liver_sim.physics.solver.implicit_kernels import assemble
-from liver_sim.physics.solver.records import ContactRows, Loads, Operator, SolveSettings
-from liver_sim.physics.tissue.fem_kernels import TetArrays, build_tets, tet_terms
+from liver_sim.physics.solver.implicit_kernels import system_terms
+from liver_sim.physics.solver.records import ContactRows, Loads, Operator, SolveSettings, Tissue
+from liver_sim.physics.tissue.fem_kernels import TetArrays, build_tets
+from liver_sim.physics.tissue.organ_support import SupportArrays
 from liver_sim.physics.tissue.spring_law import spring_arrays
 from liver_sim.physics.tissue.springs import build_springs
 
@@ -44,8 +45,8 @@ def assembled_system(mesh, params: ModelParams, x, inv_mass):
     node_i, node_j = springs.node_i.astype(np.uint32), springs.node_j.astype(np.uint32)
     op = Operator.allocate(node_i, node_j, n, tets.tets)
     law = spring_arrays(springs, node_i, node_j).taken(op.spring_order)
-    assemble(x, zero, zero, inv_mass, Loads(zero, np.zeros(3), 3.0), H_S, law, op, f, ky, True)
-    tet_terms(x, zero, zero, inv_mass, H_S, tets, f, ky, op.diagonal, True)
+    system_terms(x, zero, zero, inv_mass, Loads(zero, np.zeros(3), 3.0), H_S, Tissue(law, SupportArrays.none(), tets),
+                 op, f, ky, True, False)
     inverse = np.zeros_like(op.diagonal)
     pcg.block_jacobi(op.diagonal, inv_mass, NO_ROWS, inverse)
     return op, (*op[:6], inv_mass, tets, H_S * H_S + H_S * tets.viscous_time_s), inverse

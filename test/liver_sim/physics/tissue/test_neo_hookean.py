@@ -232,7 +232,7 @@ def test_the_system_blocks_are_the_tangents_k_times_y_and_its_diagonal():
     inv_mass[2] = 0.0
     zero = np.zeros((n, 3))
     f, ky, diagonal = np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3, 3))
-    tet_terms(x, zero, zero, inv_mass, h, law, f, ky, diagonal, True)
+    tet_terms(x, zero, zero, inv_mass, h, law, f, ky, diagonal, True, np.arange(len(law.tets)), 0, len(law.tets))
     weight = h * h + h * law.viscous_time_s
     dense = np.zeros((3 * n, 3 * n))
     for k in range(3 * n):
@@ -245,7 +245,8 @@ def test_the_system_blocks_are_the_tangents_k_times_y_and_its_diagonal():
     y = rng.normal(size=(n, 3))
     y[inv_mass == 0.0] = 0.0
     ky[:] = 0.0
-    tet_terms(x, zero, y, inv_mass, h, law, np.zeros((n, 3)), ky, np.zeros((n, 3, 3)), False)
+    tet_terms(x, zero, y, inv_mass, h, law, np.zeros((n, 3)), ky, np.zeros((n, 3, 3)), False, np.arange(len(law.tets)),
+              0, len(law.tets))
     ky[inv_mass == 0.0] = 0.0
     np.testing.assert_allclose(dense @ y.ravel(), -weight * ky.ravel(), atol=1e-12 * np.abs(dense).max())
     blocks = np.array([dense[3 * a:3 * a + 3, 3 * a:3 * a + 3] for a in range(n)])

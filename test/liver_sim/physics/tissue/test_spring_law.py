@@ -85,7 +85,7 @@ def test_the_implicit_terms_are_the_forces_and_their_stiffness(box):
     def terms(xs, vs):
         f, ky = np.zeros((n, 3)), np.zeros((n, 3))
         op = Operator.allocate(springs.node_i, springs.node_j, n)
-        spring_terms(xs, vs, direction, inv_mass, 0.01, law, op, f, ky, True)
+        spring_terms(xs, vs, direction, inv_mass, 0.01, law, op, f, ky, True, 0, len(springs.node_i))
         return f, ky
 
     expected = np.zeros((n, 3))
@@ -106,7 +106,8 @@ def test_the_product_is_the_sum_of_the_springs_blocks(box):
     n = len(x)
     op = Operator.allocate(springs.node_i, springs.node_j, n)
     law = spring_arrays(springs).taken(op.spring_order)  # the operator's springs, in its order
-    spring_terms(x, v, np.zeros((n, 3)), np.ones(n), 0.01, law, op, np.zeros((n, 3)), np.zeros((n, 3)), True)
+    spring_terms(x, v, np.zeros((n, 3)), np.ones(n), 0.01, law, op, np.zeros((n, 3)), np.zeros((n, 3)), True, 0,
+                 len(springs.node_i))
     p = np.random.default_rng(3).normal(size=(n, 3))
     out = np.zeros((n, 3))
     spring_apply(op, p, 0, len(springs.node_i), out)
