@@ -1,7 +1,7 @@
 """`liver-sim bench loop`: the four nodes in closed loop (R4 of docs/paper.md), or the physics and two device sides
 (`--tools 2`), watched from outside as a rig would: rates and period errors on the wire, pose-to-force latency per
-device, the Fig. 8 smoothness ratio, the physics frame's compute, what each process cost, each against its target,
-beside the machine's own stalls."""
+device, the Fig. 8 smoothness ratio, the physics frame's compute, each against its target, beside the machine's own
+stalls; and what each process cost against the bare 1 kHz hops of `bench floor` run just before it."""
 from __future__ import annotations
 
 import json
@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from liver_sim.base.process_settings import cli_command_line
+from liver_sim.bench.floor import run_floor_bench
 from liver_sim.bench.machine import machine
 from liver_sim.bench.physics import contact_frame_times
 from liver_sim.mesh.landmarks import upper_skin_point
@@ -30,9 +31,13 @@ LOOP_TARGETS = {"physics_rate_hz": (147.0, 153.0), "haptic_rate_hz_min": 995.0, 
 #: the device sample it was computed from to its own reception.
 NEIGHBOUR_TARGETS = {"frames_hz_by_stamp_min": 148.0, "commands_hz_by_stamp_min": 995.0,
                      "pose_to_command_at_client_p99_s_max": 0.0025, "command_gap_at_client_max_s_max": 0.010}
-#: What the network may cost (share of one core, `processes`): the physics, the bridge and the tool together, and
-#: the simulated PHANToM, which stands in for a device's own driver.
-COST_TARGETS = {"physics_bridge_tool_cores_max": 0.35, "phantom_sim_cores_max": 0.10}
+#: What the network may cost, as ratios of shares of one core (`processes`) to those of `bench floor`'s matching
+#: roles measured in the same invocation (:func:`cost_ratios`): the physics, the bridges and the tool nodes together
+#: over the floor's `loop` once per tool, and each simulated PHANToM, which stands in for a device's own driver,
+#: over the floor's `source`.
+COST_TARGETS = {"physics_bridge_tool_over_floor_loop_max": 4.0, "phantom_sim_over_floor_source_max": 1.3}
+#: Seconds `bench loop` measures the floor for before the loop.
+FLOOR_DURATION_S = 20.0
 #: After a machine stall the simulated hand has moved on by the stall's length and the physics catches up two
 #: frames: commands from a stall's start to this long (s, three physics frames) after its end are the stall's.
 MACHINE_STALL_SETTLE_S = 0.02
@@ -48,20 +53,33 @@ HAND_SPOTS_XY = {"left": (-0.046, 0.004), "right": (0.03, 0.0)}
 
 
 def run_loop_bench(duration_s: float = 30.0, log_dir=None, progress=None, observers: dict | None = None,
-                   extra_load: bool = False, view: bool = False, check_domain: bool = True, tools: int = 1) -> dict:
-    """The loop benchmark's JSON object (:func:`loop_run`); with `extra_load`, the same run follows with one
-    core-bound process at normal priority beside the network, reported under `with_extra_load`; with `view`, the
-    live view (`liver-sim view`) runs beside the network, its figures under `results.view`. `check_domain`: before
-    each run (network.run_network). `tools` 2: two device sides, each exploring its own spot (HAND_SPOTS_XY)."""
+                   extra_load: bool = False, view: bool = False, check_domain: bool = True, tools: int = 1,
+                   floor_duration_s: float | None = FLOOR_DURATION_S) -> dict:
+    """The loop benchmark's JSON object (:func:`loop_run`), after `bench floor` (liver_sim.bench.floor) has run for
+    `floor_duration_s` with its logs beside the loop's: its processes' costs under `floor` (None when
+    `floor_duration_s` is None: no floor, no cost ratios). With `extra_load`, the same run follows with one
+    core-bound process at normal priority beside the network, reported under `with_extra_load` (its cost ratios
+    against the same floor); with `view`, the live view (`liver-sim view`) runs beside the network, its figures under
+    `results.view`. `check_domain`: before each run (network.run_network). `tools` 2: two device sides, each
+    exploring its own spot (HAND_SPOTS_XY)."""
 
     log_dir = Path(log_dir or "out/bench_loop/logs")
-    report = loop_run(duration_s, log_dir, progress, observers, view=view, check_domain=check_domain, tools=tools)
+    say = progress or (lambda line: None)
+    floor = floor_shares = None
+    if floor_duration_s is not None:
+        say(f"the floor first, the bare 1 kHz hops of `bench floor` for {floor_duration_s:g} s:")
+        measured = run_floor_bench(floor_duration_s, log_dir.with_name(log_dir.name + "_floor"), progress)
+        floor = {"duration_s": measured["duration_s"], "processes": measured["processes"]}
+        floor_shares = cpu_shares(floor["processes"])
+    report = loop_run(duration_s, log_dir, progress, observers, view=view, check_domain=check_domain, tools=tools,
+                      floor_shares=floor_shares)
+    report["floor"] = floor
     if view:
         report["results"]["view"] = view_figures(report["processes"], log_dir / VIEW_SUMMARY)
     if extra_load:
-        (progress or (lambda line: None))("the same run with one core-bound process at normal priority beside it:")
+        say("the same run with one core-bound process at normal priority beside it:")
         loaded = loop_run(duration_s, log_dir.with_name(log_dir.name + "_extra_load"), progress, observers, 1,
-                          check_domain=check_domain, tools=tools)
+                          check_domain=check_domain, tools=tools, floor_shares=floor_shares)
         report["with_extra_load"] = {key: loaded[key] for key in ("results", "processes", "cores_used",
                                                                    "load_average", "met")}
     return report
@@ -144,8 +162,47 @@ def device_figures(run, label: str) -> tuple[dict, dict]:
     return figures, met
 
 
+def cpu_shares(costs: dict) -> dict:
+    """label -> share of one core, of network.process_costs' `costs`."""
+    return {label: cost.get("cpu_share_of_one_core", float("nan")) for label, cost in costs.items()}
+
+
+def cost_ratios(shares: dict, floor_shares: dict | None, sides: list, devices: list) -> tuple[dict, dict]:
+    """(figures, met) of what the run's processes cost against the floor's matching roles (COST_TARGETS).
+
+    `shares` and `floor_shares` map label to share of one core (:func:`cpu_shares`) of the run and of `bench floor`
+    in the same invocation; `sides` are the labels of the bridges and tool nodes, `devices` those of the simulated
+    PHANToMs, one per tool (NetworkPlan.after_physics). Figures: the absolute shares `physics_bridge_tool_cores`
+    and `{device}_cores`, beside `physics_bridge_tool_over_floor_loop`, their sum over the floor's `loop` once per
+    device, and `{device}_over_floor_source`, each PHANToM's over the floor's `source`. With no floor
+    (`floor_shares` None) the ratios are None and `met` has no entry for them; a role missing from either run, or a
+    floor share not above zero, gives a NaN ratio, not met."""
+
+    def share(label):
+        return shares.get(label, float("nan"))
+
+    def over(value, role):
+        floor_share = floor_shares.get(role, float("nan"))
+        return value / floor_share if floor_share > 0.0 else float("nan")
+
+    figures = {"physics_bridge_tool_cores": sum(share(label) for label in ["liver_physics", *sides])}
+    figures.update({f"{label}_cores": share(label) for label in devices})
+    if floor_shares is None:
+        figures["physics_bridge_tool_over_floor_loop"] = None
+        figures.update({f"{label}_over_floor_source": None for label in devices})
+        return figures, {}
+    figures["physics_bridge_tool_over_floor_loop"] = over(figures["physics_bridge_tool_cores"] / len(devices), "loop")
+    figures.update({f"{label}_over_floor_source": over(share(label), "source") for label in devices})
+    met = {"physics_bridge_tool_over_floor_loop_max": (figures["physics_bridge_tool_over_floor_loop"]
+                                                       <= COST_TARGETS["physics_bridge_tool_over_floor_loop_max"])}
+    met.update({f"{label}_over_floor_source_max": (figures[f"{label}_over_floor_source"]
+                                                   <= COST_TARGETS["phantom_sim_over_floor_source_max"])
+                for label in devices})
+    return figures, met
+
+
 def loop_run(duration_s: float, log_dir, progress=None, observers: dict | None = None, extra_load: int = 0,
-             view: bool = False, check_domain: bool = True, tools: int = 1) -> dict:
+             view: bool = False, check_domain: bool = True, tools: int = 1, floor_shares: dict | None = None) -> dict:
     """One run of the physics and `tools` device sides in closed loop for `duration_s` (R4), watched by a listener
     as a rig would.
 
@@ -157,10 +214,11 @@ def loop_run(duration_s: float, log_dir, progress=None, observers: dict | None =
     live bridge's tick times on the physics wrenches and device samples the listener received
     (analysis.held_wrench_baseline): no second live bridge.  `physics_frame_compute_p99_s` is the physics' own
     measure of a frame's compute (diagnostics).  `processes` gives what each process cost over the window
-    (network.process_costs: share of one core, context switches per second), `load_average` the machine's before
-    and after.  `observers` (label -> argv) run beside the network (NetworkPlan.observers), e.g. a recorder;
-    `extra_load` core-bound processes at normal priority beside it (network.run_network); `view`: the live view too
-    (its cost in `processes`).
+    (network.process_costs: share of one core, context switches per second), judged against `floor_shares`, the
+    floor's (:func:`cost_ratios`; None: not judged), `load_average` the machine's before and after.  `observers`
+    (label -> argv) run beside the network (NetworkPlan.observers), e.g. a recorder; `extra_load` core-bound
+    processes at normal priority beside it (network.run_network); `view`: the live view too (its cost in
+    `processes`).
 
     Sentinels (liver_sim.running.machine_stalls, started by run_network) note when the machine itself ran nothing that
     was due; each command gap over the target is listed with the part of it the machine
@@ -197,13 +255,10 @@ def loop_run(duration_s: float, log_dir, progress=None, observers: dict | None =
         figures["physics_frame_offline"] = contact_frame_times(
             [upper_skin_point(default_liver(), xy) for xy in HAND_SPOTS_XY.values()])
     costs = run.process_costs
-    share = {label: costs.get(label, {}).get("cpu_share_of_one_core", float("nan")) for label in costs}
     sides = [label for label in plan.commands if label.startswith(("haptic_bridge", "liver_tool"))]
-    figures["physics_bridge_tool_cores"] = sum(share.get(label, float("nan")) for label in ["liver_physics", *sides])
-    met["physics_bridge_tool_cores_max"] = (figures["physics_bridge_tool_cores"]
-                                            <= COST_TARGETS["physics_bridge_tool_cores_max"] * tools)
-    for label in plan.after_physics:
-        met[f"{label}_cores_max"] = share.get(label, float("nan")) <= COST_TARGETS["phantom_sim_cores_max"]
+    cost, cost_met = cost_ratios(cpu_shares(costs), floor_shares, sides, list(plan.after_physics))
+    figures.update(cost)
+    met.update(cost_met)
     return {"benchmark": "loop", "machine": machine(), "duration_s": duration_s, "tools": tools,
             "results": figures, "processes": costs,
             "cores_used": sum(c["cpu_share_of_one_core"] for c in costs.values()),

@@ -33,19 +33,19 @@ def loop_figures(report: dict) -> dict:
 
 def run_record_bench(duration_s: float = 30.0, out: Path = Path("out/bench_record"), storage: str = "mcap",
                      progress=None, compare: bool = True) -> dict:
-    """run_loop_bench with a recorder into a new bag out/bench_session (or out/bench_session_2, … : nothing
-    there is replaced) — and first without it when
-    `compare` — adding the recorder's CPU share (CPU seconds per wall second, of one core and of the
-    machine, from its rclpy start-up to the closed bag; imports excluded), the bag's counts and rates,
-    and the loop figures side by side."""
+    """run_loop_bench, without its floor (no cost ratios), with a recorder into a new bag out/bench_session (or
+    out/bench_session_2, … : nothing there is replaced) — and first without it when `compare` — adding the
+    recorder's CPU share (CPU seconds per wall second, of one core and of the machine, from its rclpy start-up to
+    the closed bag; imports excluded), the bag's counts and rates, and the loop figures side by side."""
     say = progress or (lambda line: None)
     without = None
     if compare:
         say("the closed loop without the recorder:")
-        without = run_loop_bench(duration_s, out / "logs_without_recorder", progress)
+        without = run_loop_bench(duration_s, out / "logs_without_recorder", progress, floor_duration_s=None)
     bag = new_path(out / "bench_session")
     say("the closed loop with the recorder:")
-    report = run_loop_bench(duration_s, out / "logs", progress, {"recorder": recorder_command(bag, storage)})
+    report = run_loop_bench(duration_s, out / "logs", progress, {"recorder": recorder_command(bag, storage)},
+                            floor_duration_s=None)
     report["benchmark"] = "record"
     info = bag_info(bag)
     counts = check_bag(bag)

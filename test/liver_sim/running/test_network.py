@@ -282,11 +282,18 @@ def test_sigterm_to_the_demo_stops_the_nodes_it_started(ros_env, tmp_path):
 def test_loop_bench_reports_every_figure_against_its_target(ros_domain_id, tmp_path):
     import json
 
+    from liver_sim.bench.floor import ROLES
     from liver_sim.bench.loop import COST_TARGETS, LOOP_TARGETS, NEIGHBOUR_TARGETS, run_loop_bench
 
-    report = json.loads(json.dumps(run_loop_bench(duration_s=3.0, log_dir=tmp_path, check_domain=False)))
+    report = json.loads(json.dumps(run_loop_bench(duration_s=3.0, log_dir=tmp_path / "logs", check_domain=False,
+                                                  floor_duration_s=2.0)))
     assert set(report["met"]) == (set(LOOP_TARGETS) | set(COST_TARGETS)
                                   | {f"neighbour_{key}" for key in NEIGHBOUR_TARGETS})
+    # the floor ran first, its logs beside the loop's, and each cost is a ratio to its matching role
+    assert report["floor"]["duration_s"] == 2.0 and set(report["floor"]["processes"]) == set(ROLES)
+    assert (tmp_path / "logs_floor" / "loop.log").is_file()
+    for ratio in ("physics_bridge_tool_over_floor_loop", "phantom_sim_over_floor_source"):
+        assert report["results"][ratio] > 0.0
     neighbour = report["results"]["neighbour"]
     assert report["machine"] and neighbour["commands_hz_by_stamp"] > 0.0 and neighbour["frames_hz_by_stamp"] > 0.0
     results = report["results"]
@@ -314,7 +321,7 @@ def test_loop_bench_reports_every_figure_against_its_target(ros_domain_id, tmp_p
     # a sentinel measured the machine's own stalls beside the network, and every long command gap is split
     stalls = results["machine_stalls"]
     assert_stall_summary(stalls)
-    assert {path.name for path in tmp_path.glob("machine_stalls_cpu*.jsonl")} == \
+    assert {path.name for path in (tmp_path / "logs").glob("machine_stalls_cpu*.jsonl")} == \
         {f"machine_stalls_cpu{cpu}.jsonl" for cpu in os.sched_getaffinity(0)}
     assert 0.0 < results["haptic_max_gap_outside_machine_stalls_s"] <= results["haptic_on_wire"]["max_gap_s"] + 1e-9
     assert 0.0 < results["commands_outside_machine_stalls"] <= 1.0
@@ -331,8 +338,14 @@ def test_loop_bench_with_two_tools_reports_each_device_and_both_contacts(ros_dom
 
     from liver_sim.bench.loop import HAND_SPOTS_XY, run_loop_bench
 
-    report = json.loads(json.dumps(run_loop_bench(duration_s=3.0, log_dir=tmp_path, check_domain=False, tools=2)))
+    report = json.loads(json.dumps(run_loop_bench(duration_s=3.0, log_dir=tmp_path, check_domain=False, tools=2,
+                                                  floor_duration_s=None)))
     results, names = report["results"], list(HAND_SPOTS_XY)
+    # no floor: each PHANToM's share stands alone, its ratio None and not judged
+    assert report["floor"] is None and results["physics_bridge_tool_over_floor_loop"] is None
+    assert not any("over_floor" in key for key in report["met"])
+    for name in names:
+        assert results[f"phantom_sim_{name}_cores"] > 0.0 and results[f"phantom_sim_{name}_over_floor_source"] is None
     assert report["tools"] == 2 and set(results["devices"]) == set(names)
     assert results["physics_on_wire"]["samples"] > 100 and results["physics_frame_compute_p99_s"] > 0.0
     for name in names:  # each bridge on the wire, its latency from its own device's samples
