@@ -33,6 +33,8 @@ def add_bench_command(commands) -> None:
                            "namespace (/left, /right)")
     loop.add_argument("--view", action="store_true", help="run the live view (liver-sim view) beside the loop and "
                       "report its CPU share and scene rate (results.view)")
+    loop.add_argument("--no-floor", action="store_true",
+                      help="skip `bench floor` before the loop: the cost ratios to the floor are None and not judged")
     loop.set_defaults(handler=bench_loop)
     teleop = kinds.add_parser("teleop", help="the closed loop over an emulated teleoperation link: each delay with "
                                              "the local model (passive and direct model updates) and with direct "
@@ -166,18 +168,38 @@ def bench_segmentation(args) -> int:
 
 def bench_loop(args) -> int:
     # this command's own modules, loaded when it runs (module docstring)
-    from liver_sim.bench.loop import run_loop_bench
+    from liver_sim.bench.loop import FLOOR_DURATION_S, run_loop_bench
 
     report = run_loop_bench(args.duration, args.out / "logs", None if args.json else print,
-                            extra_load=args.extra_load, view=args.view, tools=args.tools)
+                            extra_load=args.extra_load, view=args.view, tools=args.tools,
+                            floor_duration_s=None if args.no_floor else FLOOR_DURATION_S)
     if args.json:
         print(json.dumps(report, default=float))
         return 0
     print(json.dumps(report["results"], indent=2, default=float))
+    for line in cost_lines(report):
+        print(line)
     for target, met in report["met"].items():
         known = next((key for key in report["targets"] if target.endswith(key)), None)
         print(f"target {target} = {report['targets'].get(known, 'see targets')}: {'met' if met else 'NOT met'}")
     return 0
+
+
+def cost_lines(report: dict) -> list[str]:
+    """The lines `bench loop` prints of what its processes cost: the floor's shares of a core, then each cost
+    ratio to the floor beside the absolute share it was taken from."""
+    results, floor = report["results"], report["floor"]
+    if floor is None:
+        return ["cost against the floor: not measured (--no-floor)"]
+    lines = [f"the floor ({floor['duration_s']:g} s just before): "
+             + ", ".join(f"{role} {cost['cpu_share_of_one_core']:.3f}" for role, cost in floor["processes"].items())
+             + " of a core",
+             f"physics, bridges and tool nodes: {results['physics_bridge_tool_cores']:.3f} of a core, "
+             f"{results['physics_bridge_tool_over_floor_loop']:.2f}x the floor's loop per tool"]
+    for key in (key for key in results if key.endswith("_over_floor_source")):
+        label = key.removesuffix("_over_floor_source")
+        lines.append(f"{label}: {results[f'{label}_cores']:.3f} of a core, {results[key]:.2f}x the floor's source")
+    return lines
 
 
 def bench_teleop(args) -> int:
