@@ -42,9 +42,10 @@ CONTACT_MODELS = ("probe", "surface")
 #: the coarse correction of physics.solver.coarse_space), or 'auto': two-level on livers of implicit.TWO_LEVEL_MIN_NODES
 #: nodes and more.  Each keeps the answer within the solver's tolerance; they differ in iterations.
 PRECONDITIONERS = ("auto", "block_jacobi", "two_level")
-#: The threads of the numba kernels of a frame (the explicit spring pass, the implicit step's PCG): 'auto', all of
-#: numba's from structure.PARALLEL_MIN_EDGES springs on (fastest alone on the machine); 'one' (beside 1 kHz loops on
-#: two cores, where the threads wait for each other); 'all'.
+#: The threads of the numba kernels of a frame (the explicit spring pass, the implicit step's assembly and PCG):
+#: 'auto', all of numba's from structure.PARALLEL_MIN_EDGES springs on, on four cores or more (structure.auto_parallel:
+#: beside the 1 kHz loops on two cores the threads wait for each other); 'one'; 'all' (fastest alone on the
+#: machine).  The same bits whichever.
 SOLVER_THREADS = ("auto", "one", "all")
 #: How the liver is held (physics.tissue.organ_support): 'organ' (anchored where a liver is held) or 'paper'
 #: (§3.1's scene).
@@ -256,8 +257,8 @@ class ModelParams:
                                           "(dimensionless)", low=0.01, high=10.0)
     preconditioner: str = "auto"
     solver_threads: str = declared("auto", description="threads of a frame's numba kernels (the implicit step's "
-                                   "PCG, the explicit spring pass): auto (all from 20 000 springs on), one (beside the "
-                                   "1 kHz loops on a 2-core machine) or all", choices=SOLVER_THREADS)
+                                   "assembly and PCG, the explicit spring pass): auto (all from 20 000 springs on, "
+                                   "on 4 cores or more), one or all", choices=SOLVER_THREADS)
 
     def __post_init__(self):
         if self.substeps is None and self.integrator in INTEGRATOR_SUBSTEPS:

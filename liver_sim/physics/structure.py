@@ -8,6 +8,7 @@ is liver_sim.physics.state.State.
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -26,6 +27,9 @@ from liver_sim.physics.topology.tearing import TearDetector
 
 #: Above this many springs the parallel kernel is used (below it thread start-up costs more).
 PARALLEL_MIN_EDGES = 20_000
+#: 'auto' takes all threads only on this many cores or more: a rig's 1 kHz loops (bridge, device, tool) keep about a
+#: core busy, and on two cores the frame's threads wait for each other beside them (docs/performance.md).
+AUTO_PARALLEL_MIN_CORES = 4
 #: After a topology change the substeps are raised, when needed, to keep dt under this share of the bound.
 STABILITY_MARGIN = 0.9
 #: The most substeps a topology change may raise a frame to.
@@ -122,11 +126,17 @@ class Structure:
                             p.tear_strain_capsule)
 
 
+def auto_parallel(springs: int, cores: int) -> bool:
+    """solver_threads 'auto': all threads from PARALLEL_MIN_EDGES `springs` on, on AUTO_PARALLEL_MIN_CORES `cores`
+    or more (the bits are the same either way: physics.solver.pcg)."""
+    return springs >= PARALLEL_MIN_EDGES and cores >= AUTO_PARALLEL_MIN_CORES
+
+
 def build_structure(mesh: TetMesh, params: ModelParams, capsule_triangles: np.ndarray, masses_kg: np.ndarray,
                     fixed_nodes: np.ndarray, parallel: bool | None = None, version: int = 0) -> Structure:
     """The Structure of these parts: the springs and support built on `mesh` and `capsule_triangles`, and the
-    integrators' arrays for them; `parallel` None: as params.solver_threads says ('auto': by the spring count,
-    PARALLEL_MIN_EDGES); a change passes its structure's, so that it keeps its threads.
+    integrators' arrays for them; `parallel` None: as params.solver_threads says ('auto': `auto_parallel`); a
+    change passes its structure's, so that it keeps its threads.
 
     The explicit step's bound: exact (springs.stable_time_step) for the first structure (`version` 0); after a
     change (`version` > 0) its estimate, and when dt exceeds STABILITY_MARGIN of it (new short springs or light
@@ -136,7 +146,8 @@ def build_structure(mesh: TetMesh, params: ModelParams, capsule_triangles: np.nd
     springs = build_springs(mesh, params, capsule_triangles=capsule)
     support = build_support(mesh, capsule, params)
     if parallel is None:
-        parallel = {"one": False, "all": True}.get(params.solver_threads, springs.edges >= PARALLEL_MIN_EDGES)
+        parallel = {"one": False, "all": True}.get(params.solver_threads,
+                                                  auto_parallel(springs.edges, len(os.sched_getaffinity(0))))
     parallel = bool(parallel)
     damping, integrator = params.environment_damping_per_s, params.integrator
     if integrator == "implicit_euler":

@@ -9,7 +9,10 @@ import pytest
 from liver_sim.physics.model import LiverModel
 from liver_sim.physics.settings import ModelParams
 from liver_sim.physics.structure import (
+    AUTO_PARALLEL_MIN_CORES,
+    PARALLEL_MIN_EDGES,
     STABILITY_MARGIN,
+    auto_parallel,
     build_structure,
     default_fixed_nodes,
     initial_structure,
@@ -51,6 +54,12 @@ def test_solver_threads_choose_the_kernels_threads(solver_threads, parallel):
     assert model.structure.solver.threads == threads
     assert ("threads" in model.structure.step_solver) is (threads > 1)
     model.step_frame(None)  # steps on those threads
+
+
+def test_auto_takes_the_threads_for_a_large_liver_on_four_cores_or_more():
+    assert auto_parallel(PARALLEL_MIN_EDGES, AUTO_PARALLEL_MIN_CORES)
+    assert not auto_parallel(PARALLEL_MIN_EDGES, 2)  # beside the 1 kHz loops of a 2-core rig: one thread
+    assert not auto_parallel(PARALLEL_MIN_EDGES - 1, 64)
 
 
 def test_scaled_masses_raise_the_light_nodes_and_keep_the_total():
