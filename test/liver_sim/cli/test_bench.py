@@ -56,3 +56,17 @@ def test_bench_loop_no_floor_skips_it_and_judges_no_cost(asked, capsys):
 def test_no_floor_is_off_unless_asked():
     assert build_parser().parse_args(["bench", "loop"]).no_floor is False
     assert build_parser().parse_args(["bench", "loop", "--no-floor"]).no_floor is True
+
+
+def test_each_met_entry_of_a_loop_report_finds_its_bound():
+    from liver_sim.bench.loop import LOOP_TARGETS, NEIGHBOUR_TARGETS
+    from liver_sim.cli.bench import target_value
+
+    targets = {**LOOP_TARGETS, **COST_TARGETS, "neighbour": NEIGHBOUR_TARGETS}
+    assert target_value(targets, "haptic_rate_hz_min") == LOOP_TARGETS["haptic_rate_hz_min"]
+    assert target_value(targets, "left_haptic_rate_hz_min") == LOOP_TARGETS["haptic_rate_hz_min"]
+    assert (target_value(targets, "neighbour_pose_to_command_at_client_p99_s_max")
+            == NEIGHBOUR_TARGETS["pose_to_command_at_client_p99_s_max"])
+    assert (target_value(targets, "phantom_sim_left_over_floor_source_max")
+            == COST_TARGETS["phantom_sim_over_floor_source_max"])
+    assert target_value(targets, "unknown") == "see targets"
