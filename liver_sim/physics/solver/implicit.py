@@ -119,13 +119,14 @@ class ImplicitEuler:
     rotations and work arrays, which depend on the topology only; with `second_order`, BDF2 from the second step on
     (see the module docstring), from the StepHistory each step is given; its PCG's `preconditioner`
     (settings.PRECONDITIONERS: 'auto' is two-level from TWO_LEVEL_MIN_NODES nodes on), with the two-level one
-    a coarse space per step length, built at its first step (physics.solver.coarse_space).  Build a new one after a
-    topology change."""
+    a coarse space per step length, built at its first step (physics.solver.coarse_space); `layout_of`, a solver of
+    the same network and elements whose operator groups (physics.solver.partition) and aggregates it shares (a
+    `workspace`).  Build a new one after a topology change."""
 
     def __init__(self, springs: SpringNetwork, n_nodes: int, cg_tolerance: float = 1e-3,
                  max_cg_iterations: int = 500, newton_tolerance_n: float = 1e-2, max_newton: int = 2,
                  second_order: bool = True, support: SupportArrays | None = None, tets: TetArrays | None = None,
-                 preconditioner: str = "auto", threads: int = 1):
+                 preconditioner: str = "auto", threads: int = 1, layout_of: "ImplicitEuler | None" = None):
         if preconditioner not in PRECONDITIONERS:
             raise ValueError(f"parameter preconditioner must be one of {', '.join(PRECONDITIONERS)}, "
                              f"got {preconditioner!r}")
@@ -146,11 +147,16 @@ class ImplicitEuler:
         self.threads = max(1, int(threads))
         self._aggregate: np.ndarray | None = None
         self._coarse: dict[float, CoarseSpace] = {}
-        # unsigned indices spare numba's negative-index wraparound in the inner loops
-        node_i, node_j = springs.node_i.astype(np.uint32), springs.node_j.astype(np.uint32)
-        self._op = Operator.allocate(node_i, node_j, self.n_nodes, self.tets.tets)
-        # the kernels' record of the same springs, in the operator's order
-        self._springs = spring_arrays(springs, node_i, node_j).taken(self._op.spring_order)
+        if layout_of is None:
+            # unsigned indices spare numba's negative-index wraparound in the inner loops
+            node_i, node_j = springs.node_i.astype(np.uint32), springs.node_j.astype(np.uint32)
+            self._op = Operator.allocate(node_i, node_j, self.n_nodes, self.tets.tets)
+            # the kernels' record of the same springs, in the operator's order
+            self._springs = spring_arrays(springs, node_i, node_j).taken(self._op.spring_order)
+        else:  # a workspace: the groups and aggregates are the solver's, found once
+            self._op = layout_of._op.emptied()
+            self._springs = layout_of._springs
+            self._aggregate = layout_of._aggregate
         self._scratch = Scratch(np.zeros((10, self.n_nodes, 3)), np.zeros((self.n_nodes, 3, 3)), self.threads > 1)
         self._coefficient = np.zeros(0)
         self._inv_mass = np.zeros(self.n_nodes)
@@ -262,7 +268,7 @@ class ImplicitEuler:
                                                 rotation=self.tets.rotation.copy(),
                                                 rotated_gradients=self.tets.rotated_gradients.copy(),
                                                 tangent=self.tets.tangent.copy()),
-                             "two_level" if self.two_level else "block_jacobi", self.threads)
+                             "two_level" if self.two_level else "block_jacobi", self.threads, layout_of=self)
 
     @staticmethod
     def compliance_solve(workspace: "ImplicitEuler", x: np.ndarray, inv_mass: np.ndarray, load: np.ndarray,

@@ -59,6 +59,13 @@ class Operator(NamedTuple):
                    np.zeros((n_nodes, 3, 3)), spring_order, spring_start.astype(np.uint64), part_nodes, part_start,
                    tet_order.astype(np.uint32), tet_start.astype(np.uint64))
 
+    def emptied(self) -> "Operator":
+        """An operator of the same springs, elements and groups (shared, never written) with blocks, shifts and
+        diagonal blocks of its own, to be assembled (blocks 0, shift 1)."""
+        edges, n_nodes = len(self.node_i), len(self.shift)
+        return self._replace(unit=np.zeros((edges, 3)), iso=np.zeros(edges), axial=np.zeros(edges),
+                             shift=np.ones(n_nodes), diagonal=np.zeros((n_nodes, 3, 3)))
+
 
 class ContactRows(NamedTuple):
     """The penalty rows of contact.rows.Contacts for the kernels (`nodes` (K, 3) int64 with −1 pads, `weights`,

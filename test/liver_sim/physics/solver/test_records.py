@@ -45,3 +45,19 @@ def test_contact_rows_take_the_contacts_fields_and_the_coefficients():
     assert rows.nodes is contacts.nodes and rows.normal is contacts.normal and rows.coefficient is coefficient
     assert rows.offset is contacts.offset_m and rows.speed is contacts.normal_speed_m_s
     assert rows.stiffness is contacts.stiffness_n_per_m and rows.damping is contacts.damping_ns_per_m
+
+
+def test_an_emptied_operator_shares_the_groups_and_owns_what_is_assembled():
+    mesh = build_liver(2_000)
+    node_i, node_j = mesh.edges[:, 0].astype(np.uint32), mesh.edges[:, 1].astype(np.uint32)
+    op = Operator.allocate(node_i, node_j, len(mesh.points), mesh.tets)
+    op.iso[:] = 1.0
+    op.shift[:] = 2.0
+    empty = op.emptied()
+    for shared in ("node_i", "node_j", "spring_order", "spring_start", "part_nodes", "part_start", "tet_order",
+                   "tet_start"):
+        assert getattr(empty, shared) is getattr(op, shared)
+    for own in ("unit", "iso", "axial", "shift", "diagonal"):
+        assert not np.shares_memory(getattr(empty, own), getattr(op, own))
+    assert not (empty.iso.any() or empty.unit.any() or empty.diagonal.any())
+    np.testing.assert_array_equal(empty.shift, 1.0)
