@@ -89,8 +89,9 @@ def flatten(figures: dict) -> dict:
 
 @contextlib.contextmanager
 def tight_solves(tolerance: float = 1e-9):
-    """A context in which every ImplicitEuler solves its steps, and the tool's compliance, to `tolerance`: the
-    scenes' exact answer (the compliance's path into the physics: a cut follows the local model's contact)."""
+    """A context in which every ImplicitEuler solves its steps, and the tool's compliance, to `tolerance` with no
+    absolute floor: the scenes' exact answer (the compliance's path into the physics: a cut follows the local model's
+    contact)."""
     from liver_sim.physics.solver import implicit
 
     init = implicit.ImplicitEuler.__init__
@@ -100,7 +101,8 @@ def tight_solves(tolerance: float = 1e-9):
         self.cg_tolerance = tolerance
 
     with mock.patch.object(implicit.ImplicitEuler, "__init__", tight), \
-            mock.patch.object(implicit, "COMPLIANCE_TOLERANCE", tolerance):
+            mock.patch.object(implicit, "COMPLIANCE_TOLERANCE", tolerance), \
+            mock.patch.object(implicit, "CG_FLOOR_OF_NEWTON", 0.0):
         yield
 
 

@@ -7,7 +7,9 @@ penalty contacts, K = ∂f/∂x and D = ∂f/∂v, one step of length h solves
 
 (Baraff & Witkin 1998), then — when the residual of the nonlinear step
 r = M·Δv − h·f(x + h·v_new, v_new) exceeds `newton_tolerance_n`·h on some node — Newton
-iterations J·δ = −r with J re-assembled at the iterate.
+iterations J·δ = −r with J re-assembled at the iterate.  Each linear solve stops at ‖r‖ ≤ cg_tolerance·‖b‖, or
+once ‖r‖ ≤ CG_FLOOR_OF_NEWTON·newton_tolerance_n·h, so that no node's linear residual exceeds that fraction of what
+the Newton check accepts: near equilibrium ‖b‖ is small and the relative tolerance alone would solve far below it.
 
 Second order (BDF2, default from the second step on).  Backward Euler damps the liver's slow
 oscillations (about its fixed nodes) by ~(ω·h)²/2 per step, which at h = 1/150 s shows beside symplectic
@@ -60,11 +62,16 @@ STATIC_CG_TOLERANCE = 1e-6
 
 NO_COARSE_SPACE = CoarseSpace.none()
 
+#: The linear solve's absolute floor as a fraction of the Newton tolerance (‖r‖ in N·s, over all nodes, against
+#: newton_tolerance_n·h on each).  What it moves and saves: docs/performance.md, "The physics".
+CG_FLOOR_OF_NEWTON = 0.003
+
 #: The version of the step's arithmetic, named in `ImplicitEuler.solver` (/diagnostics, re-simulated bags): a session
 #: re-simulates to the bit under the version it was recorded with (version 2: and its threads).  2: the coarse solve
 #: without fastmath (the same bits on every x86-64 CPU), the local model's compliance solved in slices.  3: the
-#: product gathered per node and every sum over fixed chunks (physics.solver.pcg), the same bits on any thread count.
-SOLVER_VERSION = 3
+#: product in fixed groups and every sum over fixed chunks (physics.solver.pcg), the same bits on any thread count.
+#: 4: the linear solve's absolute floor (CG_FLOOR_OF_NEWTON).
+SOLVER_VERSION = 4
 #: The first version whose bits do not depend on the threads.
 THREAD_FREE_VERSION = 3
 
@@ -187,7 +194,8 @@ class ImplicitEuler:
         contact, history.cg_iterations, history.newton_iterations, history.residual_n = implicit_step(
             x, v, inv_mass, loads, h, Tissue(self._springs, self.support, tets), self._op,
             ContactRows.of(contacts, self._coefficient), coarse, history.warm,
-            SolveSettings(self.cg_tolerance, self.max_cg_iterations, self.newton_tolerance_n, self.max_newton),
+            SolveSettings(self.cg_tolerance, self.max_cg_iterations, self.newton_tolerance_n, self.max_newton,
+                          CG_FLOOR_OF_NEWTON * self.newton_tolerance_n * h),
             self._scratch)
         x_last[:], v_last[:] = x, v
         history.dt_s = float(dt)
@@ -208,7 +216,7 @@ class ImplicitEuler:
     @property
     def solver(self) -> str:
         """Which solver the steps take: 'pcg block-jacobi' or 'pcg two-level' (with its aggregates once built), its
-        threads when more than one, and SOLVER_VERSION ('; solver 3')."""
+        threads when more than one, and SOLVER_VERSION ('; solver 4')."""
         threads = f", {self.threads} threads" if self.threads > 1 else ""
         version = f"; solver {SOLVER_VERSION}"
         if not self.two_level:

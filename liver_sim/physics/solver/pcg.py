@@ -8,8 +8,10 @@ the springs and elements group by group (physics.solver.partition), and every pa
 chunks whose sums are added in chunk order.  An iteration: A·p with p·q; the update of z0 and r with z = D⁻¹·r, ‖r‖²,
 r·z and the coarse restriction, in one pass; the coarse solve; the prolongation with the update of p, in one pass.
 
-The solve starts from the previous step's Δv and stops at ‖r‖ ≤ cg_tolerance·‖b‖ (default 1e-3; the Newton residual
-check guards the result).  Preconditioner: block-Jacobi (the 3×3 diagonal blocks, contacts included), and on larger
+The solve starts from the previous step's Δv and stops at ‖r‖ ≤ max(cg_tolerance·‖b‖, cg_floor_ns) (the relative
+tolerance 1e-3 by default, and an absolute floor the step sets well below what its Newton check accepts,
+physics.solver.implicit.CG_FLOOR_OF_NEWTON; the Newton residual check guards the result).  Preconditioner:
+block-Jacobi (the 3×3 diagonal blocks, contacts included), and on larger
 livers the additive two-level one, block-Jacobi plus a coarse correction on rigid aggregates of nodes
 (physics.solver.coarse_space), which keeps the iterations nearly flat as the mesh is refined (docs/performance.md, "The
 physics", for the iterations and costs).  Why this solver: the values change at every step (the axes turn, the
@@ -242,9 +244,10 @@ def _restricted(coarse):
 
 
 @numba.njit(cache=True, inline="always")
-def _pcg_start(op, inv_mass, rows, tet_law, tet_weight, preconditioner, coarse, b, z0, tolerance, vectors,
+def _pcg_start(op, inv_mass, rows, tet_law, tet_weight, preconditioner, coarse, b, z0, tolerance, floor, vectors,
                status):
-    """The start of a solve from z0: r = b − A·z0, z = P⁻¹·r, p = z, and `status` (RZ … ENDED)."""
+    """The start of a solve from z0: r = b − A·z0, z = P⁻¹·r, p = z, and `status` (RZ … ENDED), its target
+    ‖r‖ ≤ max(tolerance·‖b‖, floor)."""
     r, z, p, q = vectors
     count = b.shape[0]
     sums = np.zeros((NODE_CHUNKS, 2))
@@ -255,7 +258,7 @@ def _pcg_start(op, inv_mass, rows, tet_law, tet_weight, preconditioner, coarse, 
         for n in range(first, last):
             for a in range(3):
                 r[n, a] = b[n, a] - q[n, a]
-    target = tolerance * tolerance * _dot(b, b, sums)
+    target = max(tolerance * tolerance * _dot(b, b, sums), floor * floor)
     r_norm2, rz = _precondition(preconditioner, coarse, r, z, sums, _restricted(coarse), True, 0.0, z0, p, q)
     _next_direction(coarse, inv_mass, z, p, 0.0)
     status[RZ], status[R_NORM2], status[TARGET] = rz, r_norm2, target
@@ -293,8 +296,8 @@ def _pcg(op, inv_mass, rows, tet_law, tet_weight, preconditioner, coarse, b, z0,
     """`pcg`'s solve: its start and its iterations (prange: on the threads of a parallel dispatcher, in order in a
     serial one)."""
     status = np.zeros(4)
-    _pcg_start(op, inv_mass, rows, tet_law, tet_weight, preconditioner, coarse, b, z0, settings.cg_tolerance, vectors,
-               status)
+    _pcg_start(op, inv_mass, rows, tet_law, tet_weight, preconditioner, coarse, b, z0, settings.cg_tolerance,
+               settings.cg_floor_ns, vectors, status)
     return _pcg_steps(op, inv_mass, rows, tet_law, tet_weight, preconditioner, coarse, z0,
                       settings.max_cg_iterations, vectors, status)
 
@@ -303,9 +306,9 @@ def _pcg(op, inv_mass, rows, tet_law, tet_weight, preconditioner, coarse, b, z0,
 def pcg(op, inv_mass, rows, tet_law, tet_weight, preconditioner, coarse, b, z0, settings, vectors):
     """Solve A·z = b by preconditioned conjugate gradients from z0 (overwritten by z): block-Jacobi, plus the
     coarse correction of `coarse` (a coarse_space.CoarseSpace; none: block-Jacobi alone); stops when
-    ‖r‖ ≤ cg_tolerance·‖b‖ or after max_cg_iterations (`settings`, records.SolveSettings); `vectors` (r, z, p, q)
-    (N, 3) each, scratch.  Returns the iterations used.  One thread (`pcg_parallel`: on the threads, the same
-    bits)."""
+    ‖r‖ ≤ max(cg_tolerance·‖b‖, cg_floor_ns) or after max_cg_iterations (`settings`, records.SolveSettings);
+    `vectors` (r, z, p, q) (N, 3) each, scratch.  Returns the iterations used.  One thread (`pcg_parallel`: on the
+    threads, the same bits)."""
     return _pcg(op, inv_mass, rows, tet_law, tet_weight, preconditioner, coarse, b, z0, settings, vectors)
 
 
@@ -321,9 +324,10 @@ def pcg_resumable(op, inv_mass, rows, tet_law, tet_weight, preconditioner, coars
                   vectors, status):
     """`pcg`'s solve in slices: with `start`, begin it from z0 (`status` (4,), RZ … ENDED, is then set); then up to
     `steps` iterations, z0 the iterate, `vectors` and `status` kept by the caller from one slice to the next.  The
-    slices make the same iterations, in the same order, as one `pcg` call.  Returns the iterations made."""
+    slices make the same iterations, in the same order, as one `pcg` call with no floor.  Returns the iterations
+    made."""
     if start:
-        _pcg_start(op, inv_mass, rows, tet_law, tet_weight, preconditioner, coarse, b, z0, tolerance, vectors,
+        _pcg_start(op, inv_mass, rows, tet_law, tet_weight, preconditioner, coarse, b, z0, tolerance, 0.0, vectors,
                    status)
     return _pcg_steps(op, inv_mass, rows, tet_law, tet_weight, preconditioner, coarse, z0, steps, vectors, status)
 
@@ -333,6 +337,6 @@ def pcg_resumable_parallel(op, inv_mass, rows, tet_law, tet_weight, precondition
                            steps, vectors, status):
     """`pcg_resumable` on the threads (as `pcg_parallel`)."""
     if start:
-        _pcg_start(op, inv_mass, rows, tet_law, tet_weight, preconditioner, coarse, b, z0, tolerance, vectors,
+        _pcg_start(op, inv_mass, rows, tet_law, tet_weight, preconditioner, coarse, b, z0, tolerance, 0.0, vectors,
                    status)
     return _pcg_steps(op, inv_mass, rows, tet_law, tet_weight, preconditioner, coarse, z0, steps, vectors, status)

@@ -114,13 +114,14 @@ class Tissue(NamedTuple):
 
 
 class SolveSettings(NamedTuple):
-    """PCG stops at ‖r‖ ≤ `cg_tolerance`·‖b‖ or `max_cg_iterations`; Newton's iterations at a residual of
-    `newton_tolerance_n` N on every node or `max_newton`."""
+    """PCG stops at ‖r‖ ≤ max(`cg_tolerance`·‖b‖, `cg_floor_ns`) or `max_cg_iterations`; Newton's iterations at a
+    residual of `newton_tolerance_n` N on every node or `max_newton`."""
 
     cg_tolerance: float
     max_cg_iterations: int
     newton_tolerance_n: float
     max_newton: int
+    cg_floor_ns: float = 0.0
 
 
 class Scratch(NamedTuple):

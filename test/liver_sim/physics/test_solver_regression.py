@@ -13,9 +13,10 @@ from liver_sim.physics.settings import ModelParams
 STORED = Path(__file__).parent / "data" / "regression_scenes.npz"
 PRECONDITIONERS = ("block_jacobi", "two_level")
 #: How far a solve at the tolerance may land from the stored one: this many times as far as the exact solve is
-#: from it, plus a floor (m, N) for scenes where the stored solve is exact to rounding.
+#: from it, plus a floor (m, N): near rest the linear solve stops at its absolute floor
+#: (implicit.CG_FLOOR_OF_NEWTON), a few tenths of a micrometre and a tenth of a millinewton from a solve that went on.
 TOLERANCE_FACTOR = 3.0
-FLOOR = {"positions": 1e-9, "forces": 1e-6}
+FLOOR = {"positions": 1e-6, "forces": 2e-4}
 
 
 @pytest.fixture(scope="module")

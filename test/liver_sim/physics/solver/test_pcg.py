@@ -96,16 +96,22 @@ def test_pcg_stops_at_the_tolerance_and_at_the_iteration_limit(system):
     inverse = np.zeros_like(op.diagonal)
     pcg.block_jacobi(op.diagonal, np.ones(6), NO_ROWS, inverse)
 
-    def solve(tolerance, limit):
+    def solve(tolerance, limit, floor=0.0):
         z = np.zeros_like(b)
         used = pcg.pcg(op, np.ones(6), NO_ROWS, TetArrays.none(), 0.0, inverse, CoarseSpace.none(), b, z,
-                       SolveSettings(tolerance, limit, 0.0, 0), tuple(np.zeros_like(b) for _ in range(4)))
+                       SolveSettings(tolerance, limit, 0.0, 0, floor), tuple(np.zeros_like(b) for _ in range(4)))
         return used, np.linalg.norm(b.ravel() - dense(op) @ z.ravel())
 
     used, residual = solve(1e-2, 100)
     assert residual <= 1e-2 * np.linalg.norm(b)
     assert 0 < used < solve(1e-12, 100)[0]  # a looser tolerance stops sooner
     assert solve(1e-12, 2)[0] == 2
+    # the absolute floor: a tolerance of 1e-12 stops where ‖r‖ reaches 1e-2·‖b‖ given as the floor …
+    floor = 1e-2 * float(np.linalg.norm(b))
+    floored, floored_residual = solve(1e-12, 100, floor)
+    assert floored_residual <= floor and floored == used
+    # … and a floor below the relative target changes nothing
+    assert solve(1e-2, 100, 1e-6 * floor) == (used, residual)
 
 
 def test_the_product_refuses_an_operator_allocated_without_the_elements():
