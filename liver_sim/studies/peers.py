@@ -160,10 +160,9 @@ def time_mujoco_flex(mesh: TetMesh, youngs_modulus_pa: float, poisson_ratio: flo
                      settings: FlexSettings = FlexSettings(), tool_radius_m: float = TOOL_RADIUS_M) -> dict:
     """Play `frames` frames of the press (press_depth_m) on the MuJoCo flex, timing each: wall and CPU ms per
     frame (wall: mean, median, p90; CPU: median), steps per frame, stability (no divergence warning — MuJoCo then
-    resets the state —,
-    finite, no coordinate beyond STABLE_MAX_DISPLACEMENT_M; the run stops at the first unstable frame), steps
-    whose implicit solve under-converged, the last tool force (N) and node displacements (m, all and fixed
-    nodes), model size and MuJoCo version."""
+    resets the state —, finite, no coordinate beyond STABLE_MAX_DISPLACEMENT_M; the run stops at the first unstable
+    frame), steps whose implicit solve under-converged, the last tool force (N) and node displacements (m, all and
+    fixed nodes), model size and MuJoCo version."""
     mujoco, model = build_flex(mesh, youngs_modulus_pa, poisson_ratio, density_kg_m3, fixed_nodes, damping_s,
                                settings, tool_radius_m)
     messages = []

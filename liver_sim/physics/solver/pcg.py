@@ -10,15 +10,14 @@ r·z and the coarse restriction, in one pass; the coarse solve; the prolongation
 
 The solve starts from the previous step's Δv and stops at ‖r‖ ≤ max(cg_tolerance·‖b‖, cg_floor_ns) (the relative
 tolerance 1e-3 by default, and an absolute floor the step sets well below what its Newton check accepts,
-physics.solver.implicit.CG_FLOOR_OF_NEWTON; the Newton residual check guards the result).  Preconditioner:
-block-Jacobi (the 3×3 diagonal blocks, contacts included), and on larger
-livers the additive two-level one, block-Jacobi plus a coarse correction on rigid aggregates of nodes
-(physics.solver.coarse_space), which keeps the iterations nearly flat as the mesh is refined (docs/performance.md, "The
-physics", for the iterations and costs).  Why this solver: the values change at every step (the axes turn, the
-cubic law stiffens, contacts come and go), so a sparse factorisation would be redone each step (SuperLU: 20–70× the
-cost of the solve), and matrix-free beats a block CSR pattern because it reads 5 numbers per spring instead of 36.
-The coarse matrix, small and dense, is factored once per topology and step length: a preconditioner need not follow
-the values exactly to leave the answer unchanged.
+physics.solver.implicit.CG_FLOOR_OF_NEWTON; the Newton residual check guards the result).  Preconditioner: block-Jacobi
+(the 3×3 diagonal blocks, contacts included), and on larger livers the additive two-level one, block-Jacobi plus a
+coarse correction on rigid aggregates of nodes (physics.solver.coarse_space), which keeps the iterations nearly flat as
+the mesh is refined (docs/performance.md, "The physics", for the iterations and costs).  Why this solver: the values
+change at every step (the axes turn, the cubic law stiffens, contacts come and go), so a sparse factorisation would be
+redone each step (SuperLU: 20–70× the cost of the solve), and matrix-free beats a block CSR pattern because it reads 5
+numbers per spring instead of 36. The coarse matrix, small and dense, is factored once per topology and step length: a
+preconditioner need not follow the values exactly to leave the answer unchanged.
 """
 from __future__ import annotations
 
