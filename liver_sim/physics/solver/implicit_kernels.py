@@ -28,7 +28,7 @@ import numpy as np
 from liver_sim.physics.solver.partition import LEVELS
 from liver_sim.physics.solver.pcg import block_jacobi, pcg, pcg_parallel
 from liver_sim.physics.tissue.fem_kernels import tet_terms
-from liver_sim.physics.tissue.spring_law import spring_terms
+from liver_sim.physics.tissue.spring_law import accumulate_forces, spring_terms
 
 
 @numba.njit(cache=True)
@@ -133,36 +133,41 @@ def load_terms(x, v, y, inv_mass, loads, h, op, f, ky, assemble_matrix):
 
 
 @numba.njit(cache=True, inline="always")
-def _group_terms(x, v, y, inv_mass, h, springs, tet_law, op, f, ky, assemble_matrix, g):
-    """The terms of group g's springs (spring_law.spring_terms) and elements (fem_kernels.tet_terms)."""
-    spring_terms(x, v, y, inv_mass, h, springs, op, f, ky, assemble_matrix, op.spring_start[g], op.spring_start[g + 1])
+def _group_terms(x, v, y, inv_mass, h, springs, tet_law, op, f, ky, assemble_matrix, stiffness, g):
+    """The terms of group g's springs (spring_law.spring_terms; without `stiffness`, their forces alone,
+    spring_law.accumulate_forces, the same sums) and elements (fem_kernels.tet_terms)."""
+    first, last = op.spring_start[g], op.spring_start[g + 1]
+    if stiffness:
+        spring_terms(x, v, y, inv_mass, h, springs, op, f, ky, assemble_matrix, first, last)
+    else:
+        accumulate_forces(x, v, springs, first, last, f)
     if tet_law.tets.shape[0] > 0:
         tet_terms(x, v, y, inv_mass, h, tet_law, f, ky, op.diagonal, assemble_matrix, op.tet_order, op.tet_start[g],
                   op.tet_start[g + 1])
 
 
 @numba.njit(cache=True, inline="always")
-def _groups_terms(x, v, y, inv_mass, h, springs, tet_law, op, f, ky, assemble_matrix):
+def _groups_terms(x, v, y, inv_mass, h, springs, tet_law, op, f, ky, assemble_matrix, stiffness):
     """The springs' and elements' terms group by group (physics.solver.partition): the groups of a level on the
     threads of a parallel dispatcher, each node's sum in the same order."""
     for g in numba.prange(LEVELS[0][1]):
-        _group_terms(x, v, y, inv_mass, h, springs, tet_law, op, f, ky, assemble_matrix, g)
+        _group_terms(x, v, y, inv_mass, h, springs, tet_law, op, f, ky, assemble_matrix, stiffness, g)
     first_group, last_group = LEVELS[1]
     for g in numba.prange(last_group - first_group):
-        _group_terms(x, v, y, inv_mass, h, springs, tet_law, op, f, ky, assemble_matrix, first_group + g)
-    _group_terms(x, v, y, inv_mass, h, springs, tet_law, op, f, ky, assemble_matrix, LEVELS[2][0])
+        _group_terms(x, v, y, inv_mass, h, springs, tet_law, op, f, ky, assemble_matrix, stiffness, first_group + g)
+    _group_terms(x, v, y, inv_mass, h, springs, tet_law, op, f, ky, assemble_matrix, stiffness, LEVELS[2][0])
 
 
 @numba.njit(cache=True, nogil=True)
-def groups_terms(x, v, y, inv_mass, h, springs, tet_law, op, f, ky, assemble_matrix):
+def groups_terms(x, v, y, inv_mass, h, springs, tet_law, op, f, ky, assemble_matrix, stiffness):
     """`_groups_terms` on one thread (groups_terms_parallel: on the threads, the same bits)."""
-    _groups_terms(x, v, y, inv_mass, h, springs, tet_law, op, f, ky, assemble_matrix)
+    _groups_terms(x, v, y, inv_mass, h, springs, tet_law, op, f, ky, assemble_matrix, stiffness)
 
 
 @numba.njit(cache=True, nogil=True, parallel=True)
-def groups_terms_parallel(x, v, y, inv_mass, h, springs, tet_law, op, f, ky, assemble_matrix):
+def groups_terms_parallel(x, v, y, inv_mass, h, springs, tet_law, op, f, ky, assemble_matrix, stiffness):
     """`groups_terms` on the threads."""
-    _groups_terms(x, v, y, inv_mass, h, springs, tet_law, op, f, ky, assemble_matrix)
+    _groups_terms(x, v, y, inv_mass, h, springs, tet_law, op, f, ky, assemble_matrix, stiffness)
 
 
 @numba.njit(cache=True, nogil=True)
@@ -174,9 +179,21 @@ def system_terms(x, v, y, inv_mass, loads, h, tissue, op, f, ky, assemble_matrix
     load_terms(x, v, y, inv_mass, loads, h, op, f, ky, assemble_matrix)
     support_terms(x, v, y, inv_mass, h, tissue.support, f, ky, op, assemble_matrix)
     if parallel:
-        groups_terms_parallel(x, v, y, inv_mass, h, tissue.springs, tissue.tets, op, f, ky, assemble_matrix)
+        groups_terms_parallel(x, v, y, inv_mass, h, tissue.springs, tissue.tets, op, f, ky, assemble_matrix, True)
     else:
-        groups_terms(x, v, y, inv_mass, h, tissue.springs, tissue.tets, op, f, ky, assemble_matrix)
+        groups_terms(x, v, y, inv_mass, h, tissue.springs, tissue.tets, op, f, ky, assemble_matrix, True)
+
+
+@numba.njit(cache=True, nogil=True)
+def system_forces(x, v, zero, inv_mass, loads, h, tissue, op, f, ky, parallel):
+    """The forces f at (x, v) of `system_terms` with no matrix, bit for bit, without the springs' K·y: the
+    Newton check's (`zero` (N, 3) zeros; ky receives the support's and elements' K·0)."""
+    load_terms(x, v, zero, inv_mass, loads, h, op, f, ky, False)
+    support_terms(x, v, zero, inv_mass, h, tissue.support, f, ky, op, False)
+    if parallel:
+        groups_terms_parallel(x, v, zero, inv_mass, h, tissue.springs, tissue.tets, op, f, ky, False, False)
+    else:
+        groups_terms(x, v, zero, inv_mass, h, tissue.springs, tissue.tets, op, f, ky, False, False)
 
 
 @numba.njit(cache=True, nogil=True)
@@ -295,7 +312,7 @@ def implicit_step(x, v, inv_mass, loads, h, tissue, op, rows, coarse, warm, sett
                                     warm, settings, vectors)
         advance(x, x0, v, v0, warm, inv_mass, h)
         surface_rows(x, rows)
-        system_terms(x, v, zero, inv_mass, loads, h, tissue, op, f, ky, False, scratch.parallel)
+        system_forces(x, v, zero, inv_mass, loads, h, tissue, op, f, ky, scratch.parallel)
         tx, ty, tz = contact_forces(x, v, zero, inv_mass, h, rows, f, ky)
         contact[0], contact[1], contact[2] = tx, ty, tz
         residual = newton_rhs(v, v0, f, inv_mass, h, rhs)

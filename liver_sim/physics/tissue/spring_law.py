@@ -77,7 +77,7 @@ def _elastic(law, s, d):
 
 
 @numba.njit(cache=True, inline="always")
-def _accumulate_forces(x, v, law, first, last, f):
+def accumulate_forces(x, v, law, first, last, f):
     """Add the Eq. 1 forces of springs first..last−1 to f: +T·u on node i, −T·u on node j."""
     for s in range(first, last):
         i, j = law.node_i[s], law.node_j[s]
@@ -92,7 +92,7 @@ def _accumulate_forces(x, v, law, first, last, f):
 @numba.njit(cache=True)
 def spring_forces_serial(x, v, law, f):
     """Add every spring's Eq. 1 force to f (one thread)."""
-    _accumulate_forces(x, v, law, 0, law.node_i.shape[0], f)
+    accumulate_forces(x, v, law, 0, law.node_i.shape[0], f)
 
 
 @numba.njit(cache=True, parallel=True)
@@ -104,7 +104,7 @@ def spring_forces_parallel(x, v, law, partial, f):
     for c in numba.prange(chunks):
         own = partial[c]
         own[:] = 0.0
-        _accumulate_forces(x, v, law, c * springs // chunks, (c + 1) * springs // chunks, own)
+        accumulate_forces(x, v, law, c * springs // chunks, (c + 1) * springs // chunks, own)
     for n in numba.prange(f.shape[0]):
         for c in range(chunks):
             f[n, 0] += partial[c, n, 0]

@@ -6,8 +6,10 @@ from implicit_scene import tiny_scene
 
 from liver_sim.physics.contact.rows import Contacts
 from liver_sim.physics.solver import implicit_kernels, pcg
-from liver_sim.physics.solver.records import ContactRows, Operator
-from liver_sim.physics.tissue.fem_kernels import TetArrays
+from liver_sim.physics.solver.records import ContactRows, Loads, Operator, Tissue
+from liver_sim.physics.tissue.fem_kernels import TetArrays, build_tets
+from liver_sim.physics.tissue.organ_support import SupportArrays
+from liver_sim.physics.tissue.spring_law import spring_arrays
 
 
 def test_contact_jacobian_matches_finite_differences():
@@ -95,3 +97,29 @@ def test_surface_rows_are_rebuilt_on_the_tools_true_surface_at_the_iterate():
     depth = contacts.offset_m[0] - contacts.normal[0] @ x[0]
     assert depth == pytest.approx(0.01 - 0.006 + 2e-4, abs=1e-15)
     assert contacts.normal_speed_m_s[0] == pytest.approx(-0.5) and contacts.offset_m[1] == 0.123
+
+
+@pytest.mark.parametrize("law", ["springs", "fem", "neo_hookean"])
+@pytest.mark.parametrize("parallel", [False, True])
+def test_the_newton_checks_forces_are_the_assemblys_to_the_bit(law, parallel):
+    """system_forces, the Newton check's pass, gives the f of system_terms without the matrix, bit for bit: springs
+    (their forces alone), support and elements."""
+    mesh, springs, x, v, inv_mass, _, external = tiny_scene()
+    n = len(x)
+    tets = TetArrays.none()
+    if law != "springs":
+        tets = build_tets(mesh.points, mesh.tets, 2e3, 0.45, 500.0, neo_hookean=law == "neo_hookean")
+    node_i, node_j = springs.node_i.astype(np.uint32), springs.node_j.astype(np.uint32)
+    op = Operator.allocate(node_i, node_j, n, tets.tets)
+    support = SupportArrays(np.array([1, 5]), mesh.points[[1, 5]].copy(), np.array([40.0, 25.0]), np.array([0.2, 0.1]))
+    tissue = Tissue(spring_arrays(springs, node_i, node_j).taken(op.spring_order), support, tets)
+    loads = Loads(external, np.array([0.0, 0.0, -9.81]), 3.0)
+    zero = np.zeros((n, 3))
+    h = 1.0 / 150.0
+    f, ky = np.zeros((n, 3)), np.zeros((n, 3))
+    implicit_kernels.system_terms(x, v, v, inv_mass, loads, h, tissue, op, f, ky, True, parallel)  # the rotations
+    implicit_kernels.system_terms(x, v, zero, inv_mass, loads, h, tissue, op, f, ky, False, parallel)
+    forces, ky_forces = np.zeros((n, 3)), np.full((n, 3), np.nan)
+    implicit_kernels.system_forces(x, v, zero, inv_mass, loads, h, tissue, op, forces, ky_forces, parallel)
+    assert np.abs(f).max() > 0.1
+    np.testing.assert_array_equal(forces, f)
