@@ -107,28 +107,42 @@ def aggregates(indptr: np.ndarray, indices: np.ndarray, target: int = TARGET_AGG
 
 
 @numba.njit(cache=True, inline="always")
-def _modes(offset, n, t):
-    """t ← T_n (3 × 6): [I | −[d_n]×], column 3 + k the displacement e_k × d_n."""
-    dx, dy, dz = offset[n, 0], offset[n, 1], offset[n, 2]
-    for r in range(3):
-        for c in range(MODES):
-            t[r, c] = 0.0
-        t[r, r] = 1.0
-    t[1, 3], t[2, 3] = -dz, dy
-    t[0, 4], t[2, 4] = dz, -dx
-    t[0, 5], t[1, 5] = -dy, dx
+def _rotations(dx, dy, dz, m):
+    """m ← M(d) = −[d]×, the rotations' columns of T_n = [I | M(d_n)]: column k the displacement e_k × d."""
+    m[0, 0], m[0, 1], m[0, 2] = 0.0, dz, -dy
+    m[1, 0], m[1, 1], m[1, 2] = -dz, 0.0, dx
+    m[2, 0], m[2, 1], m[2, 2] = dy, -dx, 0.0
 
 
 @numba.njit(cache=True, inline="always")
-def _add_block(matrix, a, ta, b, tb, block, scale):
-    """matrix[6a:6a+6, 6b:6b+6] += scale·T_aᵀ·block·T_b."""
-    for r in range(MODES):
-        for c in range(MODES):
-            total = 0.0
-            for i in range(3):
-                bt = block[i, 0] * tb[0, c] + block[i, 1] * tb[1, c] + block[i, 2] * tb[2, c]
-                total += ta[i, r] * bt
-            matrix[MODES * a + r, MODES * b + c] += scale * total
+def _add_block(matrix, a, ma, b, mb, block, scale, work):
+    """matrix[6a:6a+6, 6b:6b+6] += scale·T_aᵀ·block·T_b, T = [I | M] (`ma`, `mb` the M of its two nodes):
+    [[B, B·M_b], [M_aᵀ·B, M_aᵀ·B·M_b]]; `work` (3, 3) scratch."""
+    ra, rb = MODES * a, MODES * b
+    for r in range(3):
+        for c in range(3):
+            work[r, c] = block[r, 0] * mb[0, c] + block[r, 1] * mb[1, c] + block[r, 2] * mb[2, c]
+    for r in range(3):
+        for c in range(3):
+            matrix[ra + r, rb + c] += scale * block[r, c]
+            matrix[ra + r, rb + 3 + c] += scale * work[r, c]
+            matrix[ra + 3 + r, rb + c] += scale * (ma[0, r] * block[0, c] + ma[1, r] * block[1, c]
+                                                   + ma[2, r] * block[2, c])
+            matrix[ra + 3 + r, rb + 3 + c] += scale * (ma[0, r] * work[0, c] + ma[1, r] * work[1, c]
+                                                       + ma[2, r] * work[2, c])
+
+
+@numba.njit(cache=True, inline="always")
+def _add_rotations(matrix, a, m, block, work):
+    """matrix's rotations of aggregate a += Mᵀ·block·M: a spring within the aggregate, whose four blocks add up to
+    (T_i − T_j)ᵀ·B·(T_i − T_j) with T_i − T_j = [0 | M(d_i − d_j)]; `work` (3, 3) scratch."""
+    ra = MODES * a + 3
+    for r in range(3):
+        for c in range(3):
+            work[r, c] = block[r, 0] * m[0, c] + block[r, 1] * m[1, c] + block[r, 2] * m[2, c]
+    for r in range(3):
+        for c in range(3):
+            matrix[ra + r, ra + c] += m[0, r] * work[0, c] + m[1, r] * work[1, c] + m[2, r] * work[2, c]
 
 
 @numba.njit(cache=True)
@@ -137,16 +151,17 @@ def coarse_matrix(node_i, node_j, unit, iso, axial, shift, inv_mass, tet_law, te
     shift·I on free nodes, each spring's ±B = iso·I + axial·uuᵀ, each tetrahedron's weight·V·(λ·h_a·h_bᵀ +
     μ·h_b·h_aᵀ + μ·(h_a·h_b)·I) between its free nodes a, b (h = R·g, fem_kernels)."""
     matrix = np.zeros((MODES * count, MODES * count))
-    ta = np.empty((3, MODES))
-    tb = np.empty((3, MODES))
+    ma = np.empty((3, 3))
+    mb = np.empty((3, 3))
     block = np.empty((3, 3))
+    work = np.empty((3, 3))
     for n in range(shift.shape[0]):
         if inv_mass[n] > 0.0:
-            _modes(offset, n, ta)
+            _rotations(offset[n, 0], offset[n, 1], offset[n, 2], ma)
             block[:] = 0.0
             for i in range(3):
                 block[i, i] = shift[n]
-            _add_block(matrix, aggregate[n], ta, aggregate[n], ta, block, 1.0)
+            _add_block(matrix, aggregate[n], ma, aggregate[n], ma, block, 1.0, work)
     for s in range(node_i.shape[0]):
         i, j = node_i[s], node_j[s]
         for r in range(3):
@@ -154,15 +169,19 @@ def coarse_matrix(node_i, node_j, unit, iso, axial, shift, inv_mass, tet_law, te
                 block[r, c] = axial[s] * unit[s, r] * unit[s, c]
             block[r, r] += iso[s]
         free_i, free_j = inv_mass[i] > 0.0, inv_mass[j] > 0.0
-        _modes(offset, i, ta)
-        _modes(offset, j, tb)
+        if free_i and free_j and aggregate[i] == aggregate[j]:
+            _rotations(offset[i, 0] - offset[j, 0], offset[i, 1] - offset[j, 1], offset[i, 2] - offset[j, 2], ma)
+            _add_rotations(matrix, aggregate[i], ma, block, work)
+            continue
+        _rotations(offset[i, 0], offset[i, 1], offset[i, 2], ma)
+        _rotations(offset[j, 0], offset[j, 1], offset[j, 2], mb)
         if free_i:
-            _add_block(matrix, aggregate[i], ta, aggregate[i], ta, block, 1.0)
+            _add_block(matrix, aggregate[i], ma, aggregate[i], ma, block, 1.0, work)
         if free_j:
-            _add_block(matrix, aggregate[j], tb, aggregate[j], tb, block, 1.0)
+            _add_block(matrix, aggregate[j], mb, aggregate[j], mb, block, 1.0, work)
         if free_i and free_j:
-            _add_block(matrix, aggregate[i], ta, aggregate[j], tb, block, -1.0)
-            _add_block(matrix, aggregate[j], tb, aggregate[i], ta, block, -1.0)
+            _add_block(matrix, aggregate[i], ma, aggregate[j], mb, block, -1.0, work)
+            _add_block(matrix, aggregate[j], mb, aggregate[i], ma, block, -1.0, work)
     lam, mu = tet_law.lame_lambda_pa, tet_law.lame_mu_pa
     for e in range(tet_law.tets.shape[0]):
         tet, hg = tet_law.tets[e], tet_law.rotated_gradients[e]
@@ -171,18 +190,18 @@ def coarse_matrix(node_i, node_j, unit, iso, axial, shift, inv_mass, tet_law, te
             na = tet[a]
             if inv_mass[na] == 0.0:
                 continue
-            _modes(offset, na, ta)
+            _rotations(offset[na, 0], offset[na, 1], offset[na, 2], ma)
             for b in range(4):
                 nb = tet[b]
                 if inv_mass[nb] == 0.0:
                     continue
-                _modes(offset, nb, tb)
+                _rotations(offset[nb, 0], offset[nb, 1], offset[nb, 2], mb)
                 dot = hg[a, 0] * hg[b, 0] + hg[a, 1] * hg[b, 1] + hg[a, 2] * hg[b, 2]
                 for r in range(3):
                     for c in range(3):
                         block[r, c] = lam * hg[a, r] * hg[b, c] + mu * hg[b, r] * hg[a, c]
                     block[r, r] += mu * dot
-                _add_block(matrix, aggregate[na], ta, aggregate[nb], tb, block, scale)
+                _add_block(matrix, aggregate[na], ma, aggregate[nb], mb, block, scale, work)
     return matrix
 
 

@@ -70,8 +70,9 @@ CG_FLOOR_OF_NEWTON = 0.003
 #: re-simulates to the bit under the version it was recorded with (version 2: and its threads).  2: the coarse solve
 #: without fastmath (the same bits on every x86-64 CPU), the local model's compliance solved in slices.  3: the
 #: product in fixed groups and every sum over fixed chunks (physics.solver.pcg), the same bits on any thread count.
-#: 4: the linear solve's absolute floor (CG_FLOOR_OF_NEWTON).
-SOLVER_VERSION = 4
+#: 4: the linear solve's absolute floor (CG_FLOOR_OF_NEWTON).  5: the coarse matrix summed in closed form
+#: (physics.solver.coarse_space.coarse_matrix).
+SOLVER_VERSION = 5
 #: The first version whose bits do not depend on the threads.
 THREAD_FREE_VERSION = 3
 
@@ -216,7 +217,7 @@ class ImplicitEuler:
     @property
     def solver(self) -> str:
         """Which solver the steps take: 'pcg block-jacobi' or 'pcg two-level' (with its aggregates once built), its
-        threads when more than one, and SOLVER_VERSION ('; solver 4')."""
+        threads when more than one, and SOLVER_VERSION ('; solver 5')."""
         threads = f", {self.threads} threads" if self.threads > 1 else ""
         version = f"; solver {SOLVER_VERSION}"
         if not self.two_level:
