@@ -17,6 +17,10 @@ PRECONDITIONERS = ("block_jacobi", "two_level")
 #: (implicit.CG_FLOOR_OF_NEWTON), a few tenths of a micrometre and a tenth of a millinewton from a solve that went on.
 TOLERANCE_FACTOR = 3.0
 FLOOR = {"positions": 1e-6, "forces": 2e-4}
+#: What the step's linear solve, stopping at its tolerance or its absolute floor (implicit.CG_FLOOR_OF_NEWTON), may
+#: cost a scene against the same scene solved to 1e-9: positions (m), and forces as a fraction of the scene's largest.
+#: The cut is left out: the local model it follows moves the cut itself.
+ACCURACY = {"positions": 5e-6, "forces": 1e-4}
 
 
 @pytest.fixture(scope="module")
@@ -27,12 +31,16 @@ def stored():
 
 def assert_within_tolerance(figures: dict, stored: dict, scene: str) -> None:
     """The scene's node counts equal the stored ones frame by frame; its positions and forces lie within
-    TOLERANCE_FACTOR times the distance of the exact solve from the stored one (+ FLOOR)."""
+    TOLERANCE_FACTOR times the distance of the exact solve from the stored one (+ FLOOR), and but for the cut within
+    ACCURACY of the exact solve."""
     np.testing.assert_array_equal(figures["nodes"], stored[f"{scene}/nodes"])
     for key, floor in FLOOR.items():
         today, exact = stored[f"{scene}/{key}"], stored[f"tight/{scene}/{key}"]
         allowed = TOLERANCE_FACTOR * float(np.abs(exact - today).max()) + floor
         assert float(np.abs(figures[key] - today).max()) <= allowed, f"{scene} {key}"
+        if scene != "cut":
+            scale = float(np.abs(exact).max()) if key == "forces" else 1.0
+            assert float(np.abs(figures[key] - exact).max()) <= ACCURACY[key] * scale, f"{scene} {key} accuracy"
 
 
 @pytest.mark.parametrize("preconditioner", PRECONDITIONERS)
