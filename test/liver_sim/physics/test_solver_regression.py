@@ -13,8 +13,7 @@ from liver_sim.physics.settings import ModelParams
 STORED = Path(__file__).parent / "data" / "regression_scenes.npz"
 PRECONDITIONERS = ("block_jacobi", "two_level")
 #: How far a solve at the tolerance may land from the stored one: this many times as far as the exact solve is
-#: from it, plus a floor (m, N): near rest the linear solve stops at its absolute floor
-#: (implicit.CG_FLOOR_OF_NEWTON), a few tenths of a micrometre and a tenth of a millinewton from a solve that went on.
+#: from it, plus a floor (m, N): near rest the linear solve stops at its absolute floor (implicit.CG_FLOOR_OF_NEWTON).
 TOLERANCE_FACTOR = 3.0
 FLOOR = {"positions": 1e-6, "forces": 2e-4}
 #: What the step's linear solve, stopping at its tolerance or its absolute floor (implicit.CG_FLOOR_OF_NEWTON), may

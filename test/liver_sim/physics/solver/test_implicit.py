@@ -109,8 +109,7 @@ def perturbed(model, seed=0, scale=0.002):
 def test_a_free_vibration_follows_the_same_steps_solved_tightly(liver, monkeypatch):
     """The liver let go 2 mm from rest, every node at random (paper constants), over 2 s: the steps at the solver's
     tolerances stay within 0.3 mm of the same steps with each linear solve taken to 1e-10 and no floor (the
-    linearisation and the Newton check the same): a looser relative tolerance leaves the slow modes' decay behind
-    (1e-2: 1.9 mm)."""
+    linearisation and the Newton check the same): a looser relative tolerance leaves the slow modes' decay behind."""
     p = liver.structure.params
 
     def free_vibration(**settings):
